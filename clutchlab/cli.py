@@ -1,0 +1,156 @@
+"""``clutchlab`` command line: thin wrappers that parse arguments and call the layers."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import sys
+from pathlib import Path
+
+from . import __version__
+from .errors import ClutchlabError
+
+__all__ = ["main"]
+
+
+def _csv_list(text: str | None) -> tuple[str, ...]:
+    return tuple(s.strip() for s in (text or "").split(",") if s.strip())
+
+
+def _cmd_stand(args: argparse.Namespace) -> int:
+    from .physics.stand import DEFAULT_SETTINGS, StandConfig, truth_path, write_stand
+
+    n = args.settings
+    if not 1 <= n <= len(DEFAULT_SETTINGS):
+        raise SystemExit(f"--settings must be 1..{len(DEFAULT_SETTINGS)}")
+    # Spread the chosen settings over frequencies and shapes (3 → 30/A, 50/B, 70/C).
+    step = max(len(DEFAULT_SETTINGS) // n, 1)
+    settings = DEFAULT_SETTINGS[::step][:n] if n < len(DEFAULT_SETTINGS) else DEFAULT_SETTINGS
+    config = StandConfig(
+        effects=_csv_list(args.effects),
+        builtin_effects=not args.no_builtin,
+        settings=settings,
+        seed=args.seed,
+    )
+    config.model()  # unknown effect names fail before any work
+    run = write_stand(args.out, config, overwrite=args.overwrite, progress=not args.quiet)
+    out = Path(args.out)
+    print(
+        f"wrote {len(run.dataset)} experiments to {out} "
+        f"(ramps: {', '.join(run.dataset.ramps)}); overview {out / 'pressure_vs_current.png'}"
+    )
+    print(f"truth (effects, parameters) beside it: {truth_path(out)}")
+    if args.json:
+        Path(args.json).write_text(
+            json.dumps(
+                {
+                    "dataset": str(out),
+                    "experiments": run.dataset.names,
+                    "truth": str(truth_path(out)),
+                },
+                indent=2,
+            )
+            + "\n"
+        )
+    return 0
+
+
+def _cmd_effects(args: argparse.Namespace) -> int:
+    from .physics import effect_table
+
+    table = effect_table()
+    if args.json:
+        Path(args.json).write_text(
+            json.dumps(table, indent=2, ensure_ascii=False) + "\n", encoding="utf-8"
+        )
+    for row in table:
+        print(f"{row['name']:32s} {row['description']}")
+        print(f"{'':32s}   residual signature: {row['signature']}")
+        print(f"{'':32s}   parameters: {row['parameters']} (off at zero: {row['strength']})")
+    return 0
+
+
+def _cmd_params(args: argparse.Namespace) -> int:
+    from .physics import CircuitModel
+
+    model = CircuitModel().with_effects(*_csv_list(args.effects))
+    rows = [p.to_dict() for p in model.parameters]
+    if args.json:
+        Path(args.json).write_text(
+            json.dumps(rows, indent=2, ensure_ascii=False) + "\n", encoding="utf-8"
+        )
+    for p in model.parameters:
+        print(
+            f"{p.name:18s} {p.default:10.4g} {p.unit:14s} [{p.lower:g}, {p.upper:g}]  "
+            f"{p.description}"
+        )
+    return 0
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from .validation import run_demo
+
+    command = "clutchlab " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    report = run_demo(args.out, progress=not args.quiet, command=command)
+    if args.json:
+        Path(args.json).write_text((Path(args.out) / "metrics.json").read_text())
+    print(f"report: {report}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of the ``clutchlab`` command."""
+    parser = argparse.ArgumentParser(prog="clutchlab", description=__doc__)
+    parser.add_argument("--version", action="version", version=f"clutchlab {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("stand", help="run the synthetic test stand and write a dataset folder")
+    p.add_argument("--out", required=True, help="dataset folder to create")
+    p.add_argument("--effects", default="", help="extra library effects, comma separated")
+    p.add_argument(
+        "--no-builtin",
+        action="store_true",
+        help="without the stand's built-in effects (base model + noise only)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of noise and wander")
+    p.add_argument(
+        "--settings",
+        type=int,
+        default=9,
+        help="number of dither settings (1-9; default 9 = 3 frequencies × 3 shapes)",
+    )
+    p.add_argument("--overwrite", action="store_true", help="replace an existing dataset folder")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--json", help="write a summary as JSON here")
+    p.set_defaults(func=_cmd_stand)
+
+    p = sub.add_parser("effects", help="list the effect library")
+    p.add_argument("--json", help="write the table as JSON here")
+    p.set_defaults(func=_cmd_effects)
+
+    p = sub.add_parser("params", help="list the model parameters (units, defaults, bounds)")
+    p.add_argument("--effects", default="", help="effects switched on, comma separated")
+    p.add_argument("--json", help="write the table as JSON here")
+    p.set_defaults(func=_cmd_params)
+
+    p = sub.add_parser("demo", help="stand data → physics → report, end to end")
+    p.add_argument("--out", default="clutchlab-demo", help="output folder (default clutchlab-demo)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--json", help="also write metrics.json here")
+    p.set_defaults(func=_cmd_demo)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``clutchlab`` console script."""
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except ClutchlabError as exc:
+        print(f"clutchlab {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

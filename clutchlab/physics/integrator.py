@@ -1,0 +1,162 @@
+"""Fixed-step ROS2 integration of a model over a sampled input, compiled to C.
+
+One *sample step* advances the state over one sample interval ``[t_k, t_{k+1}]``
+with the inputs linearly interpolated between the samples, in ``substeps`` ROS2
+steps. A *chunk* maps the sample step over ``chunk`` samples (``mapaccum``) so that
+a whole trace runs inside generated C code with no Python per sample. The same
+sample step is what a fitter differentiates and what an FMU calls each
+communication step.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import subprocess
+import tempfile
+import warnings
+from functools import lru_cache
+from pathlib import Path
+
+import casadi as ca
+
+from ..errors import SimulationError
+from .model import CircuitModel, ModelFunctions
+from .smooth import smooth_max0
+
+__all__ = [
+    "GAMMA_ROS2",
+    "cache_dir",
+    "chunk_function",
+    "sample_step_function",
+    "stabilized_jacobian",
+]
+
+#: ROS2 parameter γ = 1 + 1/√2 (L-stable).
+GAMMA_ROS2 = 1.0 + 1.0 / 2.0**0.5
+
+
+def cache_dir() -> Path:
+    """Folder of compiled model code: ``$CLUTCHLAB_CACHE`` or ``~/.cache/clutchlab``."""
+    root = os.environ.get("CLUTCHLAB_CACHE") or Path.home() / ".cache" / "clutchlab"
+    path = Path(root)
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def _solve_qr(q: ca.SX, r: ca.SX, b: ca.SX) -> ca.SX:
+    """Solve ``Q R x = b`` by back substitution (R upper triangular)."""
+    n = r.shape[0]
+    y = q.T @ b
+    x = [None] * n
+    for i in range(n - 1, -1, -1):
+        acc = y[i]
+        for j in range(i + 1, n):
+            if not r[i, j].is_zero():
+                acc = acc - r[i, j] * x[j]
+        x[i] = acc / r[i, i]
+    return ca.vertcat(*x)
+
+
+def stabilized_jacobian(jac: ca.SX) -> ca.SX:
+    """The Jacobian with positive diagonal entries smoothly clamped to zero.
+
+    ROS2 is a W-method: it keeps order 2 with any matrix in place of the exact
+    Jacobian. Locally *unstable* modes (negative Stribeck damping, the latch's
+    snap, positive feedback) have positive eigenvalues λ; with the exact Jacobian
+    ``I − γhJ`` becomes singular where ``γhλ = 1`` and the step explodes. Treating
+    those diagonal terms explicitly removes the singularity; stiff *stable* modes
+    (negative diagonal) keep their implicit treatment.
+    """
+    out = ca.SX(jac)
+    for i in range(jac.shape[0]):
+        d = jac[i, i]
+        if not d.is_zero():
+            out[i, i] = d - smooth_max0(d, 1.0)
+    return out
+
+
+def sample_step_function(fns: ModelFunctions, substeps: int) -> ca.Function:
+    """``step(x, u0, u1, dt, p) -> (x1, y1)``: one sample interval in ``substeps`` ROS2 steps.
+
+    ``u0``/``u1`` are the inputs at the interval's ends (linearly interpolated in
+    between); ``dt`` the interval (s); ``y1`` the outputs at its end.
+    """
+    nx, nu = fns.nx, fns.u_sym.shape[0]
+    x, u, p = fns.x_sym, fns.u_sym, fns.p_sym
+    jac = stabilized_jacobian(ca.jacobian(fns.dx_expr, x))
+    h = ca.SX.sym("h")
+    ua, ub = ca.SX.sym("ua", nu), ca.SX.sym("ub", nu)
+    f_a = ca.substitute(fns.dx_expr, u, ua)
+    j_a = ca.substitute(jac, u, ua)
+    w = ca.SX.eye(nx) - GAMMA_ROS2 * h * j_a
+    q, r = ca.qr(w)
+    k1 = _solve_qr(q, r, f_a)
+    f_b = ca.substitute(ca.substitute(fns.dx_expr, u, ub), x, x + h * k1)
+    k2 = _solve_qr(q, r, f_b - 2.0 * k1)
+    x_next = x + 1.5 * h * k1 + 0.5 * h * k2
+    ros2 = ca.Function("ros2", [x, ua, ub, h, p], [x_next])
+
+    x0, u0, u1, dt = ca.SX.sym("x0", nx), ca.SX.sym("u0", nu), ca.SX.sym("u1", nu), ca.SX.sym("dt")
+    xk = x0
+    for j in range(substeps):
+        a, b = j / substeps, (j + 1) / substeps
+        xk = ros2(xk, u0 + a * (u1 - u0), u0 + b * (u1 - u0), dt / substeps, p)
+    y1 = fns.out(xk, u1, p)
+    return ca.Function(
+        "sample_step", [x0, u0, u1, dt, p], [xk, y1], ["x0", "u0", "u1", "dt", "p"], ["x1", "y1"]
+    )
+
+
+def _compile(fn: ca.Function, tag: str) -> ca.Function | None:
+    """Generate C for ``fn``, compile it (cached by code hash) and load it; None if impossible."""
+    cc = shutil.which(os.environ.get("CC", "gcc")) or shutil.which("cc")
+    if cc is None:
+        return None
+    with tempfile.TemporaryDirectory() as tmp:
+        cwd = os.getcwd()
+        os.chdir(tmp)
+        try:
+            src = Path(tmp) / fn.generate(f"{fn.name()}.c", {"with_header": False})
+        finally:
+            os.chdir(cwd)
+        code = src.read_bytes()
+        digest = hashlib.sha1(code + ca.__version__.encode()).hexdigest()[:16]
+        lib = cache_dir() / f"{tag}_{digest}.so"
+        if not lib.exists():
+            part = lib.with_suffix(f".{os.getpid()}.tmp")
+            cmd = [cc, "-O2", "-shared", "-fPIC", "-o", str(part), str(src), "-lm"]
+            res = subprocess.run(cmd, capture_output=True, text=True)
+            if res.returncode != 0:
+                warnings.warn(
+                    f"C compilation failed, interpreting instead:\n{res.stderr[-2000:]}",
+                    RuntimeWarning,
+                    stacklevel=3,
+                )
+                return None
+            part.replace(lib)
+    return ca.external(fn.name(), str(lib))
+
+
+@lru_cache(maxsize=32)
+def chunk_function(
+    model: CircuitModel, drive: str, substeps: int, chunk: int, compile_mode: str
+) -> ca.Function:
+    """``chunk(x0, U0, U1, DT, p) -> (X, Y)`` over ``chunk`` samples, compiled if possible.
+
+    ``U0``/``U1`` (nu × chunk) are the inputs at the start/end of each interval,
+    ``DT`` (1 × chunk) the intervals; ``X`` (nx × chunk) and ``Y`` (ny × chunk)
+    the states and outputs at the interval ends.
+    """
+    step = sample_step_function(model.functions(drive), substeps)
+    fn = step.mapaccum(f"chunk_{chunk}", chunk, ["x0"], ["x1"])
+    if compile_mode == "never":
+        return fn
+    tag = f"clutchlab_{model.key}_{drive}_{substeps}"
+    compiled = _compile(fn, tag)
+    if compiled is None:
+        if compile_mode == "always":
+            raise SimulationError("compile='always' but no working C compiler was found")
+        return fn
+    return compiled

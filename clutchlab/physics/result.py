@@ -1,0 +1,125 @@
+"""Simulation result: outputs and states on the trace's time grid."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from .model import OutputSpec
+from .parameters import ParameterSet
+
+__all__ = ["SimulationResult"]
+
+
+@dataclass(frozen=True)
+class SimulationResult:
+    """What :func:`simulate` returns.
+
+    Attributes
+    ----------
+    time_s : ndarray
+        Sample times (s).
+    outputs : dict of str to ndarray
+        Model outputs per sample (``clutch_pressure_bar`` is what the sensor reads).
+    states : ndarray
+        States per sample (N × nx), scaled engineering units (see ``state_units``).
+    state_names, state_units : tuple of str
+        Names and units of the state columns.
+    output_specs : tuple of OutputSpec
+        Units and descriptions of the outputs.
+    params : ParameterSet
+        Parameter values used.
+    drive : str
+        ``measured`` or ``command``.
+    trace_name : str
+        Name of the simulated experiment.
+    wall_s : float
+        Wall-clock time of the simulation (s).
+    inputs : dict of str to ndarray
+        Current and dither inputs used (for plots against current).
+    """
+
+    time_s: np.ndarray
+    outputs: dict[str, np.ndarray]
+    states: np.ndarray
+    state_names: tuple[str, ...]
+    state_units: tuple[str, ...]
+    output_specs: tuple[OutputSpec, ...]
+    params: ParameterSet
+    drive: str
+    trace_name: str
+    wall_s: float
+    inputs: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def pressure_bar(self) -> np.ndarray:
+        """Clutch pressure as the sensor reads it (bar)."""
+        return self.outputs["clutch_pressure_bar"]
+
+    @property
+    def real_time_factor(self) -> float:
+        """Simulated time / wall time."""
+        return float(self.time_s[-1] - self.time_s[0]) / max(self.wall_s, 1e-12)
+
+    def units(self) -> dict[str, str]:
+        """Unit of every column of :meth:`to_pandas`."""
+        u = {"time_s": "s"} | {o.name: o.unit for o in self.output_specs}
+        return u | {
+            f"state_{n}": un for n, un in zip(self.state_names, self.state_units, strict=True)
+        }
+
+    def to_pandas(self, states: bool = False) -> pd.DataFrame:
+        """Outputs (and optionally states, as ``state_<name>``) as a DataFrame; units in attrs."""
+        cols = {"time_s": self.time_s} | dict(self.outputs)
+        if states:
+            cols |= {f"state_{n}": self.states[:, k] for k, n in enumerate(self.state_names)}
+        df = pd.DataFrame(cols)
+        df.attrs["units"] = {k: v for k, v in self.units().items() if k in df.columns}
+        df.attrs["trace"] = self.trace_name
+        return df
+
+    def plot(self, measured=None, axes=None):
+        """Pressure vs time and pressure vs current.
+
+        Parameters
+        ----------
+        measured : Trace, optional
+            Overlay its measured clutch pressure.
+        axes : pair of matplotlib Axes, optional
+            Where to draw; a new figure when omitted.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        import matplotlib.pyplot as plt
+
+        if axes is None:
+            fig, axes = plt.subplots(1, 2, figsize=(11, 4), constrained_layout=True)
+        else:
+            fig = axes[0].figure
+        ax_t, ax_i = axes
+        current = self.inputs.get("current_nom_mA")
+        if current is None or not np.any(current):
+            current = self.outputs["coil_current_mA"]
+        if measured is not None:
+            ax_t.plot(
+                measured.time_s,
+                measured.get("clutch_pressure_bar"),
+                color="0.6",
+                lw=0.6,
+                label="measured",
+            )
+            ax_i.plot(
+                current, measured.get("clutch_pressure_bar"), color="0.6", lw=0.6, label="measured"
+            )
+        ax_t.plot(self.time_s, self.pressure_bar, lw=0.9, label="simulated")
+        ax_i.plot(current, self.pressure_bar, lw=0.9, label="simulated")
+        ax_t.set(xlabel="time (s)", ylabel="clutch pressure (bar)", title=self.trace_name)
+        ax_i.set(xlabel="nominal current (mA)", ylabel="clutch pressure (bar)")
+        for ax in axes:
+            ax.grid(alpha=0.3)
+            ax.legend(loc="upper left")
+        return fig

@@ -1,0 +1,58 @@
+"""Overview figure of a stand dataset: clutch pressure vs current for each ramp."""
+
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+from ...data import Dataset
+
+__all__ = ["plot_pressure_vs_current"]
+
+_COLORS = {"fast": "tab:blue", "medium": "black", "slow": "tab:green"}
+
+
+def period_mean(x: np.ndarray, n: int) -> np.ndarray:
+    """Centered moving average over ``n`` samples (one dither period)."""
+    n = max(int(n), 1)
+    kernel = np.ones(n) / n
+    return np.convolve(np.pad(x, (n // 2, n - 1 - n // 2), mode="edge"), kernel, mode="valid")
+
+
+def plot_pressure_vs_current(dataset: Dataset, setting: str | None = None):
+    """Clutch pressure (dither-period averaged, bar) vs nominal current (mA), per ramp.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        Stand or test-stand dataset with ``current_cmd_mA``.
+    setting : str, optional
+        Only experiments whose name ends with this dither tag (e.g. ``50Hz_A``);
+        the first experiment's tag when omitted.
+    """
+    fig, ax = plt.subplots(figsize=(7.5, 5), constrained_layout=True)
+    tag = setting or "_".join(dataset[0].name.split("_")[1:])
+    for trace in dataset:
+        if not trace.name.endswith(tag) or not trace.has("current_cmd_mA"):
+            continue
+        f = float(trace.meta.get("dither_freq_Hz", 50.0)) or 50.0
+        n = round(trace.sample_rate_Hz / f)
+        p = period_mean(trace.get("clutch_pressure_bar"), n)
+        ax.plot(
+            trace.get("current_cmd_mA"),
+            p,
+            lw=0.9,
+            color=_COLORS.get(trace.ramp),
+            label=f"{trace.ramp} ({trace.name})",
+        )
+    ax.set(
+        xlabel="nominal VFS current (mA)",
+        ylabel="clutch pressure, dither-period mean (bar)",
+        title=f"Clutch pressure vs current — dither {tag}",
+    )
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper left")
+    return fig

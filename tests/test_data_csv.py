@@ -1,0 +1,294 @@
+"""Round trips and error reporting of the CSV reader/writer and dataset folders."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from clutchlab.data import (
+    CANONICAL_ORDER,
+    Dataset,
+    Trace,
+    io_dataset,
+    load_dataset,
+    read_csv,
+    save_dataset,
+    write_csv,
+)
+from clutchlab.errors import DataError
+
+HEADER = "time_s,current_mA,clutch_pressure_bar"
+
+
+def make_trace(name: str, ramp: str = "fast", n: int = 500, seed: int = 0, **meta) -> Trace:
+    """Every canonical signal, full float64 precision (random digits), 1 kHz."""
+    rng = np.random.default_rng(seed)
+    t = 12.5 + np.arange(n) * 1e-3 + rng.uniform(0, 1e-5, n)
+    signals = {
+        "time_s": t,
+        "current_mA": rng.uniform(0, 1100, n),
+        "current_cmd_mA": rng.uniform(0, 1100, n),
+        "dither_amp_mA": rng.uniform(0, 225, n),
+        "dither_freq_Hz": np.full(n, 30.0),
+        "clutch_pressure_bar": rng.normal(5, 3, n),
+        "line_pressure_bar": rng.normal(17.7, 0.3, n),
+        "prime_pressure_bar": rng.normal(0.5, 0.1, n),
+        "oil_temp_C": rng.uniform(20, 120, n),
+    }
+    return Trace(name, signals, meta={"ramp": ramp, **meta})
+
+
+def write_text(path, text: str):
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+# -- CSV ----------------------------------------------------------------------------------
+
+
+def test_csv_round_trip(tmp_path):
+    tr = make_trace("fast_30Hz_A")
+    path = write_csv(tr, tmp_path / "t.csv")
+    lines = path.read_text().splitlines()
+    assert lines[0] == ",".join(CANONICAL_ORDER)
+    assert len(lines) == len(tr) + 1
+    back = read_csv(path, meta={"ramp": "fast"})
+    assert back.name == "t" and back.ramp == "fast" and back.source == path
+    assert list(back.signals) == list(tr.signals)
+    for name, values in tr.signals.items():
+        # "%.9g" rounds to 9 significant digits: relative error <= 5e-9 for arbitrary floats
+        np.testing.assert_allclose(back.get(name), values, rtol=5e-9, atol=0, err_msg=name)
+
+
+def test_csv_round_trip_within_1e9_for_logged_resolution(tmp_path):
+    # Test-stand values with a logger resolution (0.1 µs, 0.01 mA, 0.1 mbar) survive to 1e-9.
+    n = 2000
+    rng = np.random.default_rng(1)
+    tr = Trace(
+        "x",
+        {
+            "time_s": np.round(100.0 + np.arange(n) * 1e-3, 7),
+            "current_cmd_mA": np.round(rng.uniform(0, 1100, n), 2),
+            "clutch_pressure_bar": np.round(rng.normal(5, 3, n), 4),
+        },
+    )
+    back = read_csv(write_csv(tr, tmp_path / "x.csv"))
+    for name, values in tr.signals.items():
+        np.testing.assert_allclose(back.get(name), values, rtol=1e-9, atol=0, err_msg=name)
+
+
+def test_csv_keeps_time_increasing_beyond_9_digits(tmp_path):
+    t = 1e5 + np.arange(10) * 1e-5  # 11 significant digits needed
+    tr = Trace("x", {"time_s": t, "current_mA": np.ones(10), "clutch_pressure_bar": np.ones(10)})
+    back = read_csv(write_csv(tr, tmp_path / "x.csv"))
+    np.testing.assert_array_equal(back.time_s, t)
+
+
+def test_read_csv_missing_and_empty_files(tmp_path):
+    with pytest.raises(DataError, match=r"nope\.csv: file not found"):
+        read_csv(tmp_path / "nope.csv")
+    with pytest.raises(DataError, match=r"empty\.csv: empty file"):
+        read_csv(write_text(tmp_path / "empty.csv", ""))
+    with pytest.raises(DataError, match=r"header\.csv: empty file \(header but no data rows\)"):
+        read_csv(write_text(tmp_path / "header.csv", HEADER + "\n"))
+
+
+def test_read_csv_names_column_and_line_of_unparseable_values(tmp_path):
+    path = write_text(
+        tmp_path / "bad.csv",
+        HEADER + "\n0.0,100,1.0\n0.001,1O0,1.1\n0.002,102,1.2\n0.003,103,n/a\n",
+    )
+    with pytest.raises(DataError) as info:
+        read_csv(path)
+    text = str(info.value)
+    assert str(path) in text
+    assert "column 'current_mA': unparseable number at line 3 (data row 2) '1O0'" in text
+    assert "column 'clutch_pressure_bar': unparseable number at line 5 (data row 4) 'n/a'" in text
+
+
+def test_read_csv_non_canonical_columns(tmp_path):
+    path = write_text(tmp_path / "cols.csv", "time_s,current_A,p_clutch\n0,1,2\n")
+    with pytest.raises(DataError) as info:
+        read_csv(path)
+    text = str(info.value)
+    assert "cols.csv" in text and "'current_A'" in text and "'p_clutch'" in text
+    path = write_text(tmp_path / "semi.csv", "time_s;current_mA;clutch_pressure_bar\n0;1;2\n")
+    with pytest.raises(DataError, match="must be comma-separated"):
+        read_csv(path)
+    path = write_text(tmp_path / "dup.csv", "time_s,current_mA,current_mA\n0,1,2\n")
+    with pytest.raises(DataError, match=r"duplicate column.*'current_mA'"):
+        read_csv(path)
+
+
+def test_read_csv_time_and_missing_column_problems_with_lines(tmp_path):
+    path = write_text(
+        tmp_path / "time.csv", "time_s,current_mA\n0,1\n0.002,1\n0.001,1\n\n0.004,1\n"
+    )
+    with pytest.raises(DataError) as info:
+        read_csv(path)
+    text = str(info.value)
+    assert "time.csv" in text
+    assert "'clutch_pressure_bar' is missing" in text
+    assert "not strictly increasing at line 4 (data row 3)" in text
+    assert "non-finite value at line 5 (data row 4)" in text  # blank line inside the data
+
+
+def test_read_csv_tolerates_trailing_blank_lines_and_nan_cells(tmp_path):
+    path = write_text(tmp_path / "ok.csv", HEADER + "\n0,1,\n0.001,2,NaN\n0.002, 3 ,4\n\n\n")
+    tr = read_csv(path)
+    assert len(tr) == 3
+    np.testing.assert_array_equal(tr.get("current_mA"), [1.0, 2.0, 3.0])
+    assert np.isnan(tr.get("clutch_pressure_bar")[:2]).all()
+
+
+# -- dataset folders ----------------------------------------------------------------------
+
+
+def make_dataset() -> Dataset:
+    return Dataset(
+        [
+            make_trace("fast_30Hz_A", "fast", seed=1, dither_freq_Hz=30, dither_shape="A"),
+            make_trace("medium_50Hz_B", "medium", seed=2, dither_freq_Hz=50, dither_shape="B"),
+            make_trace("slow_70Hz_A", "slow", seed=3, dither_freq_Hz=70, dither_shape="A"),
+        ],
+        manifest_extra={"stand": "synthetic", "version": 1},
+    )
+
+
+def test_dataset_round_trip(tmp_path):
+    ds = make_dataset()
+    root = save_dataset(ds, tmp_path / "ds")
+    assert sorted(p.name for p in root.iterdir()) == [
+        "fast_30Hz_A.csv",
+        "manifest.json",
+        "medium_50Hz_B.csv",
+        "slow_70Hz_A.csv",
+    ]
+    manifest = json.loads((root / "manifest.json").read_text())
+    assert manifest["experiments"][1] == {
+        "file": "medium_50Hz_B.csv",
+        "ramp": "medium",
+        "dither_freq_Hz": 50,
+        "dither_shape": "B",
+    }
+    back = load_dataset(root)
+    assert back.root == root
+    assert back.names == ds.names
+    assert back.ramps == ["fast", "medium", "slow"]
+    assert back.manifest_extra == {"stand": "synthetic", "version": 1}
+    for a, b in zip(ds, back, strict=True):
+        assert b.meta == a.meta
+        assert list(b.signals) == list(a.signals)
+        for name in a.signals:
+            np.testing.assert_allclose(b.get(name), a.get(name), rtol=5e-9, err_msg=name)
+    assert back.select(ramps=["fast", "slow"]).names == ["fast_30Hz_A", "slow_70Hz_A"]
+    assert load_dataset(root / "manifest.json").names == ds.names
+
+
+def test_save_refuses_non_empty_folder_and_overwrites_dataset(tmp_path):
+    ds = make_dataset()
+    target = tmp_path / "ds"
+    target.mkdir()
+    (target / "notes.txt").write_text("keep me")
+    with pytest.raises(DataError, match="not empty"):
+        save_dataset(ds, target)
+    with pytest.raises(DataError, match="not a dataset folder"):
+        save_dataset(ds, target, overwrite=True)
+    assert (target / "notes.txt").read_text() == "keep me"
+
+    other = tmp_path / "other"
+    save_dataset(ds, other)
+    save_dataset(ds.select(ramps="medium"), other, overwrite=True)
+    assert load_dataset(other).names == ["medium_50Hz_B"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ds", "other"]  # no leftovers
+
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert load_dataset(save_dataset(ds, empty)).names == ds.names
+
+
+def test_save_failure_leaves_nothing_half_written(tmp_path, monkeypatch):
+    calls = []
+
+    def failing_writer(trace, path):
+        calls.append(trace.name)
+        if len(calls) == 2:
+            raise OSError("disk full")
+        write_csv(trace, path)
+
+    monkeypatch.setitem(io_dataset.FORMATS, ".csv", (read_csv, failing_writer))
+    ds = make_dataset()
+    with pytest.raises(OSError, match="disk full"):
+        save_dataset(ds, tmp_path / "new")
+    assert calls == ["fast_30Hz_A", "medium_50Hz_B"]
+    assert list(tmp_path.iterdir()) == []
+
+    # an existing dataset survives a failed overwrite untouched
+    monkeypatch.setitem(io_dataset.FORMATS, ".csv", (read_csv, write_csv))
+    save_dataset(ds.select(ramps="slow"), tmp_path / "old")
+    before = {p.name: p.read_bytes() for p in (tmp_path / "old").iterdir()}
+    calls.clear()
+    monkeypatch.setitem(io_dataset.FORMATS, ".csv", (read_csv, failing_writer))
+    with pytest.raises(OSError):
+        save_dataset(ds, tmp_path / "old", overwrite=True)
+    assert {p.name: p.read_bytes() for p in (tmp_path / "old").iterdir()} == before
+    assert [p.name for p in tmp_path.iterdir()] == ["old"]
+
+
+def test_save_rejects_bad_input_before_writing(tmp_path):
+    no_ramp = Dataset([Trace("x", make_trace("x").signals)])
+    with pytest.raises(DataError, match="no ramp label"):
+        save_dataset(no_ramp, tmp_path / "a")
+    bad_name = Dataset([make_trace("a/b")])
+    with pytest.raises(DataError, match="not a portable file name"):
+        save_dataset(bad_name, tmp_path / "a")
+    with pytest.raises(DataError, match="unsupported dataset format 'mf4'"):
+        save_dataset(make_dataset(), tmp_path / "a", format="mf4")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_load_missing_and_invalid_manifest(tmp_path):
+    with pytest.raises(DataError, match="dataset folder not found"):
+        load_dataset(tmp_path / "nope")
+    with pytest.raises(DataError, match=r"manifest\.json: manifest not found"):
+        load_dataset(tmp_path)
+    write_text(tmp_path / "manifest.json", '{"experiments": [\n{"file": "a.csv",}]}')
+    with pytest.raises(DataError, match=r"manifest\.json: invalid JSON at line 2"):
+        load_dataset(tmp_path)
+    write_text(tmp_path / "manifest.json", '{"runs": []}')
+    with pytest.raises(DataError, match="'experiments' is missing"):
+        load_dataset(tmp_path)
+    write_text(tmp_path / "manifest.json", '{"experiments": {"file": "a.csv"}}')
+    with pytest.raises(DataError, match="'experiments' is a dict, not a list"):
+        load_dataset(tmp_path)
+
+
+def test_load_collects_every_manifest_and_file_problem(tmp_path):
+    save_dataset(make_dataset(), tmp_path / "ds")
+    root = tmp_path / "ds"
+    write_text(root / "broken.csv", HEADER + "\n0,1,x\n")
+    entries = [
+        {"file": "fast_30Hz_A.csv", "ramp": "fast"},
+        {"ramp": "slow"},
+        {"file": "medium_50Hz_B.csv"},
+        {"file": "gone.csv", "ramp": "slow"},
+        {"file": "broken.csv", "ramp": "medium"},
+        {"file": "fast_30Hz_A.csv", "ramp": "fast"},
+        "slow_70Hz_A.csv",
+    ]
+    write_text(root / "manifest.json", json.dumps({"experiments": entries}))
+    with pytest.raises(DataError) as info:
+        load_dataset(root)
+    err = info.value
+    text = str(err)
+    assert str(root / "manifest.json") in text
+    assert len(err.problems) == 6, text
+    assert "experiments[1]: missing 'file'" in text
+    assert "experiments[2]: missing 'ramp'" in text
+    assert "experiments[3]: file 'gone.csv' not found" in text
+    assert "experiments[4]:" in text and "broken.csv: column 'clutch_pressure_bar'" in text
+    assert "line 2 (data row 1) 'x'" in text
+    assert "experiments[5]: experiment name 'fast_30Hz_A'" in text
+    assert "experiments[6]: must be an object" in text
