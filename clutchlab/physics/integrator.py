@@ -29,6 +29,8 @@ __all__ = [
     "GAMMA_ROS2",
     "cache_dir",
     "chunk_function",
+    "lu_factor",
+    "lu_solve",
     "sample_step_function",
     "stabilized_jacobian",
 ]
@@ -45,17 +47,43 @@ def cache_dir() -> Path:
     return path
 
 
-def _solve_qr(q: ca.SX, r: ca.SX, b: ca.SX) -> ca.SX:
-    """Solve ``Q R x = b`` by back substitution (R upper triangular)."""
-    n = r.shape[0]
-    y = q.T @ b
+def lu_factor(a: ca.SX) -> tuple[list[list], int]:
+    """Symbolic LU factorization (Doolittle) without pivoting, skipping structural zeros.
+
+    No pivoting is deliberate: with the states ordered base model first, effect
+    states last, an effect at zero strength contributes exact zeros to the base
+    rows, and elimination in this order leaves the base rows bit-for-bit as in the
+    model without the effect (a QR or a pivoted LU would mix them). The diagonal of
+    ``W = I − γhJ`` is ≥ 1 after :func:`stabilized_jacobian`.
+    """
+    n = a.shape[0]
+    m = [[a[i, j] for j in range(n)] for i in range(n)]
+    for k in range(n):
+        for i in range(k + 1, n):
+            if m[i][k].is_zero():
+                continue
+            m[i][k] = m[i][k] / m[k][k]
+            for j in range(k + 1, n):
+                if not m[k][j].is_zero():
+                    m[i][j] = m[i][j] - m[i][k] * m[k][j]
+    return m, n
+
+
+def lu_solve(lu: tuple[list[list], int], b: ca.SX) -> ca.SX:
+    """Solve with the factors of :func:`lu_factor` (forward, then back substitution)."""
+    m, n = lu
+    y = [b[i] for i in range(n)]
+    for i in range(n):
+        for j in range(i):
+            if not m[i][j].is_zero():
+                y[i] = y[i] - m[i][j] * y[j]
     x = [None] * n
     for i in range(n - 1, -1, -1):
         acc = y[i]
         for j in range(i + 1, n):
-            if not r[i, j].is_zero():
-                acc = acc - r[i, j] * x[j]
-        x[i] = acc / r[i, i]
+            if not m[i][j].is_zero():
+                acc = acc - m[i][j] * x[j]
+        x[i] = acc / m[i][i]
     return ca.vertcat(*x)
 
 
@@ -91,10 +119,10 @@ def sample_step_function(fns: ModelFunctions, substeps: int) -> ca.Function:
     f_a = ca.substitute(fns.dx_expr, u, ua)
     j_a = ca.substitute(jac, u, ua)
     w = ca.SX.eye(nx) - GAMMA_ROS2 * h * j_a
-    q, r = ca.qr(w)
-    k1 = _solve_qr(q, r, f_a)
+    lu = lu_factor(w)
+    k1 = lu_solve(lu, f_a)
     f_b = ca.substitute(ca.substitute(fns.dx_expr, u, ub), x, x + h * k1)
-    k2 = _solve_qr(q, r, f_b - 2.0 * k1)
+    k2 = lu_solve(lu, f_b - 2.0 * k1)
     x_next = x + 1.5 * h * k1 + 0.5 * h * k2
     ros2 = ca.Function("ros2", [x, ua, ub, h, p], [x_next])
 

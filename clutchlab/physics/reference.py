@@ -24,7 +24,7 @@ def integrate_radau(
 ) -> np.ndarray:
     """Integrate sample interval by sample interval with Radau (tolerances from ``settings``)."""
     jac = ca.Function(
-        "jac", [fns.x_sym, fns.u_sym, fns.p_sym], [ca.jacobian(fns.dx_expr, fns.x_sym)]
+        "rhs_jacobian", [fns.x_sym, fns.u_sym, fns.p_sym], [ca.jacobian(fns.dx_expr, fns.x_sym)]
     )
     u0, u1 = interval_inputs(u)
     x = np.empty((len(t), len(x0)))

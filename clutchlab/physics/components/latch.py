@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 from ..assembly import Assembly, StateSpec
-from ..smooth import logistic
+from ..smooth import logistic, smooth_max0
 from .base import Component, param
 from .fluid import flow
 
@@ -37,7 +37,9 @@ class LatchValve(Component):
 
     Latch opening ``λ ∈ (0, 1)``: ``τ dλ/dt = σ(F_net(λ)/F_w) − λ`` with
     ``F_net = p_a (A1 + (A2 − A1) λ) − F0 − k·s·λ``: bistable, snaps open at
-    ``p_on = F0/A1`` and closes at ``p_off = (F0 + k s)/A2 < p_on``.
+    ``p_on = F0/A1`` and closes at ``p_off = (F0 + k s)/A2 < p_on``. The feedback
+    exhaust opens after an overlap (a fraction of the stroke), so the hydraulic
+    latch follows the mechanical snap, not its first micrometres.
     """
 
     name = _C
@@ -51,6 +53,7 @@ class LatchValve(Component):
         param(_C, "F_w", "N", 0.1, 0.01, 1.0, "force width of the smooth snap"),
         param(_C, "tau", "ms", 5.0, 0.5, 50.0, "switching time constant"),
         param(_C, "d_exh", "mm", 2.5, 0.5, 5.0, "feedback exhaust passage when latched"),
+        param(_C, "overlap", "-", 0.3, 0.05, 0.8, "exhaust overlap, fraction of the stroke"),
     )
 
     def build(self, asm: Assembly) -> None:
@@ -76,10 +79,11 @@ class LatchValve(Component):
             lambda a: math.pi / 4.0 * a.p("latch_d1") ** 2 * a.p("latch_stroke") * a["der:latch"],
             "m³/s",
         )
-        asm.define(
-            "Q_latch_exh",
-            lambda a: flow(
-                a, math.pi / 4.0 * a.p("latch_d_exh") ** 2 * lam, a.x("p_fb") - a["p_prime"]
-            ),
-            "m³/s",
-        )
+
+        def q_exh(a):
+            ov = a.p("latch_overlap")
+            opening = smooth_max0(lam - ov, 0.005) / (1.0 - ov)
+            area = math.pi / 4.0 * a.p("latch_d_exh") ** 2 * opening
+            return flow(a, area, a.x("p_fb") - a["p_prime"])
+
+        asm.define("Q_latch_exh", q_exh, "m³/s")

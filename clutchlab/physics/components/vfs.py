@@ -33,7 +33,7 @@ class VariableForceSolenoid(Component):
         param(_C, "F_pre", "N", 1.0, 0.1, 5.0, "spring preload (closing)"),
         param(_C, "k", "N/mm", 2.0, 0.5, 10.0, "spring rate"),
         param(_C, "m", "g", 8.0, 2.0, 30.0, "armature + spool mass"),
-        param(_C, "c", "N·s/m", 6.0, 0.5, 50.0, "viscous damping"),
+        param(_C, "c", "N·s/m", 20.0, 1.0, 80.0, "viscous damping (oil-filled armature)"),
         param(_C, "F_c", "N", 0.05, 0.005, 1.0, "Coulomb friction"),
         param(_C, "v_s", "mm/s", 1.0, 0.1, 10.0, "velocity scale of the smooth friction sign"),
         param(_C, "d_fb", "mm", 4.0, 2.0, 8.0, "pilot feedback diameter"),

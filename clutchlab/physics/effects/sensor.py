@@ -32,10 +32,11 @@ class SensorLag(Effect):
 
 
 class TransportDelay(Effect):
-    """Transport delay ``y ≈ p(t − d)``: ``y = p − d·H(s)·ṗ`` with a 2nd-order Padé filter.
+    """Transport delay ``y ≈ p(t − d)``: ``y = p − d·s·H(s)·p`` with a 2nd-order Padé filter.
 
     ``H(s) = 1 / (1 + s d₀/2 + (s d₀)²/12)``; for ``d = d₀`` this is the (2,2) Padé
-    approximant of the delay, for ``d → 0`` it vanishes exactly.
+    approximant of the delay, for ``d → 0`` it vanishes exactly. The filter states
+    are ``q = H·p`` (bar) and ``r = dq/dt`` (bar/s), so ``y = p − d·r``.
     """
 
     name = "transport_delay"
@@ -48,19 +49,17 @@ class TransportDelay(Effect):
     STRENGTH = ("delay_d",)
 
     def apply(self, asm: Assembly) -> None:
-        # H(s) realised as dw/dt = z, (d0²/12) dz/dt = dp/dt − w − (d0/2) z: w = H·ṗ.
-        w = asm.state(StateSpec("w_delay", "bar/s", 0.0, "Padé-filtered pressure rate", self.name))
-        z = asm.state(StateSpec("z_delay", "bar/s²", 0.0, "Padé filter second state", self.name))
-
-        def d0(a):
-            return a.p("delay_d0")
-
-        asm.tap("dp_sensor", "dp_sensor_in:delay")
-        asm.define("der:w_delay", lambda a: z, "Pa/s²")
+        q = asm.state(StateSpec("q_delay", "bar", 0.5, "Padé-filtered pressure", self.name))
+        r = asm.state(StateSpec("r_delay", "bar/s", 0.0, "its rate", self.name))
+        asm.tap("p_sensor", "p_sensor_in:delay")
+        asm.define("der:q_delay", lambda a: r, "Pa/s")
         asm.define(
-            "der:z_delay",
-            lambda a: (a["dp_sensor_in:delay"] - w - d0(a) / 2.0 * z) / (d0(a) ** 2 / 12.0),
-            "Pa/s³",
+            "der:r_delay",
+            lambda a: (
+                (a["p_sensor_in:delay"] - q - a.p("delay_d0") / 2.0 * r)
+                / (a.p("delay_d0") ** 2 / 12.0)
+            ),
+            "Pa/s²",
         )
-        asm.wrap("p_sensor", lambda a, prev: prev - a.p("delay_d") * w)
-        asm.wrap("dp_sensor", lambda a, prev: prev - a.p("delay_d") * z)
+        asm.wrap("p_sensor", lambda a, prev: prev - a.p("delay_d") * r)
+        asm.wrap("dp_sensor", lambda a, prev: prev - a.p("delay_d") * a["der:r_delay"])
