@@ -56,6 +56,14 @@ def test_ros2_converges_to_the_radau_reference(window):
     assert errors[8] < errors[4] / 2.5 < errors[2] / 2.5 / 2.5
 
 
+def test_outputs_are_the_output_map_of_the_states(window):
+    tr, u, x0 = window
+    x, y = simulate_inputs(MODEL, PARAMS, tr.time_s, u, "command", SimulationSettings(), x0=x0)
+    out = MODEL.functions("command").out
+    y_ref = np.asarray(out.map(len(tr))(x.T, u.T, PARAMS.vector())).T
+    assert np.max(np.abs(y - y_ref)) < 1e-9
+
+
 def test_compiled_equals_interpreted(window):
     tr, u, x0 = window
     runs = [

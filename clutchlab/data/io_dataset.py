@@ -90,6 +90,13 @@ def _manifest_text(dataset: Dataset, suffix: str) -> str:
     )
 
 
+def _chmod_like_mkdir(folder: Path) -> None:
+    """Give a ``mkdtemp`` folder (mode 0700) the permissions ``mkdir`` would (0777 & ~umask)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    os.chmod(folder, 0o777 & ~mask)
+
+
 def save_dataset(
     dataset: Dataset,
     path: str | Path,
@@ -145,6 +152,7 @@ def save_dataset(
 
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    _chmod_like_mkdir(tmp)
     try:
         for trace in dataset:
             writer(trace, tmp / f"{trace.name}{suffix}")

@@ -154,7 +154,7 @@ def _compile(fn: ca.Function, tag: str) -> ca.Function | None:
         lib = cache_dir() / f"{tag}_{digest}.so"
         if not lib.exists():
             part = lib.with_suffix(f".{os.getpid()}.tmp")
-            cmd = [cc, "-O2", "-shared", "-fPIC", "-o", str(part), str(src), "-lm"]
+            cmd = [cc, "-O3", "-shared", "-fPIC", "-o", str(part), str(src), "-lm"]
             res = subprocess.run(cmd, capture_output=True, text=True)
             if res.returncode != 0:
                 warnings.warn(

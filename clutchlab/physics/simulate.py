@@ -105,9 +105,9 @@ def simulate_inputs(
         from .reference import integrate_radau
 
         x = integrate_radau(fns, p, t, u, x0, settings)
+        y = np.asarray(fns.out.map(len(t))(x.T, u.T, p)).T
     else:
-        x = _run_ros2(model, p, t, u, drive, settings, x0)
-    y = np.asarray(fns.out.map(len(t))(x.T, u.T, p)).T
+        x, y = _run_ros2(model, p, t, u, drive, settings, x0)
     bad = ~np.all(np.isfinite(x), axis=1)
     if bad.any():
         k = int(np.argmax(bad))
@@ -127,7 +127,7 @@ def _settle(model, fns, p, t, u, drive, settings, x0):
     # Phase runs so that the settling run ends at the trace's first phase.
     us[:, k_phase] = u[0, k_phase] + freq * dt * (np.arange(n) - (n - 1))
     ts = t[0] + dt * (np.arange(n) - (n - 1))
-    x = _run_ros2(model, p, ts, us, drive, settings, x0)
+    x, _ = _run_ros2(model, p, ts, us, drive, settings, x0)
     return x[-1]
 
 
@@ -139,6 +139,9 @@ def _run_ros2(model, p, t, u, drive, settings, x0):
     nx = len(x0)
     x = np.empty((n, nx))
     x[0] = x0
+    y0 = np.asarray(model.functions(drive).out(x0, u[0], p)).ravel()
+    y = np.empty((n, len(y0)))
+    y[0] = y0
     k, xk, m = 0, np.asarray(x0, dtype=float), settings.chunk
     while k < n - 1:
         cnt = min(m, n - 1 - k)
@@ -153,11 +156,12 @@ def _run_ros2(model, p, t, u, drive, settings, x0):
         if cnt < m:  # pad with the last inputs, zero-length intervals
             a0[:, cnt:], a1[:, cnt:] = a1[:, cnt - 1 : cnt], a1[:, cnt - 1 : cnt]
             dts[0, cnt:] = 0.0
-        xs, _ = fn(xk, a0, a1, dts, p)
+        xs, ys = fn(xk, a0, a1, dts, p)
         xs = np.asarray(xs)
         x[k + 1 : k + 1 + cnt] = xs[:, :cnt].T
+        y[k + 1 : k + 1 + cnt] = np.asarray(ys)[:, :cnt].T
         xk = xs[:, cnt - 1]
         if not np.all(np.isfinite(xk)):
             break
         k += cnt
-    return x
+    return x, y
