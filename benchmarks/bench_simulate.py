@@ -27,13 +27,16 @@ def main() -> None:
     stand = run_stand(StandConfig(settings=(DitherSetting(50.0, "B"),)), progress=False)
     trace = stand.dataset["medium_50Hz_B"]
     duration = trace.duration_s
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-          f"Python {platform.python_version()}")
-    print(f"trace: {trace.name}, {duration:.1f} s at {trace.sample_rate_Hz:.0f} Hz "
-          f"({len(trace)} samples), dither {trace.meta['dither_freq_Hz']:g} Hz resolved")
+    print(
+        f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+        f"Python {platform.python_version()}"
+    )
+    print(
+        f"trace: {trace.name}, {duration:.1f} s at {trace.sample_rate_Hz:.0f} Hz "
+        f"({len(trace)} samples), dither {trace.meta['dither_freq_Hz']:g} Hz resolved"
+    )
     rows = []
-    for label, model in (("base model", CircuitModel()),
-                         ("stand model (3 effects)", stand.model)):
+    for label, model in (("base model", CircuitModel()), ("stand model (3 effects)", stand.model)):
         for drive in ("measured", "command"):
             settings = SimulationSettings(drive=drive, substeps=args.substeps)
             simulate(model, None, trace, settings)  # compile (cached) and warm up
@@ -48,8 +51,10 @@ def main() -> None:
     for label, drive, med, rtf in rows:
         print(f"{label:26s} {drive:9s} {med:16.4f} {rtf:12.1f}")
     worst = min(r[3] for r in rows)
-    print(f"\nworst real-time factor {worst:.1f}x (budget >= 50x, aim 200x): "
-          f"{'PASS' if worst >= 50 else 'FAIL'}")
+    print(
+        f"\nworst real-time factor {worst:.1f}x (budget >= 50x, aim 200x): "
+        f"{'PASS' if worst >= 50 else 'FAIL'}"
+    )
 
 
 if __name__ == "__main__":

@@ -13,6 +13,18 @@ from .trace import Trace
 __all__ = ["Dataset"]
 
 
+def _unknown_check(wanted, known: list[str], what: str, problems: list[str]) -> set:
+    """The wanted labels as a set; records a problem listing the known ones for unknown labels."""
+    wanted = {wanted} if isinstance(wanted, str) else set(wanted)
+    unknown = sorted(map(str, wanted - set(known)))
+    if unknown:
+        problems.append(
+            f"unknown {what} {', '.join(map(repr, unknown))}; known: "
+            f"{', '.join(map(repr, known)) or '(none)'}"
+        )
+    return wanted
+
+
 class Dataset:
     """Ordered collection of experiments, as described by a dataset manifest.
 
@@ -154,23 +166,11 @@ class Dataset:
         keep = list(self._experiments)
         problems: list[str] = []
         if ramps is not None:
-            wanted = {ramps} if isinstance(ramps, str) else set(ramps)
-            unknown = sorted(map(str, wanted - set(self.ramps)))
-            if unknown:
-                problems.append(
-                    f"unknown ramp label(s) {', '.join(map(repr, unknown))}; known: "
-                    f"{', '.join(map(repr, self.ramps)) or '(none)'}"
-                )
+            wanted = _unknown_check(ramps, self.ramps, "ramp label(s)", problems)
             keep = [t for t in keep if t.ramp in wanted]
         if names is not None:
-            wanted_names = {names} if isinstance(names, str) else set(names)
-            unknown = sorted(map(str, wanted_names - set(self._index)))
-            if unknown:
-                problems.append(
-                    f"unknown experiment name(s) {', '.join(map(repr, unknown))}; known: "
-                    f"{', '.join(map(repr, self._index)) or '(none)'}"
-                )
-            keep = [t for t in keep if t.name in wanted_names]
+            wanted = _unknown_check(names, list(self._index), "experiment name(s)", problems)
+            keep = [t for t in keep if t.name in wanted]
         if problems:
             raise DataError("cannot select experiments", problems)
         return self._derive(keep)

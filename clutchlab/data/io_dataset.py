@@ -176,6 +176,18 @@ def save_dataset(
     return path
 
 
+def _required_string(entry: dict, key: str, where: str, problems: list[str]) -> str | None:
+    """``entry[key]`` if it is a non-empty string, else None with the problem recorded."""
+    value = entry.get(key)
+    if key not in entry:
+        problems.append(f"{where}: missing {key!r}")
+        return None
+    if not isinstance(value, str) or not value:
+        problems.append(f"{where}: {key!r} must be a non-empty string, got {value!r}")
+        return None
+    return value
+
+
 def load_dataset(path: str | Path) -> Dataset:
     """Load a dataset folder.
 
@@ -232,23 +244,11 @@ def load_dataset(path: str | Path) -> Dataset:
         if not isinstance(entry, dict):
             problems.append(f"{where}: must be an object, got {json.dumps(entry)}")
             continue
-        ok = True
-        file = entry.get("file")
-        if "file" not in entry:
-            problems.append(f"{where}: missing 'file'")
-            ok = False
-        elif not isinstance(file, str) or not file:
-            problems.append(f"{where}: 'file' must be a non-empty string, got {file!r}")
-            ok = False
-        ramp = entry.get("ramp")
-        if "ramp" not in entry:
-            problems.append(f"{where}: missing 'ramp'")
-            ok = False
-        elif not isinstance(ramp, str) or not ramp:
-            problems.append(f"{where}: 'ramp' must be a non-empty string, got {ramp!r}")
-            ok = False
-        if not ok:
+        file = _required_string(entry, "file", where, problems)
+        ramp = _required_string(entry, "ramp", where, problems)
+        if file is None or ramp is None:
             continue
+        ok = True
         file_path = root / file
         name = file_path.stem
         if not file_path.is_file():

@@ -8,14 +8,29 @@ from ..assembly import Assembly
 from ..smooth import smooth_max0, smooth_window
 from .base import param
 
-__all__ = ["accumulator_compliance", "accumulator_parameters"]
+__all__ = [
+    "accumulator_compliance",
+    "accumulator_parameters",
+    "declare_accumulator_node",
+    "node_compliance",
+]
 
 
 def accumulator_parameters(
-    prefix: str, d_mm: float, k_N_mm: float, p0_bar: float, stroke_mm: float, what: str
+    prefix: str,
+    d_mm: float,
+    k_N_mm: float,
+    p0_bar: float,
+    stroke_mm: float,
+    what: str,
+    volume_cm3: float,
+    line: str,
 ):
-    """Parameters of a spring-piston accumulator called ``prefix``."""
+    """Parameters of spring-piston accumulator ``prefix`` and the oil volume (cm³) of its node."""
     return (
+        param(
+            prefix, "V", "cm³", volume_cm3, 0.1 * volume_cm3, 6.0 * volume_cm3, f"{line} oil volume"
+        ),
         param(prefix, "d", "mm", d_mm, 0.4 * d_mm, 2.5 * d_mm, f"{what} piston diameter"),
         param(prefix, "k", "N/mm", k_N_mm, 0.2 * k_N_mm, 5.0 * k_N_mm, f"{what} spring rate"),
         param(prefix, "p0", "bar", p0_bar, 0.1, 10.0, f"{what} cracking (preload) pressure"),
@@ -49,3 +64,13 @@ def accumulator_compliance(asm: Assembly, prefix: str, p):
     s = 2.0 * area * dp / (k + (k * k + 4.0 * kappa * k * area * dp / stroke) ** 0.5)
     p_full = p0 + k * stroke * (1.0 + kappa) / area
     return area**2 / (k * (1.0 + 2.0 * kappa * s / stroke)) * smooth_window(p, p0, p_full, 0.3e5)
+
+
+def declare_accumulator_node(asm: Assembly, prefix: str) -> None:
+    """Define the accumulator's spring progression ``acc_kappa:<prefix>`` (0: linear spring)."""
+    asm.define(f"acc_kappa:{prefix}", lambda a: 0.0, "-")
+
+
+def node_compliance(asm: Assembly, prefix: str, node: str, p):
+    """Compliance (m³/Pa) of hydraulic node ``node``: oil ``V/β(p)`` plus accumulator ``prefix``."""
+    return asm.p(f"{prefix}_V") / asm[f"beta:{node}"] + accumulator_compliance(asm, prefix, p)

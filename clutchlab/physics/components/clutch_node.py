@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from ..assembly import Assembly, StateSpec
-from .accumulator import accumulator_compliance, accumulator_parameters
-from .base import Component, param
+from .accumulator import accumulator_parameters, declare_accumulator_node, node_compliance
+from .base import Component
 
 __all__ = ["ClutchNode"]
 
@@ -20,18 +20,16 @@ class ClutchNode(Component):
 
     name = _C
     description = "clutch line and clutch accumulator"
-    PARAMETERS = (
-        *accumulator_parameters(_C, 20.0, 40.0, 1.0, 15.0, "clutch accumulator"),
-        param(_C, "V", "cm³", 15.0, 2.0, 100.0, "clutch line oil volume"),
+    PARAMETERS = accumulator_parameters(
+        _C, 20.0, 40.0, 1.0, 15.0, "clutch accumulator", 15.0, "clutch line"
     )
 
     def build(self, asm: Assembly) -> None:
         p = asm.state(StateSpec("p_c", "bar", 0.5, "clutch pressure", _C))
-        asm.define("acc_kappa:cacc", lambda a: 0.0, "-")
+        declare_accumulator_node(asm, _C)
         asm.add_term("Q_clutch_extra", lambda a: 0.0)
 
         def der(a):
-            c = a.p("cacc_V") / a["beta:p_c"] + accumulator_compliance(a, _C, p)
             q = (
                 a["Q_reg_in"]
                 - a["Q_reg_out"]
@@ -39,6 +37,6 @@ class ClutchNode(Component):
                 - a["Q_reg_leak"]
                 + a["Q_clutch_extra"]
             )
-            return q / c
+            return q / node_compliance(a, _C, "p_c", p)
 
         asm.define("der:p_c", der, "Pa/s")

@@ -5,8 +5,8 @@ from __future__ import annotations
 import math
 
 from ..assembly import Assembly, StateSpec
-from .accumulator import accumulator_compliance, accumulator_parameters
-from .base import Component, param
+from .accumulator import accumulator_parameters, declare_accumulator_node, node_compliance
+from .base import Component
 
 __all__ = ["PilotNode"]
 
@@ -21,21 +21,17 @@ class PilotNode(Component):
 
     name = _C
     description = "VFS accumulator and pilot line"
-    PARAMETERS = (
-        *accumulator_parameters(_C, 12.0, 12.0, 1.0, 12.0, "VFS accumulator"),
-        param(_C, "V", "cm³", 2.0, 0.2, 10.0, "pilot line oil volume"),
+    PARAMETERS = accumulator_parameters(
+        _C, 12.0, 12.0, 1.0, 12.0, "VFS accumulator", 2.0, "pilot line"
     )
 
     def build(self, asm: Assembly) -> None:
         p = asm.state(StateSpec("p_a", "bar", 0.5, "pilot (VFS accumulator) pressure", _C))
-        asm.define("acc_kappa:vacc", lambda a: 0.0, "-")
-
-        def compliance(a):
-            return a.p("vacc_V") / a["beta:p_a"] + accumulator_compliance(a, _C, p)
+        declare_accumulator_node(asm, _C)
 
         def der(a):
             a_pil = math.pi / 4.0 * a.p("reg_d_pil") ** 2
             q = a["Q_vfs_orf"] - a_pil * a.x("v_r") - a["V_latch_rate"]
-            return q / compliance(a)
+            return q / node_compliance(a, _C, "p_a", p)
 
         asm.define("der:p_a", der, "Pa/s")

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 
-from ..assembly import Assembly
+from ..assembly import Assembly, StateSpec
 from ..parameters import Parameter
 
-__all__ = ["Effect"]
+__all__ = ["Effect", "add_first_order_lag"]
 
 
 class Effect(ABC):
@@ -47,3 +47,31 @@ class Effect(ABC):
 
     def __repr__(self) -> str:
         return f"<effect {self.name}>"
+
+
+def add_first_order_lag(
+    asm: Assembly, signal: str, rate: str, state: StateSpec, kappa: str, tau: str
+) -> None:
+    """Lag ``signal`` (whose time derivative is signal ``rate``) by a blended first-order lag.
+
+    ``y = x − κ e`` with ``de/dt = dx/dt − e/τ``: for κ = 1 exactly the lag
+    ``τ dy/dt = x − y``, for κ = 0 exactly no effect (the state ``e`` then feeds
+    nothing). Both ``signal`` and ``rate`` are wrapped, so lags compose.
+
+    Parameters
+    ----------
+    asm : Assembly
+        Where to declare.
+    signal, rate : str
+        Names of the lagged signal and of its time derivative.
+    state : StateSpec
+        The deficit state ``e`` (same unit as ``signal``).
+    kappa, tau : str
+        Names of the strength (-) and time-constant (s after conversion) parameters.
+    """
+    e = asm.state(state)
+    tapped = f"{rate}_in:{state.name}"
+    asm.tap(rate, tapped)
+    asm.define(f"der:{state.name}", lambda a: a[tapped] - e / a.p(tau))
+    asm.wrap(signal, lambda a, prev: prev - a.p(kappa) * e)
+    asm.wrap(rate, lambda a, prev: prev - a.p(kappa) * (prev - e / a.p(tau)))

@@ -6,7 +6,7 @@ import casadi as ca
 
 from ..assembly import Assembly, StateSpec
 from ..components.base import param
-from .base import Effect
+from .base import Effect, add_first_order_lag
 
 __all__ = ["EddyCurrentLag", "MagneticHysteresis"]
 
@@ -59,8 +59,5 @@ class EddyCurrentLag(Effect):
     STRENGTH = ("eddy_kappa",)
 
     def apply(self, asm: Assembly) -> None:
-        e = asm.state(StateSpec("e_eddy", "N", 0.0, "eddy-current force deficit", self.name))
-        asm.tap("dF_mag", "dF_mag_in:eddy")
-        asm.define("der:e_eddy", lambda a: a["dF_mag_in:eddy"] - e / a.p("eddy_tau"), "N/s")
-        asm.wrap("F_mag", lambda a, prev: prev - a.p("eddy_kappa") * e)
-        asm.wrap("dF_mag", lambda a, prev: prev - a.p("eddy_kappa") * (prev - e / a.p("eddy_tau")))
+        state = StateSpec("e_eddy", "N", 0.0, "eddy-current force deficit", self.name)
+        add_first_order_lag(asm, "F_mag", "dF_mag", state, "eddy_kappa", "eddy_tau")

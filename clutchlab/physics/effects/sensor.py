@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from ..assembly import Assembly, StateSpec
 from ..components.base import param
-from .base import Effect
+from .base import Effect, add_first_order_lag
 
 __all__ = ["SensorLag", "TransportDelay"]
 
@@ -22,13 +22,8 @@ class SensorLag(Effect):
     STRENGTH = ("slag_kappa",)
 
     def apply(self, asm: Assembly) -> None:
-        e = asm.state(StateSpec("e_slag", "bar", 0.0, "sensor lag deficit", self.name))
-        asm.tap("dp_sensor", "dp_sensor_in:slag")
-        asm.define("der:e_slag", lambda a: a["dp_sensor_in:slag"] - e / a.p("slag_tau"), "Pa/s")
-        asm.wrap("p_sensor", lambda a, prev: prev - a.p("slag_kappa") * e)
-        asm.wrap(
-            "dp_sensor", lambda a, prev: prev - a.p("slag_kappa") * (prev - e / a.p("slag_tau"))
-        )
+        state = StateSpec("e_slag", "bar", 0.0, "sensor lag deficit", self.name)
+        add_first_order_lag(asm, "p_sensor", "dp_sensor", state, "slag_kappa", "slag_tau")
 
 
 class TransportDelay(Effect):
