@@ -29,6 +29,7 @@ __all__ = [
     "GAMMA_ROS2",
     "cache_dir",
     "chunk_function",
+    "compile_function",
     "lu_factor",
     "lu_solve",
     "sample_step_function",
@@ -137,7 +138,12 @@ def sample_step_function(fns: ModelFunctions, substeps: int) -> ca.Function:
     )
 
 
-def _compile(fn: ca.Function, tag: str) -> ca.Function | None:
+def compile_function(fn: ca.Function, tag: str, opt: str = "-O2") -> ca.Function | None:
+    """Public alias of the code-generation cache (see :func:`_compile`)."""
+    return _compile(fn, tag, opt)
+
+
+def _compile(fn: ca.Function, tag: str, opt: str = "-O2") -> ca.Function | None:
     """Generate C for ``fn``, compile it (cached by code hash) and load it; None if impossible."""
     cc = shutil.which(os.environ.get("CC", "gcc")) or shutil.which("cc")
     if cc is None:
@@ -150,11 +156,11 @@ def _compile(fn: ca.Function, tag: str) -> ca.Function | None:
         finally:
             os.chdir(cwd)
         code = src.read_bytes()
-        digest = hashlib.sha1(code + ca.__version__.encode()).hexdigest()[:16]
+        digest = hashlib.sha1(code + ca.__version__.encode() + opt.encode()).hexdigest()[:16]
         lib = cache_dir() / f"{tag}_{digest}.so"
         if not lib.exists():
             part = lib.with_suffix(f".{os.getpid()}.tmp")
-            cmd = [cc, "-O3", "-shared", "-fPIC", "-o", str(part), str(src), "-lm"]
+            cmd = [cc, opt, "-shared", "-fPIC", "-o", str(part), str(src), "-lm"]
             res = subprocess.run(cmd, capture_output=True, text=True)
             if res.returncode != 0:
                 warnings.warn(
@@ -182,7 +188,7 @@ def chunk_function(
     if compile_mode == "never":
         return fn
     tag = f"clutchlab_{model.key}_{drive}_{substeps}"
-    compiled = _compile(fn, tag)
+    compiled = _compile(fn, tag, "-O3")
     if compiled is None:
         if compile_mode == "always":
             raise SimulationError("compile='always' but no working C compiler was found")

@@ -50,7 +50,7 @@ class LatchValve(Component):
         param(_C, "F0", "N", 27.7, 2.0, 100.0, "spring preload"),
         param(_C, "k", "N/mm", 2.0, 0.2, 20.0, "spring rate"),
         param(_C, "stroke", "mm", 2.0, 0.5, 5.0, "valve stroke"),
-        param(_C, "F_w", "N", 0.1, 0.01, 1.0, "force width of the smooth snap"),
+        param(_C, "F_w", "N", 0.4, 0.05, 2.0, "force width of the smooth snap"),
         param(_C, "tau", "ms", 5.0, 0.5, 50.0, "switching time constant"),
         param(_C, "d_exh", "mm", 2.5, 0.5, 5.0, "feedback exhaust passage when latched"),
         param(_C, "overlap", "-", 0.3, 0.05, 0.8, "exhaust overlap, fraction of the stroke"),

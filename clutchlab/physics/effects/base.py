@@ -27,6 +27,8 @@ class Effect(ABC):
     ``STRENGTH``
         Names of the parameters that switch the effect off exactly at zero: with
         all of them at 0 the model output equals the model without the effect.
+    ``FIT``
+        Parameters a fit frees when the effect is switched on (default ``STRENGTH``).
     """
 
     name: str = ""
@@ -34,6 +36,13 @@ class Effect(ABC):
     signature: str = ""
     PARAMETERS: tuple[Parameter, ...] = ()
     STRENGTH: tuple[str, ...] = ()
+    #: Parameters a fit frees when the effect is on (default: the strength ones).
+    FIT: tuple[str, ...] | None = None
+
+    @classmethod
+    def fit_parameters(cls) -> tuple[str, ...]:
+        """Names of the parameters a fitter frees for this effect."""
+        return cls.FIT if cls.FIT is not None else cls.STRENGTH
 
     def declare(self, asm: Assembly) -> None:
         """Declare the parameters, then apply."""

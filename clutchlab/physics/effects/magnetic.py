@@ -57,6 +57,7 @@ class EddyCurrentLag(Effect):
         param("eddy", "tau", "ms", 3.0, 0.1, 50.0, "eddy-current time constant"),
     )
     STRENGTH = ("eddy_kappa",)
+    FIT = ("eddy_tau",)
 
     def apply(self, asm: Assembly) -> None:
         state = StateSpec("e_eddy", "N", 0.0, "eddy-current force deficit", self.name)

@@ -20,6 +20,7 @@ class SensorLag(Effect):
         param("slag", "tau", "ms", 5.0, 0.1, 100.0, "sensor time constant"),
     )
     STRENGTH = ("slag_kappa",)
+    FIT = ("slag_tau",)
 
     def apply(self, asm: Assembly) -> None:
         state = StateSpec("e_slag", "bar", 0.0, "sensor lag deficit", self.name)

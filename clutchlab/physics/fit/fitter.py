@@ -1,0 +1,352 @@
+"""Multi-experiment physics parameter estimation (CasADi sensitivities + IPOPT)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict
+
+import numpy as np
+from sklearn.exceptions import NotFittedError
+from tqdm.auto import tqdm
+
+from ...data import Dataset, Trace
+from ...errors import FitError, ModelError
+from ..effects import EFFECTS
+from ..model import CircuitModel
+from ..parameters import ParameterSet
+from ..settings import SimulationSettings
+from ..simulate import simulate
+from .nlp import solve_ipopt
+from .problem import FitProblem, dither_period_samples, period_mean
+from .result import FitResult, identifiability
+from .settings import DEFAULT_FREE, FitSettings
+
+__all__ = ["PhysicsFitter", "resolve_free"]
+
+_OK = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+
+
+def resolve_free(model: CircuitModel, settings: FitSettings) -> tuple[str, ...]:
+    """The free parameters: the settings' list, or the defaults plus each effect's fit set."""
+    known = [p.name for p in model.parameters]
+    if settings.free is not None:
+        free = tuple(settings.free)
+    else:
+        free = tuple(n for n in DEFAULT_FREE if n in known)
+        for e in model.effects:
+            free += tuple(n for n in EFFECTS[e.name].fit_parameters() if n not in free)
+    unknown = [n for n in (*free, *settings.per_experiment) if n not in known]
+    if unknown:
+        raise FitError(
+            f"unknown parameter(s) {', '.join(unknown)}; the model has: {', '.join(known)}"
+        )
+    missing = [n for n in settings.per_experiment if n not in free]
+    if missing:
+        raise FitError(f"per-experiment parameter(s) not free: {', '.join(missing)}")
+    if not free:
+        raise FitError("no free parameters")
+    return free
+
+
+class PhysicsFitter:
+    """Fit the circuit model's parameters to test-stand data.
+
+    scikit-learn contract: ``__init__`` stores its arguments, :meth:`fit` validates
+    and returns ``self``; learned state ends in ``_`` (``result_``, ``params_``,
+    ``model_``); :meth:`predict` before :meth:`fit` raises ``NotFittedError``.
+
+    Parameters
+    ----------
+    model : CircuitModel, optional
+        Model structure (effects on); the base circuit by default.
+    settings : FitSettings, optional
+        Free parameters, method, objective, limits.
+    start : ParameterSet, optional
+        Starting values (and fixed values); the datasheet defaults by default.
+
+    Notes
+    -----
+    Objective: ``½ Σ (P̄_model − P̄_measured)²`` over the training experiments, with
+    ``P̄`` the pressure averaged over one dither period (bar), every ``decimate``-th
+    sample. Standard errors come from the Gauss–Newton Fisher information of a
+    single-shooting pass at the optimum, with the residual variance estimated from
+    the fit; neighbouring residuals are correlated by the period mean, so they are
+    lower bounds of the true uncertainty.
+    """
+
+    def __init__(
+        self,
+        model: CircuitModel | None = None,
+        settings: FitSettings | None = None,
+        start: ParameterSet | None = None,
+    ) -> None:
+        self.model = model
+        self.settings = settings
+        self.start = start
+
+    # ---- validation ---------------------------------------------------------------
+    def _training(self, data) -> list[Trace]:
+        settings = self.settings or FitSettings()
+        if isinstance(data, Dataset):
+            missing = [r for r in settings.train_ramps if r not in data.ramps]
+            if len(missing) == len(settings.train_ramps):
+                raise FitError(
+                    f"no training experiments: ramps {list(settings.train_ramps)} "
+                    f"not in the dataset (it has {data.ramps})"
+                )
+            traces = list(data.select(ramps=[r for r in settings.train_ramps if r in data.ramps]))
+        else:
+            traces = list(data)
+        if not traces:
+            raise FitError("no training experiments")
+        problems = []
+        for tr in traces:
+            cur = tr.get("current_mA") if tr.has("current_mA") else tr.get("current_cmd_mA")
+            span = float(np.ptp(cur))
+            n = dither_period_samples(tr)
+            p_span = float(np.ptp(period_mean(tr.get("clutch_pressure_bar"), n)))
+            if span < settings.min_current_span_mA:
+                problems.append(
+                    f"{tr.name}: no excitation — the current spans only "
+                    f"{span:.1f} mA (< {settings.min_current_span_mA:g} mA)"
+                )
+            elif p_span < settings.min_pressure_span_bar:
+                problems.append(
+                    f"{tr.name}: no excitation — the pressure spans only "
+                    f"{p_span:.3f} bar (< {settings.min_pressure_span_bar:g} bar)"
+                )
+        if problems:
+            raise FitError("cannot fit:\n  - " + "\n  - ".join(problems))
+        return traces
+
+    @staticmethod
+    def _check_bounds(model: CircuitModel, free, settings: FitSettings, start: ParameterSet):
+        specs = {p.name: p for p in model.parameters}
+        problems = []
+        for n in free:
+            p = specs[n]
+            lb, ub = settings.bounds.get(n, (p.lower, p.upper))
+            if not lb < ub:
+                problems.append(f"{n}: lower bound {lb} ≥ upper bound {ub} {p.unit}")
+            elif lb < p.lower or ub > p.upper:
+                problems.append(
+                    f"{n}: bounds [{lb}, {ub}] leave the physical range "
+                    f"[{p.lower}, {p.upper}] {p.unit}"
+                )
+            elif not lb <= start[n] <= ub:
+                problems.append(f"{n}: start value {start[n]} outside bounds [{lb}, {ub}] {p.unit}")
+            elif p.transform == "log" and lb <= 0:
+                problems.append(f"{n}: log-scaled parameter needs a positive lower bound")
+        unknown = sorted(set(settings.bounds) - set(free))
+        problems += [f"{n}: bounds given but the parameter is not free" for n in unknown]
+        if problems:
+            raise FitError("infeasible bounds:\n  - " + "\n  - ".join(problems))
+
+    # ---- fit ----------------------------------------------------------------------------
+    def fit(self, data: Dataset | list[Trace]) -> PhysicsFitter:
+        """Estimate the free parameters on the training experiments of ``data``.
+
+        Raises
+        ------
+        FitError
+            Bad settings or bounds, experiments without excitation, a model that
+            diverges at the start, or a solver that fails or runs out of time
+            (``exc.result`` then holds the best iterate found).
+        """
+        t_start = time.perf_counter()
+        model = self.model or CircuitModel()
+        settings = self.settings or FitSettings()
+        try:
+            start = self.start or model.default_params()
+        except ModelError as exc:
+            raise FitError(str(exc)) from exc
+        traces = self._training(data)
+        free = resolve_free(model, settings)
+        self._check_bounds(model, free, settings, start)
+        problem = FitProblem(model, traces, free, settings, start)
+        lo, hi = problem.bounds_z()
+        slo, shi = problem.state_bounds()
+        lbz, ubz = np.concatenate([lo, slo]), np.concatenate([hi, shi])
+        rng = np.random.default_rng(settings.seed)
+        starts = [np.zeros(problem.n_par)]
+        for k in range(settings.multistart):  # Latin hypercube inside the bounds
+            u = rng.permutation(settings.multistart)[None, :] + rng.random((problem.n_par, 1))
+            frac = (u[:, k] / settings.multistart) if settings.multistart else 0.5
+            starts.append(lo + (hi - lo) * np.clip(frac, 0.02, 0.98))
+        history: list[float] = []
+        best = {"cost": np.inf, "z": None, "stats": None}
+        bar = tqdm(
+            total=settings.max_iter * len(starts),
+            desc="fit-physics",
+            unit="it",
+            disable=not settings.progress,
+            leave=False,
+        )
+
+        def on_jacobian(cost):
+            history.append(cost)
+            bar.update(1)
+            bar.set_postfix(cost=f"{cost:.4g}", best=f"{min(history):.4g}")
+
+        problem.on_jacobian = on_jacobian
+        problem.start_workers(traces, settings.workers)
+        try:
+            best = self._solve_starts(problem, starts, lbz, ubz, settings, t_start, best)
+        finally:
+            problem.close()
+            bar.close()
+        result = self._result(
+            model, problem, best, history, traces, settings, time.perf_counter() - t_start
+        )
+        if best["stats"] is None or best["stats"]["return_status"] not in _OK:
+            status = best["stats"]["return_status"] if best["stats"] else "no start completed"
+            err = FitError(
+                f"the fit did not converge ({status}) after "
+                f"{time.perf_counter() - t_start:.1f} s; best cost "
+                f"{best['cost']:.6g} kept in exc.result"
+            )
+            err.result = result
+            raise err
+        self.result_ = result
+        self.model_ = result.model()
+        self.params_ = result.params()
+        return self
+
+    @staticmethod
+    def _solve_starts(problem, starts, lbz, ubz, settings, t_start, best):
+        """Run IPOPT from each start; keep the lowest cost."""
+        for z_par in starts:
+            z0 = problem.initial_z(z_par)
+            if not np.isfinite(problem.cost(z0)):
+                raise FitError(
+                    "the model diverges at the start parameters on "
+                    f"{[e.name for e in problem.experiments]}"
+                )
+            remaining = settings.time_limit_s - (time.perf_counter() - t_start)
+            if remaining <= 0:
+                break
+            try:
+                z, stats = solve_ipopt(
+                    problem,
+                    z0,
+                    lbz,
+                    ubz,
+                    settings.max_iter,
+                    settings.tol,
+                    remaining,
+                    settings.ipopt_options,
+                )
+            except RuntimeError as exc:  # a callback raised: keep what we have
+                z, stats = z0, {"return_status": f"error: {exc}", "iter_count": 0, "success": False}
+            z = np.clip(z, lbz, ubz)
+            cost = problem.cost(z)
+            if cost < best["cost"]:
+                best = {"cost": cost, "z": z, "stats": stats}
+        return best
+
+    def _result(self, model, problem: FitProblem, best, history, traces, settings, wall):
+        z = best["z"] if best["z"] is not None else problem.initial_z()
+        fitted = problem.parameter_set(z, 0)
+        free = list(problem.free)
+        # Uncertainty and identifiability from a single-shooting pass at the optimum.
+        ss = FitProblem(
+            model,
+            traces,
+            tuple(problem.shared),
+            FitSettings(**{**asdict(settings), "method": "single_shooting", "per_experiment": ()}),
+            fitted,
+        )
+        ss.start_workers(traces, settings.workers)
+        try:
+            ev = ss.evaluate(np.zeros(ss.n_z), True)
+        finally:
+            ss.close()
+        names = list(ss.shared)
+        se, corr, sv, unid, weak = {}, [], [], list(names), []
+        if ev.get("J") is not None:
+            jz = ev["J"].toarray()
+            r = ev["r"]
+            dof = max(len(r) - jz.shape[1], 1)
+            sigma2 = float(np.dot(r, r)) / dof
+            cov = sigma2 * np.linalg.pinv(jz.T @ jz)
+            sd_z = np.sqrt(np.clip(np.diag(cov), 0, None))
+            rel = []
+            for k, n in enumerate(names):
+                spec = ss.specs[k]
+                deriv = fitted[n] if spec.transform == "log" else spec.scale
+                se[n] = float(abs(deriv) * sd_z[k])
+                ref = (
+                    abs(fitted[n])
+                    if spec.transform == "log"
+                    else max(abs(fitted[n]), 0.01 * spec.scale)
+                )
+                rel.append(se[n] / ref)
+            d = np.where(sd_z > 0, sd_z, 1.0)
+            corr = (cov / np.outer(d, d)).tolist()
+            sv, unid, weak = identifiability(jz, names, np.array(rel))
+        for n in problem.per_exp:
+            se[n] = float("nan")
+        per_values = (
+            {ex.name: problem.params_of(z, e)[1] for e, ex in enumerate(problem.experiments)}
+            if problem.per_exp
+            else {}
+        )
+        per_exp = {}
+        for e, tr in enumerate(traces):
+            ps = problem.parameter_set(z, e)
+            pred = simulate(model, ps, tr, SimulationSettings()).pressure_bar
+            n = dither_period_samples(tr)
+            y, yh = period_mean(tr.get("clutch_pressure_bar"), n), period_mean(pred, n)
+            err = yh - y
+            per_exp[tr.name] = {
+                "rmse_bar": float(np.sqrt(np.mean(err**2))),
+                "fit_pct": float(100 * (1 - np.linalg.norm(err) / np.linalg.norm(y - y.mean()))),
+            }
+        stats = best["stats"] or {"return_status": "not run", "iter_count": 0}
+        return FitResult(
+            effects=list(model.effect_names),
+            values=dict(fitted.values),
+            units={p.name: p.unit for p in model.parameters},
+            free=free,
+            std_errors=se,
+            correlation=corr,
+            singular_values=sv,
+            unidentifiable=unid,
+            weak_directions=weak,
+            per_experiment=per_exp,
+            per_experiment_values=per_values,
+            cost_history=list(history),
+            status=stats["return_status"],
+            success=stats["return_status"] in _OK,
+            iterations=stats["iter_count"],
+            wall_s=wall,
+            train=[t.name for t in traces],
+            settings={
+                k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(settings).items()
+            },
+        )
+
+    # ---- use --------------------------------------------------------------------------
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "result_"):
+            raise NotFittedError("this PhysicsFitter is not fitted yet; call fit(dataset) first")
+
+    def predict(self, trace: Trace, settings: SimulationSettings | None = None) -> np.ndarray:
+        """Clutch pressure (bar) of the fitted model on ``trace``."""
+        self._check_fitted()
+        return simulate(self.model_, self.params_, trace, settings).pressure_bar
+
+    def save(self, path) -> None:
+        """Write the fit result as JSON."""
+        self._check_fitted()
+        self.result_.to_json(path)
+
+    @classmethod
+    def load(cls, path) -> PhysicsFitter:
+        """A fitted fitter from a JSON written by :meth:`save`."""
+        result = FitResult.from_json(path)
+        fitter = cls(result.model())
+        fitter.result_ = result
+        fitter.model_ = result.model()
+        fitter.params_ = result.params()
+        return fitter

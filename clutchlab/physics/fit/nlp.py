@@ -1,0 +1,165 @@
+"""IPOPT on the fit problem with a Gauss–Newton Hessian.
+
+``min ½‖r(z)‖²  s.t.  g(z) = 0, z_lo ≤ z ≤ z_hi``. Residuals and constraints come
+from :class:`FitProblem` through CasADi callbacks; the Hessian of the Lagrangian
+is replaced by ``σ JᵀJ`` (generalized Gauss–Newton; the constraint curvature is
+dropped, as in constrained Gauss–Newton for multiple shooting).
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+
+from .problem import FitProblem
+
+__all__ = ["solve_ipopt"]
+
+
+def _sparsity(m: sp.csc_matrix) -> ca.Sparsity:
+    m = sp.csc_matrix(m)
+    return ca.Sparsity(m.shape[0], m.shape[1], m.indptr.tolist(), m.indices.tolist())
+
+
+def _dm(m: sp.csc_matrix, pattern: sp.csc_matrix) -> ca.DM:
+    """``m`` as a CasADi matrix on ``pattern``'s sparsity (both built from the same COO)."""
+    m = sp.csc_matrix(m)
+    if m.nnz != pattern.nnz or not np.array_equal(m.indices, pattern.indices):
+        m = (m + 0 * pattern).tocsc()  # align to the pattern (explicit zeros where absent)
+        m.sort_indices()
+    return ca.DM(_sparsity(pattern), m.data)
+
+
+class _Vec(ca.Callback):
+    """``z -> r(z)`` or ``z -> g(z)`` with a Jacobian callback."""
+
+    def __init__(self, name, problem: FitProblem, which: str, n_out: int, pattern):
+        ca.Callback.__init__(self)
+        self.problem, self.which, self.n_out, self.pattern = problem, which, n_out, pattern
+        self.construct(name, {"enable_fd": False})
+
+    def get_n_in(self):
+        return 1
+
+    def get_n_out(self):
+        return 1
+
+    def get_sparsity_in(self, i):
+        return ca.Sparsity.dense(self.problem.n_z, 1)
+
+    def get_sparsity_out(self, i):
+        return ca.Sparsity.dense(self.n_out, 1)
+
+    def eval(self, arg):
+        out = self.problem.evaluate(np.asarray(arg[0]).ravel(), False)
+        return [ca.DM(out[self.which])]
+
+    def has_jacobian(self):
+        return True
+
+    def get_jacobian(self, name, inames, onames, opts):
+        self._jac = _Jac(name, self.problem, self.which, self.n_out, self.pattern, opts)
+        return self._jac
+
+
+class _Jac(ca.Callback):
+    def __init__(self, name, problem, which, n_out, pattern, opts):
+        ca.Callback.__init__(self)
+        self.problem, self.which, self.n_out, self.pattern = problem, which, n_out, pattern
+        self.key = "J" if which == "r" else "Jg"
+        self.construct(name, opts)
+
+    def get_n_in(self):
+        return 2
+
+    def get_n_out(self):
+        return 1
+
+    def get_sparsity_in(self, i):
+        n = self.problem.n_z if i == 0 else self.n_out
+        return ca.Sparsity.dense(n, 1)
+
+    def get_sparsity_out(self, i):
+        return _sparsity(self.pattern)
+
+    def eval(self, arg):
+        out = self.problem.evaluate(np.asarray(arg[0]).ravel(), True)
+        m = out.get(self.key)
+        if m is None:  # diverged: NaN Jacobian, IPOPT backtracks
+            return [ca.DM(_sparsity(self.pattern), np.full(self.pattern.nnz, np.nan))]
+        return [_dm(m, self.pattern)]
+
+
+def solve_ipopt(
+    problem: FitProblem,
+    z0: np.ndarray,
+    lbz: np.ndarray,
+    ubz: np.ndarray,
+    max_iter: int,
+    tol: float,
+    time_limit_s: float,
+    extra: dict | None = None,
+    reg: float = 1e-6,
+):
+    """Solve; return ``(z, stats)`` where stats has IPOPT's return status and iterations.
+
+    ``reg`` (bar² per unit of z²) is a small Levenberg damping added to the Gauss–Newton
+    Hessian so that directions the residuals do not see (the fast states of a
+    segment's initial state) cannot take huge steps.
+    """
+    j_pattern = sp.csc_matrix(
+        (np.ones(len(problem.j_rows)), (problem.j_rows, problem.j_cols)),
+        shape=(problem.n_r, problem.n_z),
+    )
+    g_pattern = sp.csc_matrix(
+        (np.ones(len(problem.g_rows)), (problem.g_rows, problem.g_cols)),
+        shape=(problem.n_g, problem.n_z),
+    )
+    keep = []
+    z = ca.MX.sym("z", problem.n_z)
+    r_fn = _Vec("residuals", problem, "r", problem.n_r, j_pattern)
+    keep.append(r_fn)
+    r = r_fn(z)
+    nlp = {"x": z, "f": 0.5 * ca.sumsqr(r)}
+    if problem.n_g:
+        g_fn = _Vec("continuity", problem, "g", problem.n_g, g_pattern)
+        keep.append(g_fn)
+        nlp["g"] = g_fn(z)
+    jr = ca.jacobian(r, z)
+    lam_f = ca.MX.sym("lam_f")
+    lam_g = ca.MX.sym("lam_g", problem.n_g)
+    hess = ca.Function(
+        "gauss_newton_hessian",
+        [z, ca.MX.sym("p", 0), lam_f, lam_g],
+        [ca.triu(lam_f * (jr.T @ jr + reg * ca.MX.eye(problem.n_z)))],
+        ["x", "p", "lam_f", "lam_g"],
+        ["triu_hess_gamma_x_x"],
+    )
+    opts = {
+        "hess_lag": hess,
+        "print_time": False,
+        "ipopt": {
+            "max_iter": max_iter,
+            "tol": tol,
+            "acceptable_tol": 1e-2,
+            "acceptable_obj_change_tol": 1e-5,
+            "acceptable_iter": 3,
+            "max_wall_time": time_limit_s,
+            "print_level": 0,
+            "sb": "yes",
+            "mu_strategy": "adaptive",
+            **(extra or {}),
+        },
+    }
+    solver = ca.nlpsol("physics_fit", "ipopt", nlp, opts)
+    args = {"x0": z0, "lbx": lbz, "ubx": ubz}
+    if problem.n_g:
+        args |= {"lbg": 0.0, "ubg": 0.0}
+    sol = solver(**args)
+    stats = solver.stats()
+    return np.asarray(sol["x"]).ravel(), {
+        "return_status": stats.get("return_status", "?"),
+        "iter_count": int(stats.get("iter_count", -1)),
+        "success": bool(stats.get("success", False)),
+    }

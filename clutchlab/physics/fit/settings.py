@@ -1,0 +1,119 @@
+"""Typed settings of the physics fit."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+from ...errors import FitError
+
+__all__ = ["DEFAULT_FREE", "FitSettings"]
+
+#: Parameters of the base circuit freed by default: the ones a set of current
+#: ramps excites — VFS force curve and preload (gain, threshold), regulator spring
+#: offset and friction (offset, hysteresis), the VFS accumulator orifice (rate-
+#: dependent lag), the latch preload and spring (latch-on / latch-off currents).
+DEFAULT_FREE: tuple[str, ...] = (
+    "vfs_K_m",
+    "vfs_i_knee",
+    "vfs_F_pre",
+    "reg_F0",
+    "reg_F_c",
+    "vfs_d_orf",
+    "latch_F0",
+    "latch_k",
+)
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """How :class:`PhysicsFitter` fits.
+
+    Attributes
+    ----------
+    free : tuple of str or None
+        Parameters to estimate. ``None``: :data:`DEFAULT_FREE` plus the fit
+        parameters of every switched-on effect.
+    per_experiment : tuple of str
+        Free parameters estimated separately for each experiment (the rest are shared).
+    bounds : dict
+        Bound overrides ``name -> (lower, upper)`` in the parameter's unit.
+    method : {"multiple_shooting", "single_shooting"}
+        Multiple shooting: each experiment is cut into segments of ``segment_s``
+        whose initial states are decision variables tied by continuity
+        constraints. Single shooting: one simulation per experiment.
+    segment_s : float
+        Segment length (s) for multiple shooting.
+    substeps : int
+        ROS2 steps per sample during the fit (scored models use the simulator's
+        default); the effect on the optimum is measured in ``benchmarks/bench_fit.py``.
+    drive : {"auto", "command", "measured"}
+        Coil excitation during the fit (see :class:`SimulationSettings`): the measured
+        current when present (``auto``), or the command through the current loop.
+    objective : {"period_mean", "raw"}
+        Residual of the dither-period-averaged pressure (default) or the raw one.
+    decimate : int
+        Keep every ``decimate``-th residual (the period mean is smooth over a
+        dither period, so little information is lost; measured in the benchmark).
+    train_ramps : tuple of str
+        Ramp labels fitted on; the others (the test ramp) are never seen.
+    max_iter : int
+        IPOPT iteration limit.
+    tol : float
+        IPOPT convergence tolerance.
+    time_limit_s : float
+        Wall-clock limit of the solver (s); the best iterate is kept when reached.
+    multistart : int
+        Extra starts drawn (Latin hypercube) inside the bounds, besides the defaults.
+    seed : int
+        Seed of the multistart draws.
+    settle_s : float
+        Settling time (s) before each experiment, at its first inputs.
+    min_current_span_mA, min_pressure_span_bar : float
+        An experiment whose current or pressure spans less carries no excitation.
+    progress : bool
+        Show a live progress bar (iteration, cost).
+    workers : int
+        Processes that simulate experiments in parallel (1: in this process).
+    ipopt_options : dict
+        Extra IPOPT options.
+    """
+
+    free: tuple[str, ...] | None = None
+    per_experiment: tuple[str, ...] = ()
+    bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
+    method: Literal["multiple_shooting", "single_shooting"] = "multiple_shooting"
+    segment_s: float = 20.0
+    substeps: int = 2
+    drive: Literal["auto", "command", "measured"] = "auto"
+    objective: Literal["period_mean", "raw"] = "period_mean"
+    decimate: int = 10
+    train_ramps: tuple[str, ...] = ("fast", "slow")
+    max_iter: int = 40
+    tol: float = 1e-6
+    time_limit_s: float = 900.0
+    multistart: int = 0
+    seed: int = 0
+    settle_s: float = 0.5
+    min_current_span_mA: float = 50.0
+    min_pressure_span_bar: float = 0.2
+    progress: bool = True
+    workers: int = 2
+    ipopt_options: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        problems = []
+        if self.method not in ("multiple_shooting", "single_shooting"):
+            problems.append(f"method {self.method!r} is not multiple_shooting or single_shooting")
+        if self.objective not in ("period_mean", "raw"):
+            problems.append(f"objective {self.objective!r} is not period_mean or raw")
+        if self.segment_s <= 0:
+            problems.append("segment_s must be > 0")
+        if not 1 <= self.substeps <= 16:
+            problems.append("substeps must be 1..16")
+        if self.decimate < 1:
+            problems.append("decimate must be ≥ 1")
+        if self.max_iter < 1 or self.time_limit_s <= 0:
+            problems.append("max_iter and time_limit_s must be positive")
+        if problems:
+            raise FitError("invalid fit settings: " + "; ".join(problems))

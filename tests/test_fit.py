@@ -1,0 +1,178 @@
+"""Physics fit: recovery of known parameters, identifiability, failure modes, persistence."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from sklearn.exceptions import NotFittedError
+from synthetic import make_trace
+
+import clutchlab.physics.fit.problem as fit_problem
+from clutchlab.data import Dataset
+from clutchlab.errors import FitError, SimulationError
+from clutchlab.physics import CircuitModel
+from clutchlab.physics.fit import DEFAULT_FREE, FitResult, FitSettings, PhysicsFitter
+from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
+
+#: Known truth: every default-free parameter moved 3–8 % off its datasheet value.
+TRUTH = {
+    "vfs_K_m": 14.7,
+    "vfs_i_knee": 190.0,
+    "vfs_F_pre": 1.06,
+    "reg_F0": -1.85,
+    "reg_F_c": 1.08,
+    "vfs_d_orf": 0.43,
+    "latch_F0": 28.6,
+    "latch_k": 2.1,
+}
+#: The pilot line's oil volume: in parallel with the VFS accumulator, whose compliance
+#: is ~1000× larger, so ramps cannot identify it.
+UNIDENTIFIABLE = ("vacc_V",)
+#: Parameters identified through the timing of the latch snap (see the recovery test).
+SNAP_TIMED = ("latch_F0", "latch_k", "vfs_d_orf")
+SUBSTEPS = 2
+
+
+@pytest.fixture(scope="module")
+def recovery_data():
+    """Base model (no effects) with the truth, fit substeps, the stand's noise and ADC."""
+    config = StandConfig(
+        builtin_effects=False,
+        settings=(DitherSetting(50.0, "B"),),
+        ramps=(RampProfile("fast", 2.5), RampProfile("slow", 10.0)),
+        substeps=SUBSTEPS,
+        overrides=TRUTH,
+        seed=11,
+    )
+    return run_stand(config, progress=False).dataset
+
+
+@pytest.fixture(scope="module")
+def recovered(recovery_data):
+    """Fit from the defaults, with the same drive (command) the data were made with."""
+    settings = FitSettings(
+        free=DEFAULT_FREE + UNIDENTIFIABLE,
+        substeps=SUBSTEPS,
+        method="single_shooting",
+        drive="command",
+        progress=False,
+    )
+    return PhysicsFitter(CircuitModel(), settings).fit(recovery_data)
+
+
+def test_recovers_every_identifiable_parameter(recovered):
+    """Within 5 % and within 3 standard errors — with two stated exceptions.
+
+    1. The standard errors treat residuals as independent, but the dither-period mean
+       correlates neighbours (window 20 samples, one residual every 10): about half as
+       many independent residuals, errors ~√2 too small. Allowed: 3·√2 errors.
+    2. ``SNAP_TIMED`` parameters are identified by when the latch snaps. The snap is
+       resolved on the sample grid, and the linearization at the snap gives standard
+       errors (≈ 0.01–0.03 %) far below what that grid resolves, so a multiple of them
+       is no meaningful bound. For these the test requires 1 % instead: looser than
+       3 standard errors, five times tighter than the 5 % bound.
+    """
+    res = recovered.result_
+    assert res.success, res.status
+    for name, true in TRUTH.items():
+        assert name not in res.unidentifiable, name
+        err = abs(res.values[name] - true)
+        assert err <= 0.05 * abs(true), (name, res.values[name], true)
+        if name in SNAP_TIMED:
+            assert err <= 0.01 * abs(true), (name, res.values[name], true)
+        else:
+            assert err <= 3 * np.sqrt(2) * res.std_errors[name], (name, err, res.std_errors[name])
+
+
+def test_identifiability_report_names_exactly_the_unidentifiable_parameters(recovered):
+    assert set(recovered.result_.unidentifiable) == set(UNIDENTIFIABLE)
+
+
+def test_result_reports_fit_quality_and_round_trips(recovered, tmp_path):
+    res = recovered.result_
+    assert set(res.per_experiment) == {"fast_50Hz_B", "slow_50Hz_B"}
+    for m in res.per_experiment.values():
+        assert m["rmse_bar"] < 0.05 and m["fit_pct"] > 95
+    assert res.cost_history[-1] < res.cost_history[0]
+    assert res.wall_s > 0 and res.iterations > 0
+    corr = np.array(res.correlation)
+    assert corr.shape == (len(res.free), len(res.free))
+    path = tmp_path / "model.json"
+    recovered.save(path)
+    back = PhysicsFitter.load(path)
+    assert back.result_.values == res.values
+    trace = make_trace([0, 0.2, 1.0], [0, 0, 600])
+    assert np.allclose(back.predict(trace), recovered.predict(trace))
+    with pytest.raises(FitError, match="not a clutchlab fit result"):
+        FitResult.from_json('{"nope": 1}')
+
+
+def test_predict_before_fit_raises():
+    with pytest.raises(NotFittedError):
+        PhysicsFitter().predict(make_trace([0, 1.0], [0, 100]))
+
+
+# ---- failure modes ----------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def small_data():
+    config = StandConfig(
+        builtin_effects=False,
+        settings=(DitherSetting(50.0, "A"),),
+        ramps=(RampProfile("fast", 1.5, 0.3),),
+        seed=2,
+    )
+    return run_stand(config, progress=False).dataset
+
+
+def _fit(data, **kw):
+    kw = {"progress": False, "train_ramps": ("fast",), "method": "single_shooting", **kw}
+    return PhysicsFitter(settings=FitSettings(**kw)).fit(data)
+
+
+def test_infeasible_bounds(small_data):
+    with pytest.raises(FitError, match=r"reg_F_c: lower bound 2.0 ≥ upper bound 1.0"):
+        _fit(small_data, bounds={"reg_F_c": (2.0, 1.0)})
+    with pytest.raises(FitError, match=r"reg_F_c: start value 1.0 outside bounds \[1.5, 3.0\]"):
+        _fit(small_data, bounds={"reg_F_c": (1.5, 3.0)})
+    with pytest.raises(FitError, match=r"leave the physical range"):
+        _fit(small_data, bounds={"reg_F_c": (0.001, 3.0)})
+    with pytest.raises(FitError, match=r"unknown parameter\(s\) nope"):
+        _fit(small_data, free=("nope",))
+
+
+def test_trace_without_excitation():
+    flat = make_trace([0, 2.0], [300, 300], name="flat_300mA", ramp="fast")
+    with pytest.raises(FitError, match=r"flat_300mA: no excitation — the current spans only"):
+        _fit(Dataset([flat]))
+
+
+def test_diverging_integrator(small_data, monkeypatch):
+    def boom(*args, **kwargs):
+        raise SimulationError("state not finite at t = 0.1 s (sample 100)")
+
+    monkeypatch.setattr(fit_problem, "simulate_inputs", boom)
+    with pytest.raises(FitError, match=r"fast_50Hz_A: the integrator diverges at the start"):
+        _fit(small_data)
+
+
+def test_time_limit_keeps_the_best_iterate(small_data):
+    with pytest.raises(FitError, match=r"did not converge \(Maximum_WallTime_Exceeded\)") as exc:
+        _fit(
+            small_data,
+            time_limit_s=3.0,
+            max_iter=500,
+            tol=1e-14,
+            ipopt_options={"acceptable_iter": 0},
+        )
+    best = exc.value.result
+    assert isinstance(best, FitResult)
+    assert best.cost_history and min(best.cost_history) <= best.cost_history[0]
+    assert set(best.free) == set(DEFAULT_FREE)
+
+
+def test_multiple_shooting_reaches_the_single_shooting_optimum(small_data):
+    ss = _fit(small_data).result_
+    ms = _fit(small_data, method="multiple_shooting", segment_s=1.0).result_
+    assert ms.success
+    for name in DEFAULT_FREE:
+        assert ms.values[name] == pytest.approx(ss.values[name], rel=0.02), name
