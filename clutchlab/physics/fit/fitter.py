@@ -163,20 +163,9 @@ class PhysicsFitter:
         traces = self._training(data)
         free = resolve_free(model, settings)
         self._check_bounds(model, free, settings, start)
-        problem = FitProblem(model, traces, free, settings, start)
-        lo, hi = problem.bounds_z()
-        slo, shi = problem.state_bounds()
-        lbz, ubz = np.concatenate([lo, slo]), np.concatenate([hi, shi])
-        rng = np.random.default_rng(settings.seed)
-        starts = [np.zeros(problem.n_par)]
-        for k in range(settings.multistart):  # Latin hypercube inside the bounds
-            u = rng.permutation(settings.multistart)[None, :] + rng.random((problem.n_par, 1))
-            frac = (u[:, k] / settings.multistart) if settings.multistart else 0.5
-            starts.append(lo + (hi - lo) * np.clip(frac, 0.02, 0.98))
         history: list[float] = []
-        best = {"cost": np.inf, "z": None, "stats": None}
         bar = tqdm(
-            total=settings.max_iter * len(starts),
+            total=settings.max_iter,
             desc="fit-physics",
             unit="it",
             disable=not settings.progress,
@@ -188,18 +177,51 @@ class PhysicsFitter:
             bar.update(1)
             bar.set_postfix(cost=f"{cost:.4g}", best=f"{min(history):.4g}")
 
-        problem.on_jacobian = on_jacobian
-        problem.start_workers(traces, settings.workers)
+        z_par = None
+        statuses: list[str] = []
+        stages = self._stages(traces, settings)
         try:
-            best = self._solve_starts(problem, starts, lbz, ubz, settings, t_start, best)
+            for stage, (stage_traces, stage_settings) in enumerate(stages):
+                bar.set_description(f"fit-physics ({len(stage_traces)} exp)")
+                problem = FitProblem(model, stage_traces, free, stage_settings, start)
+                problem.on_jacobian = on_jacobian
+                starts = [np.zeros(problem.n_par) if z_par is None else z_par]
+                if stage == 0:
+                    starts += self._multistarts(problem, settings)
+                problem.start_workers(stage_traces, settings.workers)
+                try:
+                    best = self._solve_starts(problem, starts, stage_settings, t_start)
+                finally:
+                    problem.close()
+                if best["z"] is not None:
+                    z_par = best["z"][: problem.n_par]
+                if best["stats"] is not None:
+                    statuses.append(best["stats"]["return_status"])
+                if len(stages) > 1 and stage == 0 and statuses and statuses[0] not in _OK:
+                    break  # the pre-fit failed: do not polish a failure
         finally:
-            problem.close()
             bar.close()
         result = self._result(
             model, problem, best, history, traces, settings, time.perf_counter() - t_start
         )
-        if best["stats"] is None or best["stats"]["return_status"] not in _OK:
-            status = best["stats"]["return_status"] if best["stats"] else "no start completed"
+        # A refinement stopped by its iteration limit after a converged pre-fit is a
+        # finished fit: the limit is the refinement's budget, not a failure.
+        converged = bool(statuses) and (
+            statuses[-1] in _OK
+            or (
+                len(stages) > 1
+                and len(statuses) == 2
+                and statuses[0] in _OK
+                and statuses[1] == "Maximum_Iterations_Exceeded"
+            )
+        )
+        if len(stages) > 1:
+            result.status = " → ".join(
+                f"{st} ({lbl})" for st, lbl in zip(statuses, ("pre-fit", "refine"), strict=False)
+            )
+        result.success = converged
+        if not converged:
+            status = result.status if statuses else "no start completed"
             err = FitError(
                 f"the fit did not converge ({status}) after "
                 f"{time.perf_counter() - t_start:.1f} s; best cost "
@@ -213,8 +235,57 @@ class PhysicsFitter:
         return self
 
     @staticmethod
-    def _solve_starts(problem, starts, lbz, ubz, settings, t_start, best):
+    def _stages(traces: list[Trace], settings: FitSettings):
+        """The fit's stages: a pre-fit on a subset when the data exceed ``prefit_samples``,
+        then a short refinement on every training experiment.
+
+        The subset takes experiments round-robin over the ramp labels (shortest
+        first) until the sample budget is used, so every ramp rate is represented.
+        """
+        total = sum(len(t) for t in traces)
+        budget = settings.prefit_samples
+        if not budget or total <= budget or settings.per_experiment:
+            return [(traces, settings)]
+        by_ramp: dict = {}
+        for t in sorted(traces, key=len):
+            by_ramp.setdefault(t.ramp, []).append(t)
+        subset, used = [], 0
+        while any(by_ramp.values()):
+            for queue in by_ramp.values():
+                if queue and (
+                    used + len(queue[0]) <= budget
+                    or not subset
+                    or all(x.ramp != queue[0].ramp for x in subset)
+                ):
+                    t = queue.pop(0)
+                    subset.append(t)
+                    used += len(t)
+                elif queue:
+                    queue.pop(0)
+        refine = FitSettings(
+            **{**asdict(settings), "max_iter": settings.refine_max_iter, "multistart": 0}
+        )
+        return [(subset, settings), (traces, refine)]
+
+    @staticmethod
+    def _multistarts(problem: FitProblem, settings: FitSettings) -> list[np.ndarray]:
+        """Latin-hypercube starts inside the parameter bounds (scaled space)."""
+        n = settings.multistart
+        if n <= 0:
+            return []
+        lo, hi = problem.bounds_z()
+        rng = np.random.default_rng(settings.seed)
+        cells = np.stack([rng.permutation(n) for _ in range(problem.n_par)])
+        frac = (cells + rng.random(cells.shape)) / n
+        return [lo + (hi - lo) * np.clip(frac[:, k], 0.02, 0.98) for k in range(n)]
+
+    @staticmethod
+    def _solve_starts(problem, starts, settings, t_start):
         """Run IPOPT from each start; keep the lowest cost."""
+        lo, hi = problem.bounds_z()
+        slo, shi = problem.state_bounds()
+        lbz, ubz = np.concatenate([lo, slo]), np.concatenate([hi, shi])
+        best = {"cost": np.inf, "z": None, "stats": None}
         for z_par in starts:
             z0 = problem.initial_z(z_par)
             if not np.isfinite(problem.cost(z0)):
@@ -248,20 +319,28 @@ class PhysicsFitter:
         z = best["z"] if best["z"] is not None else problem.initial_z()
         fitted = problem.parameter_set(z, 0)
         free = list(problem.free)
-        # Uncertainty and identifiability from a single-shooting pass at the optimum.
-        ss = FitProblem(
-            model,
-            traces,
-            tuple(problem.shared),
-            FitSettings(**{**asdict(settings), "method": "single_shooting", "per_experiment": ()}),
-            fitted,
+        # Uncertainty and identifiability from the single-shooting Jacobian at the optimum:
+        # the last stage's (cached) when it is single shooting on all experiments, else
+        # one extra single-shooting pass.
+        reuse = (
+            not problem.ms
+            and not problem.per_exp
+            and len(problem.experiments) == len(traces)
+            and best["z"] is not None
         )
-        ss.start_workers(traces, settings.workers)
-        try:
-            ev = ss.evaluate(np.zeros(ss.n_z), True)
-        finally:
-            ss.close()
-        names = list(ss.shared)
+        ev = problem.evaluate(best["z"], True) if reuse else None
+        if ev is None or ev.get("J") is None:
+            ss_settings = {**asdict(settings), "method": "single_shooting", "per_experiment": ()}
+            ss = FitProblem(
+                model, traces, tuple(problem.shared), FitSettings(**ss_settings), fitted
+            )
+            ss.start_workers(traces, settings.workers)
+            try:
+                ev = ss.evaluate(np.zeros(ss.n_z), True)
+            finally:
+                ss.close()
+        names = list(problem.shared)
+        specs = {p.name: p for p in model.parameters}
         se, corr, sv, unid, weak = {}, [], [], list(names), []
         if ev.get("J") is not None:
             jz = ev["J"].toarray()
@@ -272,7 +351,7 @@ class PhysicsFitter:
             sd_z = np.sqrt(np.clip(np.diag(cov), 0, None))
             rel = []
             for k, n in enumerate(names):
-                spec = ss.specs[k]
+                spec = specs[n]
                 deriv = fitted[n] if spec.transform == "log" else spec.scale
                 se[n] = float(abs(deriv) * sd_z[k])
                 ref = (

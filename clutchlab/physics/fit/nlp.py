@@ -143,7 +143,7 @@ def solve_ipopt(
             "max_iter": max_iter,
             "tol": tol,
             "acceptable_tol": 1e-2,
-            "acceptable_obj_change_tol": 1e-5,
+            "acceptable_obj_change_tol": 1e-4,
             "acceptable_iter": 3,
             "max_wall_time": time_limit_s,
             "print_level": 0,

@@ -78,6 +78,21 @@ class _Experiment:
     x0: np.ndarray  # settled initial state at the start parameters
     settle_t: np.ndarray
     settle_u: np.ndarray
+    keep: np.ndarray  # samples whose residual enters the objective
+
+
+def snap_mask(target: np.ndarray, t: np.ndarray, rate_bar_s: float, guard_s: float) -> np.ndarray:
+    """False within ``guard_s`` of samples where the measured (period-mean) pressure moves
+    faster than ``rate_bar_s`` — the latch snaps — True elsewhere."""
+    keep = np.ones(len(t), dtype=bool)
+    if guard_s <= 0 or len(t) < 3:
+        return keep
+    fast = np.abs(np.gradient(target, t)) > rate_bar_s
+    if fast.any():
+        dt = float(np.median(np.diff(t)))
+        w = max(round(guard_s / dt), 0)
+        keep &= ~(np.convolve(fast.astype(float), np.ones(2 * w + 1), mode="same") > 0)
+    return keep
 
 
 class FitProblem:
@@ -189,16 +204,20 @@ class FitProblem:
         k_phase = [s.name for s in MODEL_INPUTS].index("dither_phase")
         su[:, k_phase] = u[0, k_phase] + u[0, _K_FREQ] * dt * (np.arange(ns) - (ns - 1))
         st = trace.time_s[0] + dt * (np.arange(ns) - (ns - 1))
+        target = period_mean(y, n)
         return _Experiment(
             trace.name,
             np.asarray(trace.time_s, float),
             u,
             drive,
-            period_mean(y, n),
+            target,
             n,
             np.zeros(0),
             st,
             su,
+            snap_mask(
+                target, trace.time_s, self.settings.snap_rate_bar_s, self.settings.snap_guard_s
+            ),
         )
 
     def _layout(self) -> None:
@@ -221,6 +240,7 @@ class FitProblem:
                 lo = start + a
                 hi = (stop if last else stop - 1) - tail
                 rows = np.arange(lo - lo % dec + (dec if lo % dec else 0), hi + 1, dec)
+                rows = rows[ex.keep[rows]]
                 own = len(self.shared) + e * len(self.per_exp) + np.arange(len(self.per_exp))
                 par_cols = np.concatenate([np.arange(len(self.shared)), own]).astype(int)
                 if self.ms and j > 0:  # the first segment starts from the settled state
@@ -450,7 +470,7 @@ def _quiet_boundaries(target: np.ndarray, t: np.ndarray, segment_s: float) -> li
     inside a latch snap, where sensitivities to the segment state explode."""
     n = len(t)
     dt = float(t[1] - t[0])
-    seg_n = max(int(round(segment_s / dt)), 10)
+    seg_n = max(round(segment_s / dt), 10)
     rate = np.abs(np.gradient(target))
     bounds = [0]
     nominal = seg_n

@@ -38,10 +38,16 @@ class FitSettings:
         Free parameters estimated separately for each experiment (the rest are shared).
     bounds : dict
         Bound overrides ``name -> (lower, upper)`` in the parameter's unit.
-    method : {"multiple_shooting", "single_shooting"}
-        Multiple shooting: each experiment is cut into segments of ``segment_s``
+    method : {"single_shooting", "multiple_shooting"}
+        Single shooting (default): one simulation per experiment from its settled
+        state. Multiple shooting: experiments cut into segments of ``segment_s``
         whose initial states are decision variables tied by continuity
-        constraints. Single shooting: one simulation per experiment.
+        constraints. Measured on this circuit (dissipative, lags < 0.1 s): both
+        reach the same optimum in about the same number of iterations, and multiple
+        shooting costs twice as much per iteration (its sensitivities carry the
+        nx initial-state directions besides the parameters), which would take the
+        full training fit past its 120 s budget; it remains the choice for long,
+        poorly initialized or unstable experiments.
     segment_s : float
         Segment length (s) for multiple shooting.
     substeps : int
@@ -55,10 +61,26 @@ class FitSettings:
     decimate : int
         Keep every ``decimate``-th residual (the period mean is smooth over a
         dither period, so little information is lost; measured in the benchmark).
+    snap_rate_bar_s, snap_guard_s : float
+        Residuals within ``snap_guard_s`` (s) of a latch snap — where the measured
+        period-mean pressure moves faster than ``snap_rate_bar_s`` (bar/s; the
+        regulated ramps stay below ~10 bar/s) — are left out of the objective: there
+        the error is the snap's timing, resolved on the sample grid, which makes the
+        cost non-smooth at that scale. The latch currents are still fitted by the
+        samples around the guard. Default 0 (every residual kept): measured on the
+        recovery test, a 20 ms guard biased the gain (0.3 %, 11 standard errors)
+        and hid the pilot-volume non-identifiability, for no fewer iterations on the
+        stand data.
     train_ramps : tuple of str
         Ramp labels fitted on; the others (the test ramp) are never seen.
     max_iter : int
         IPOPT iteration limit.
+    prefit_samples : int or None
+        When the training data hold more samples, first fit on a subset of about
+        this many (experiments round-robin over the ramp labels), then refine on
+        all of them for at most ``refine_max_iter`` iterations. None: one stage.
+    refine_max_iter : int
+        Iteration limit of the refinement on all training experiments.
     tol : float
         IPOPT convergence tolerance.
     time_limit_s : float
@@ -82,14 +104,18 @@ class FitSettings:
     free: tuple[str, ...] | None = None
     per_experiment: tuple[str, ...] = ()
     bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
-    method: Literal["multiple_shooting", "single_shooting"] = "multiple_shooting"
+    method: Literal["multiple_shooting", "single_shooting"] = "single_shooting"
     segment_s: float = 20.0
     substeps: int = 2
     drive: Literal["auto", "command", "measured"] = "auto"
     objective: Literal["period_mean", "raw"] = "period_mean"
     decimate: int = 10
+    snap_rate_bar_s: float = 60.0
+    snap_guard_s: float = 0.0
     train_ramps: tuple[str, ...] = ("fast", "slow")
-    max_iter: int = 40
+    max_iter: int = 50
+    prefit_samples: int | None = 160_000
+    refine_max_iter: int = 3
     tol: float = 1e-6
     time_limit_s: float = 900.0
     multistart: int = 0

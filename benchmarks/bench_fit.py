@@ -1,0 +1,89 @@
+"""Benchmark: multi-experiment physics fit on all training experiments of the default stand.
+
+Budget (DESIGN §7): ≤ 120 s wall on 2 cores (median of 3). Also prints the RMSE of the
+dither-period-mean pressure reached on the unseen medium ramp, default vs fitted model
+(the fit never sees the medium ramp), and, with ``--decimation``, how the residual
+decimation changes the fitted model's medium-ramp RMSE.
+
+Usage: ``python benchmarks/bench_fit.py [--runs 3] [--data DIR] [--decimation 1,10,50]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+
+from clutchlab.data import load_dataset
+from clutchlab.physics import CircuitModel, simulate
+from clutchlab.physics.fit import FitSettings, PhysicsFitter, dither_period_samples, period_mean
+from clutchlab.physics.stand import StandConfig, write_stand
+from clutchlab.validation import pressure_metrics
+
+
+def medium_rmse(dataset, model, params) -> float:
+    ys, yh = [], []
+    for trace in dataset.select(ramps=["medium"]):
+        n = dither_period_samples(trace)
+        ys.append(period_mean(trace.get("clutch_pressure_bar"), n))
+        yh.append(period_mean(simulate(model, params, trace).pressure_bar, n))
+    return pressure_metrics(np.concatenate(ys), np.concatenate(yh))["rmse_bar"]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--data", default="bench-stand", help="stand dataset (written if absent)")
+    ap.add_argument("--method", default=None, help="single_shooting or multiple_shooting")
+    ap.add_argument("--decimation", default="", help="comma-separated decimations to compare")
+    args = ap.parse_args()
+
+    data = Path(args.data)
+    if not (data / "manifest.json").exists():
+        write_stand(data, StandConfig(), progress=False, overwrite=True)
+    ds = load_dataset(data)
+    train = ds.select(ramps=["fast", "slow"])
+    print(
+        f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
+    )
+    print(
+        f"training: {len(train)} experiments, {sum(len(t) for t in train)} samples "
+        f"({sum(t.duration_s for t in train):.0f} s at 1 kHz); test: medium ramp"
+    )
+    kw = {"progress": False} | ({"method": args.method} if args.method else {})
+    walls, fitter = [], None
+    for _ in range(args.runs):
+        t0 = time.perf_counter()
+        fitter = PhysicsFitter(settings=FitSettings(**kw)).fit(ds)
+        walls.append(time.perf_counter() - t0)
+    res = fitter.result_
+    rmse_default = medium_rmse(ds, CircuitModel(), None)
+    rmse_fit = medium_rmse(ds, fitter.model_, fitter.params_)
+    med = statistics.median(walls)
+    print(f"\nfit wall times (s): {', '.join(f'{w:.1f}' for w in walls)}")
+    print(
+        f"median {med:.1f} s  (budget 120 s; ratio {med / 120:.2f}): "
+        f"{'PASS' if med <= 120 else 'FAIL'}"
+    )
+    print(f"status: {res.status}; Jacobian evaluations: {len(res.cost_history)}")
+    print(
+        f"medium-ramp RMSE (dither-period mean): default {rmse_default:.4f} bar, fitted "
+        f"{rmse_fit:.4f} bar, reduction {100 * (1 - rmse_fit / rmse_default):.1f} %"
+    )
+    print("\n" + res.table())
+    if args.decimation:
+        print(f"\n{'decimate':>8s} {'wall (s)':>9s} {'medium RMSE (bar)':>18s}")
+        for d in (int(x) for x in args.decimation.split(",")):
+            t0 = time.perf_counter()
+            f = PhysicsFitter(settings=FitSettings(**kw, decimate=d)).fit(ds)
+            wall = time.perf_counter() - t0
+            print(f"{d:8d} {wall:9.1f} {medium_rmse(ds, f.model_, f.params_):18.4f}")
+
+
+if __name__ == "__main__":
+    main()

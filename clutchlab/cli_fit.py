@@ -1,0 +1,70 @@
+"""``clutchlab fit-physics``: fit the physics model to a dataset's training experiments."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+__all__ = ["register"]
+
+
+def _csv(text: str | None) -> tuple[str, ...]:
+    return tuple(s.strip() for s in (text or "").split(",") if s.strip())
+
+
+def _cmd_fit_physics(args: argparse.Namespace) -> int:
+    from .data import load_dataset
+    from .errors import FitError
+    from .physics import CircuitModel
+    from .physics.fit import FitSettings, PhysicsFitter
+
+    dataset = load_dataset(args.dataset)
+    model = CircuitModel().with_effects(*_csv(args.effects))
+    kw = {
+        "train_ramps": _csv(args.train) or ("fast", "slow"),
+        "progress": not args.quiet,
+        "method": args.method,
+        "time_limit_s": args.time_limit,
+    }
+    if args.free:
+        kw["free"] = _csv(args.free)
+    fitter = PhysicsFitter(model, FitSettings(**kw))
+    out = Path(args.out)
+    try:
+        fitter.fit(dataset)
+    except FitError as exc:
+        best = getattr(exc, "result", None)
+        if best is not None:
+            partial = out.with_name(out.stem + ".best-iterate.json")
+            best.to_json(partial)
+            print(f"best iterate written to {partial}")
+        raise
+    res = fitter.result_
+    fitter.save(out)
+    print(res.table())
+    print(f"\nstatus {res.status}, {res.iterations} iterations, {res.wall_s:.1f} s")
+    if res.unidentifiable:
+        print(f"not identifiable from these data: {', '.join(res.unidentifiable)}")
+    for name, m in res.per_experiment.items():
+        print(f"  {name:20s} RMSE {m['rmse_bar']:.4f} bar  fit {m['fit_pct']:.1f} %")
+    print(f"model written to {out}")
+    if args.json:
+        Path(args.json).write_text(res.to_json() + "\n", encoding="utf-8")
+    return 0
+
+
+def register(sub) -> None:
+    """Add the ``fit-physics`` subcommand to the ``clutchlab`` parser."""
+    p = sub.add_parser("fit-physics", help="fit the physics model to training experiments")
+    p.add_argument("dataset", help="dataset folder (manifest.json + experiments)")
+    p.add_argument("--out", required=True, help="fitted model JSON to write")
+    p.add_argument("--effects", default="", help="effects switched on, comma separated")
+    p.add_argument("--free", default="", help="free parameters (default: the standard set)")
+    p.add_argument("--train", default="fast,slow", help="training ramp labels (fast,slow)")
+    p.add_argument(
+        "--method", default="single_shooting", choices=["single_shooting", "multiple_shooting"]
+    )
+    p.add_argument("--time-limit", type=float, default=900.0, help="solver wall limit (s)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--json", help="also write the fit result here")
+    p.set_defaults(func=_cmd_fit_physics)
