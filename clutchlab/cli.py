@@ -7,9 +7,13 @@ import json
 import shlex
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from . import __version__
 from .errors import ClutchlabError
+
+if TYPE_CHECKING:
+    from .data import ReadOptions
 
 __all__ = ["main"]
 
@@ -99,6 +103,53 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _read_options(args: argparse.Namespace) -> ReadOptions:
+    from .data import ReadOptions
+
+    return ReadOptions(interpolate_gaps=args.interpolate_gaps, rate_Hz=args.rate)
+
+
+def _cmd_data_check(args: argparse.Namespace) -> int:
+    from .data.check import check_path
+
+    result = check_path(args.path, args.map, options=_read_options(args))
+    if args.json:
+        Path(args.json).write_text(
+            json.dumps(result.to_dict(), indent=2, ensure_ascii=False) + "\n", encoding="utf-8"
+        )
+    print(result.table())
+    return 0 if result.ok else 1
+
+
+def _cmd_data_convert(args: argparse.Namespace) -> int:
+    from .data.convert import convert
+
+    out = convert(
+        args.src,
+        args.dst,
+        format=args.format,
+        channel_map=args.map,
+        options=_read_options(args),
+        overwrite=args.overwrite,
+    )
+    print(f"wrote {out}")
+    return 0
+
+
+def _add_read_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--map", help="channel map (TOML): source channel → canonical signal, units")
+    p.add_argument(
+        "--interpolate-gaps",
+        type=int,
+        default=0,
+        metavar="N",
+        help="fill NaN/inf runs and time gaps of up to N samples by interpolation (default 0)",
+    )
+    p.add_argument(
+        "--rate", type=float, default=None, metavar="HZ", help="resample onto a grid at HZ"
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``clutchlab`` command."""
     parser = argparse.ArgumentParser(prog="clutchlab", description=__doc__)
@@ -139,6 +190,30 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--json", help="also write metrics.json here")
     p.set_defaults(func=_cmd_demo)
+
+    p = sub.add_parser("data", help="test-stand data: check and convert logs and datasets")
+    data = p.add_subparsers(dest="data_command", required=True)
+    q = data.add_parser(
+        "check",
+        help="check a dataset folder or a log; table per experiment; exit 1 if anything is wrong",
+    )
+    q.add_argument("path", help="dataset folder, manifest.json, or one .csv/.parquet/.mf4 log")
+    _add_read_options(q)
+    q.add_argument("--json", help="write the check result as JSON here")
+    q.set_defaults(func=_cmd_data_check)
+    q = data.add_parser(
+        "convert", help="convert a dataset folder (or a log) to canonical names and units"
+    )
+    q.add_argument("src", help="dataset folder, manifest.json, or one log file")
+    q.add_argument("dst", help="destination folder (dataset) or file (single log)")
+    q.add_argument(
+        "--format",
+        choices=("csv", "parquet", "mf4"),
+        help="output format (default csv for a dataset, the suffix of DST for a file)",
+    )
+    q.add_argument("--overwrite", action="store_true", help="replace an existing destination")
+    _add_read_options(q)
+    q.set_defaults(func=_cmd_data_convert)
     return parser
 
 
@@ -148,7 +223,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except ClutchlabError as exc:
-        print(f"clutchlab {args.command}: error: {exc}", file=sys.stderr)
+        command = " ".join(filter(None, [args.command, getattr(args, "data_command", None)]))
+        print(f"clutchlab {command}: error: {exc}", file=sys.stderr)
         return 2
 
 

@@ -1,26 +1,77 @@
 """Data layer: canonical signals, traces, datasets and their file formats (DESIGN §3).
 
-A dataset is a folder with ``manifest.json`` and one file per experiment; each experiment is
-a :class:`Trace` of canonical signals (:data:`SIGNALS`) in canonical units.
+A dataset is a folder with ``manifest.json`` and one file per experiment (CSV, Parquet or
+MF4); each experiment is a :class:`Trace` of canonical signals (:data:`SIGNALS`) in canonical
+units. Logs with other channel names and units are read through a :class:`ChannelMap`;
+every problem of a log is collected into one :class:`~clutchlab.errors.DataError`.
 """
 
 from __future__ import annotations
 
+from .channel_map import ChannelMap, ChannelSpec, load_channel_map
+from .check import CheckResult, check_path
+from .convert import convert
 from .dataset import Dataset
+from .demodulate import (
+    DitherEstimate,
+    demodulate_dither,
+    demodulate_trace,
+    nominal_current,
+    nominal_didt,
+)
+from .derived import didt, dither_period_mean
+from .formats import FORMATS, FileFormat
 from .io_csv import read_csv, write_csv
-from .io_dataset import load_dataset, save_dataset
+from .io_dataset import DatasetScan, load_dataset, save_dataset, scan_dataset
+from .io_mf4 import read_mf4, write_mf4
+from .io_parquet import read_parquet, write_parquet
+from .options import ReadOptions
+from .reading import check_log, read_log
+from .report import LoadReport
 from .signals import CANONICAL_ORDER, SIGNALS, SignalSpec, unit_of
+from .timebase import Timing
 from .trace import Trace
+from .units import convert_units, parse_unit
+from .validate import validate_trace
 
 __all__ = [
     "CANONICAL_ORDER",
+    "FORMATS",
     "SIGNALS",
+    "ChannelMap",
+    "ChannelSpec",
+    "CheckResult",
     "Dataset",
+    "DatasetScan",
+    "DitherEstimate",
+    "FileFormat",
+    "LoadReport",
+    "ReadOptions",
     "SignalSpec",
+    "Timing",
     "Trace",
+    "check_log",
+    "check_path",
+    "convert",
+    "convert_units",
+    "demodulate_dither",
+    "demodulate_trace",
+    "didt",
+    "dither_period_mean",
+    "load_channel_map",
     "load_dataset",
+    "nominal_current",
+    "nominal_didt",
+    "parse_unit",
     "read_csv",
+    "read_log",
+    "read_mf4",
+    "read_parquet",
     "save_dataset",
+    "scan_dataset",
     "unit_of",
+    "validate_trace",
     "write_csv",
+    "write_mf4",
+    "write_parquet",
 ]

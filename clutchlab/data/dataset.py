@@ -5,10 +5,14 @@ from __future__ import annotations
 import copy
 from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
-from typing import Any, overload
+from types import MappingProxyType
+from typing import TYPE_CHECKING, Any, overload
 
 from ..errors import DataError
 from .trace import Trace
+
+if TYPE_CHECKING:
+    from .report import LoadReport
 
 __all__ = ["Dataset"]
 
@@ -36,6 +40,9 @@ class Dataset:
         Folder the dataset was loaded from, or None for an in-memory dataset.
     manifest_extra : dict, optional
         Top-level manifest keys other than ``"experiments"`` (free metadata). Copied.
+    reports : mapping of str to LoadReport, optional
+        How each experiment was read (sources, unit conversions, jitter, filled gaps), by
+        experiment name; set by :func:`~clutchlab.data.io_dataset.load_dataset`.
 
     Raises
     ------
@@ -50,6 +57,7 @@ class Dataset:
         experiments: Iterable[Trace],
         root: str | Path | None = None,
         manifest_extra: Mapping[str, Any] | None = None,
+        reports: Mapping[str, LoadReport] | None = None,
     ) -> None:
         traces = tuple(experiments)
         for i, trace in enumerate(traces):
@@ -74,6 +82,7 @@ class Dataset:
         self._index = index
         self.root: Path | None = Path(root) if root is not None else None
         self.manifest_extra: dict[str, Any] = extra
+        self._reports = {k: v for k, v in (reports or {}).items() if k in index}
 
     # -- container protocol ----------------------------------------------------------------
 
@@ -120,7 +129,9 @@ class Dataset:
         )
 
     def _derive(self, traces: Iterable[Trace]) -> Dataset:
-        return Dataset(traces, root=self.root, manifest_extra=self.manifest_extra)
+        return Dataset(
+            traces, root=self.root, manifest_extra=self.manifest_extra, reports=self._reports
+        )
 
     # -- views -----------------------------------------------------------------------------
 
@@ -128,6 +139,11 @@ class Dataset:
     def experiments(self) -> tuple[Trace, ...]:
         """The experiments, in order."""
         return self._experiments
+
+    @property
+    def reports(self) -> Mapping[str, LoadReport]:
+        """How each experiment was read, by name (empty for an in-memory dataset)."""
+        return MappingProxyType(self._reports)
 
     @property
     def names(self) -> list[str]:

@@ -1,31 +1,42 @@
-"""CSV reader and writer for traces with canonical column names.
+"""CSV reader and writer.
 
-File layout: one header line with canonical signal names (see
-:data:`~clutchlab.data.signals.CANONICAL_ORDER`), then one line per sample, comma-separated,
-values in the canonical units. Line numbers in error messages are the file's line numbers
+File layout: one header line of column names, then one line per sample, comma-separated.
+Files written here carry canonical signal names (see
+:data:`~clutchlab.data.signals.CANONICAL_ORDER`) in canonical units. Files read here may carry
+any names (mapped by a :class:`~clutchlab.data.channel_map.ChannelMap`), optionally with a
+unit in brackets (``P_clutch [kPa]``). Line numbers in messages are the file's line numbers
 (the header is line 1, the first data row is line 2).
 """
 
 from __future__ import annotations
 
 import csv
-from collections.abc import Mapping
+import re
+import warnings
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..errors import DataError
-from .signals import CANONICAL_ORDER, SIGNALS
-from .trace import _MAX_ROWS_LISTED, Trace, _check_signals, _unknown_names_problem
+from .rawlog import RawChannel, RawLog
+from .signals import CANONICAL_ORDER
+from .trace import _MAX_ROWS_LISTED, Trace
 
-__all__ = ["read_csv", "write_csv"]
+if TYPE_CHECKING:
+    from .channel_map import ChannelMap
+    from .options import ReadOptions
+
+__all__ = ["decode_csv", "read_csv", "write_csv"]
 
 _FLOAT_FORMAT = "%.9g"
 #: Used for ``time_s`` when ``float_format`` would merge neighbouring sample times.
 _EXACT_FORMAT = "%.17g"
 #: Cell texts read as NaN (a missing value), not as unparseable.
 _NA_VALUES = ("", "nan", "NaN", "NAN")
+#: ``name [unit]`` column header.
+_UNIT_HEADER = re.compile(r"^(?P<name>.*?)\s*\[(?P<unit>[^\[\]]*)\]$")
 
 
 def _line_label(i: int) -> str:
@@ -79,27 +90,114 @@ def _read_header(path: Path) -> list[str]:
             row = next(csv.reader(fh), None)
     except UnicodeDecodeError as exc:
         raise DataError(f"{path}: not a UTF-8 text CSV file ({exc})") from None
+    except csv.Error as exc:
+        raise DataError(f"{path}: malformed CSV header ({exc})") from None
     if row is None:
         raise DataError(f"{path}: empty file (no header, no data rows)")
     return [c.strip() for c in row]
+
+
+def _split_unit(header: str) -> tuple[str, str | None]:
+    match = _UNIT_HEADER.match(header)
+    if match and match["name"]:
+        return match["name"], match["unit"].strip() or None
+    return header, None
+
+
+def _last_line(path: Path) -> str:
+    """Text of the last non-blank line of ``path`` (read from the end of the file)."""
+    with path.open("rb") as fh:
+        fh.seek(0, 2)
+        size = fh.tell()
+        chunk = 1 << 16
+        while True:
+            fh.seek(max(size - chunk, 0))
+            lines = [ln for ln in fh.read().splitlines() if ln.strip()]
+            if len(lines) >= 2 or chunk >= size:
+                break
+            chunk *= 4
+    return lines[-1].decode("utf-8", errors="replace") if lines else ""
+
+
+def decode_csv(path: str | Path, wanted: Callable[[str], bool] | None = None) -> RawLog:
+    """Decode a CSV log into named float64 columns (no mapping, no validation of values).
+
+    Parameters
+    ----------
+    path : path-like
+        Comma-separated text file with a header line. Empty cells and ``NaN`` are NaN.
+    wanted : callable, optional
+        Ignored (every column is parsed); accepted for a uniform decoder signature.
+
+    Returns
+    -------
+    RawLog
+        One :class:`~clutchlab.data.rawlog.RawChannel` per column; rows named by file line.
+
+    Raises
+    ------
+    DataError
+        Missing, empty, non-UTF-8 or malformed file, duplicate or empty column names,
+        a truncated last line; unparseable cells are listed in ``RawLog.problems``.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise DataError(f"{path}: file not found")
+    if not path.is_file():
+        raise DataError(f"{path}: not a file")
+
+    header = _read_header(path)
+    problems: list[str] = []
+    names_units = [_split_unit(h) for h in header]
+    names = [n for n, _ in names_units]
+    dupes = sorted({c for c in names if names.count(c) > 1})
+    if dupes:
+        problems.append(f"{path}: duplicate column(s) {', '.join(map(repr, dupes))}")
+    empty = [i + 1 for i, c in enumerate(names) if not c]
+    if empty:
+        problems.append(f"{path}: empty column name at position(s) {', '.join(map(str, empty))}")
+    if len(header) == 1 and any(sep in header[0] for sep in ";\t"):
+        problems.append(f"{path}: one column {header[0]!r}; the file must be comma-separated")
+    if problems:
+        raise DataError(f"{path}: bad CSV header", problems)
+
+    columns, problems, unparseable = _parse_values(path, header)
+    n = next(iter(columns.values())).size
+    fields = len(next(csv.reader([_last_line(path)]), []))
+    if fields < len(header):
+        problems.append(
+            f"{path}: file truncated: {_line_label(n - 1)} has {fields} of {len(header)} fields"
+        )
+    channels = [
+        RawChannel(name, columns[h], unit, where=f"column {name!r}", reported=unparseable.get(h))
+        for h, (name, unit) in zip(header, names_units, strict=True)
+    ]
+    return RawLog(path, "csv", channels, row_label=_line_label, problems=problems)
 
 
 def read_csv(
     path: str | Path,
     name: str | None = None,
     meta: Mapping[str, Any] | None = None,
+    *,
+    channel_map: ChannelMap | str | Path | None = None,
+    options: ReadOptions | None = None,
 ) -> Trace:
-    """Read a trace from a CSV file with canonical column names.
+    """Read one experiment from a CSV file.
 
     Parameters
     ----------
     path : path-like
-        CSV file: header of canonical names, comma-separated numeric values in canonical
-        units (s, mA, Hz, bar, °C). Empty cells and ``NaN`` are read as NaN.
+        CSV file: header line, comma-separated numeric values. Without ``channel_map`` the
+        columns must be canonical names in canonical units (s, mA, Hz, bar, °C).
     name : str, optional
         Trace name; defaults to the file stem.
     meta : dict, optional
         Trace metadata (e.g. from the dataset manifest).
+    channel_map : ChannelMap or path-like, optional
+        Source column → canonical signal with units (see :mod:`clutchlab.data.channel_map`).
+    options : ReadOptions, optional
+        Gap interpolation, resampling and jitter tolerance.
 
     Returns
     -------
@@ -109,42 +207,34 @@ def read_csv(
     Raises
     ------
     DataError
-        Naming the file and listing every problem: missing file, empty file or no data rows,
-        non-canonical / duplicate / missing columns, unparseable values (column and line),
-        non-finite or non-increasing time (line).
+        Naming the file and listing every problem, each with column and line (see
+        :func:`~clutchlab.data.reading.read_log`).
     """
-    path = Path(path)
-    name = path.stem if name is None else name
-    if not path.exists():
-        raise DataError(f"{path}: file not found")
-    if not path.is_file():
-        raise DataError(f"{path}: not a file")
+    from .reading import read_log
 
-    header = _read_header(path)
-    problems: list[str] = []
-    dupes = sorted({c for c in header if header.count(c) > 1})
-    if dupes:
-        problems.append(f"{path}: duplicate column(s) {', '.join(map(repr, dupes))}")
-    unknown = [c for c in dict.fromkeys(header) if c not in SIGNALS]
-    if unknown:
-        problem = _unknown_names_problem(unknown, str(path))
-        if len(header) == 1 and any(sep in header[0] for sep in ";\t"):
-            problem += " (the file must be comma-separated)"
-        problems.append(problem)
-    if problems:
-        raise DataError(f"{path}: bad CSV header", problems)
-
-    signals, problems = _parse_values(path, header)
-    problems += _check_signals(signals, str(path), row_label=_line_label)[1]
-    if problems:
-        raise DataError(f"{path}: invalid CSV", problems)
-    return Trace(name, signals, meta=meta, source=path)
+    return read_log(
+        path, name=name, meta=meta, channel_map=channel_map, options=options, format="csv"
+    )[0]
 
 
-def _parse_values(path: Path, header: list[str]) -> tuple[dict[str, np.ndarray], list[str]]:
+def _long_rows(path: Path, n_fields: int) -> list[str]:
+    """Problems naming the lines with more fields than the header (data would be lost)."""
+    bad = []
+    with path.open("r", encoding="utf-8-sig", errors="replace", newline="") as fh:
+        for line_no, row in enumerate(csv.reader(fh), start=1):
+            if line_no > 1 and len(row) > n_fields:
+                bad.append(f"line {line_no} (data row {line_no - 1}) has {len(row)} fields")
+    shown = ", ".join(bad[:_MAX_ROWS_LISTED]) + (f" … ({len(bad)} lines)" if len(bad) > 5 else "")
+    return [f"{path}: more fields than the {n_fields} columns of the header at {shown}"]
+
+
+def _parse_values(
+    path: Path, header: list[str]
+) -> tuple[dict[str, np.ndarray], list[str], dict[str, np.ndarray]]:
     """Parse the data rows of ``path`` into float64 columns named by ``header``.
 
-    Unparseable cells become NaN and are listed, by column and line, in the returned problems.
+    Unparseable cells become NaN and are listed, by column and line, in the returned problems
+    (and flagged in the returned masks, by column).
 
     The fast path parses floats in the C engine; only if that fails are the values re-read
     as text to name every unparseable cell by column and line.
@@ -159,14 +249,24 @@ def _parse_values(path: Path, header: list[str]) -> tuple[dict[str, np.ndarray],
         "na_values": _NA_VALUES,
         "header": 0,
         "names": header,
+        "index_col": False,
     }
     try:
-        df = pd.read_csv(path, dtype=np.float64, **options)
-        text = None
-    except pd.errors.ParserError as exc:
-        raise DataError(f"{path}: malformed CSV ({exc})") from None
-    except ValueError:
-        df = text = pd.read_csv(path, dtype=str, **{**options, "na_values": None}).fillna("")
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", pd.errors.ParserWarning)
+            try:
+                df = pd.read_csv(path, dtype=np.float64, **options)
+                text = None
+            except ValueError as exc:
+                if isinstance(exc, pd.errors.ParserError):
+                    raise
+                text = pd.read_csv(path, dtype=str, **{**options, "na_values": None}).fillna("")
+                df = text
+    except pd.errors.ParserWarning:  # a row has more fields than the header
+        raise DataError(f"{path}: malformed CSV", _long_rows(path, len(header))) from None
+    except (pd.errors.ParserError, csv.Error, UnicodeDecodeError, ValueError) as exc:
+        reason = " ".join(str(exc).split())
+        raise DataError(f"{path}: malformed CSV ({type(exc).__name__}: {reason})") from None
     # Blank lines at the end of the file are not data rows.
     filled = df.notna().any(axis=1).to_numpy() if text is None else (text != "").any(axis=1)
     filled = np.asarray(filled, dtype=bool)
@@ -174,22 +274,26 @@ def _parse_values(path: Path, header: list[str]) -> tuple[dict[str, np.ndarray],
     if n == 0:
         raise DataError(f"{path}: empty file (header but no data rows)")
     if text is None:
-        return {col: df[col].to_numpy(dtype=np.float64)[:n] for col in header}, []
+        return {col: df[col].to_numpy(dtype=np.float64)[:n] for col in header}, [], {}
 
     problems: list[str] = []
     signals: dict[str, np.ndarray] = {}
+    masks: dict[str, np.ndarray] = {}
     for col in header:
         cells = text[col].iloc[:n].str.strip()
         missing = cells.isin(_NA_VALUES)
         values = pd.to_numeric(cells.where(~missing, "nan"), errors="coerce").to_numpy(
             dtype=np.float64
         )
-        bad = np.flatnonzero(np.isnan(values) & ~missing.to_numpy())
+        unparseable = np.isnan(values) & ~missing.to_numpy()
+        bad = np.flatnonzero(unparseable)
         if bad.size:
+            masks[col] = unparseable
             shown = ", ".join(
                 f"{_line_label(int(i))} {cells.iloc[int(i)]!r}" for i in bad[:_MAX_ROWS_LISTED]
             )
             more = f" … ({bad.size} in total)" if bad.size > _MAX_ROWS_LISTED else ""
-            problems.append(f"{path}: column {col!r}: unparseable number at {shown}{more}")
+            label = _split_unit(col)[0]
+            problems.append(f"{path}: column {label!r}: unparseable number at {shown}{more}")
         signals[col] = values
-    return signals, problems
+    return signals, problems, masks

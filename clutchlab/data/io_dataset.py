@@ -1,7 +1,8 @@
 """Dataset folders: ``manifest.json`` plus one file per experiment (DESIGN §3).
 
-Readers and writers are looked up by file extension in :data:`FORMATS`, so new formats
-(Parquet, MF4) are added by registering a ``(reader, writer)`` pair.
+Experiment files are read and written through the :data:`~clutchlab.data.formats.FORMATS`
+registry (CSV, Parquet, MF4), so new formats are added by registering a
+:class:`~clutchlab.data.formats.FileFormat`.
 """
 
 from __future__ import annotations
@@ -11,51 +12,31 @@ import os
 import re
 import shutil
 import tempfile
-from collections.abc import Callable
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
-
-import numpy as np
 
 from ..errors import DataError
+from .channel_map import ChannelMap, ChannelMapLike, load_channel_map
 from .dataset import Dataset
-from .io_csv import read_csv, write_csv
+from .formats import FORMATS, suffix_of
+from .manifest import MANIFEST_NAME, Manifest, read_manifest
+from .meta_json import json_default
+from .options import ReadOptions
+from .reading import check_log
+from .report import LoadReport
 from .trace import Trace
 
-__all__ = ["FORMATS", "MANIFEST_NAME", "load_dataset", "save_dataset"]
-
-MANIFEST_NAME = "manifest.json"
-
-#: ``reader(path, name=..., meta=...) -> Trace``
-Reader = Callable[..., Trace]
-#: ``writer(trace, path) -> Any``
-Writer = Callable[[Trace, Path], Any]
-
-#: File extension (lower case, with dot) to ``(reader, writer)``.
-FORMATS: dict[str, tuple[Reader, Writer]] = {".csv": (read_csv, write_csv)}
+__all__ = [
+    "FORMATS",
+    "MANIFEST_NAME",
+    "DatasetScan",
+    "load_dataset",
+    "save_dataset",
+    "scan_dataset",
+]
 
 # Characters that are not portable in a file name (Windows / POSIX).
 _BAD_STEM = re.compile(r'[<>:"/\\|?*\x00-\x1f]')
-
-
-def _suffix_of(format: str) -> str:
-    suffix = format.lower() if format.startswith(".") else "." + format.lower()
-    if suffix not in FORMATS:
-        raise DataError(
-            f"unsupported dataset format {format!r}; supported: "
-            f"{', '.join(s.lstrip('.') for s in FORMATS)}"
-        )
-    return suffix
-
-
-def _json_default(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"{type(value).__name__} value {value!r} is not JSON serializable")
 
 
 def _manifest_text(dataset: Dataset, suffix: str) -> str:
@@ -74,18 +55,18 @@ def _manifest_text(dataset: Dataset, suffix: str) -> str:
             )
         lower.setdefault(name.lower(), name)
         try:
-            json.dumps(entry, default=_json_default, allow_nan=False)
+            json.dumps(entry, default=json_default, allow_nan=False)
         except (TypeError, ValueError) as exc:
             problems.append(f"experiment {i} ({name!r}): metadata is not valid JSON ({exc})")
     extra = {k: v for k, v in manifest.items() if k != "experiments"}
     try:
-        json.dumps(extra, default=_json_default, allow_nan=False)
+        json.dumps(extra, default=json_default, allow_nan=False)
     except (TypeError, ValueError) as exc:
         problems.append(f"manifest_extra is not valid JSON ({exc})")
     if problems:
         raise DataError("cannot save dataset", problems)
     return (
-        json.dumps(manifest, default=_json_default, allow_nan=False, indent=2, ensure_ascii=False)
+        json.dumps(manifest, default=json_default, allow_nan=False, indent=2, ensure_ascii=False)
         + "\n"
     )
 
@@ -117,7 +98,8 @@ def save_dataset(
     path : path-like
         Destination folder. It must not exist or be empty, unless ``overwrite`` is True.
     format : str, optional
-        Experiment file format, a key of :data:`FORMATS` without the dot (``"csv"``).
+        Experiment file format: ``"csv"`` (9 significant digits), ``"parquet"`` (float64,
+        units in the field metadata) or ``"mf4"`` (MDF 4.10, float64, channel units).
     overwrite : bool, optional
         Replace an existing dataset folder (one containing ``manifest.json``) once the new one
         is complete. A non-empty folder without a manifest is never replaced.
@@ -135,8 +117,8 @@ def save_dataset(
     """
     if not isinstance(dataset, Dataset):
         raise TypeError(f"save_dataset expects a Dataset, got {type(dataset)!r}")
-    suffix = _suffix_of(format)
-    writer = FORMATS[suffix][1]
+    suffix = suffix_of(format)
+    writer = FORMATS[suffix].write
     text = _manifest_text(dataset, suffix)
 
     path = Path(path)
@@ -176,108 +158,145 @@ def save_dataset(
     return path
 
 
-def _required_string(entry: dict, key: str, where: str, problems: list[str]) -> str | None:
-    """``entry[key]`` if it is a non-empty string, else None with the problem recorded."""
-    value = entry.get(key)
-    if key not in entry:
-        problems.append(f"{where}: missing {key!r}")
+def _resolve_map(
+    override: ChannelMap | None, path: Path | None, cache: dict[Path, ChannelMap]
+) -> ChannelMap | None:
+    if override is not None:
+        return override
+    if path is None:
         return None
-    if not isinstance(value, str) or not value:
-        problems.append(f"{where}: {key!r} must be a non-empty string, got {value!r}")
-        return None
-    return value
+    if path not in cache:
+        cache[path] = load_channel_map(path)
+    return cache[path]
 
 
-def load_dataset(path: str | Path) -> Dataset:
-    """Load a dataset folder.
+@dataclass(frozen=True)
+class DatasetScan:
+    """Every experiment of a dataset folder as read, problems collected, nothing raised.
+
+    Parameters
+    ----------
+    manifest : Manifest
+        The parsed manifest (valid entries, free top-level keys, manifest problems).
+    traces : tuple of Trace or None
+        One per valid manifest entry (None where the file has problems).
+    reports : tuple of LoadReport
+        One per valid manifest entry; problems prefixed with ``experiments[i]``.
+    problems : tuple of str
+        Problems of the manifest itself and of channel maps.
+    """
+
+    manifest: Manifest
+    traces: tuple[Trace | None, ...]
+    reports: tuple[LoadReport, ...]
+    problems: tuple[str, ...]
+
+    @property
+    def all_problems(self) -> list[str]:
+        """Manifest problems, then every file's problems."""
+        return [*self.problems, *(p for r in self.reports for p in r.problems)]
+
+
+def scan_dataset(
+    path: str | Path,
+    channel_map: ChannelMapLike = None,
+    *,
+    options: ReadOptions | None = None,
+) -> DatasetScan:
+    """Read every experiment of a dataset folder, collecting problems instead of raising.
+
+    Parameters
+    ----------
+    path : path-like
+        Dataset folder, or its ``manifest.json``.
+    channel_map : ChannelMap, path-like or mapping, optional
+        Map applied to every experiment; overrides the manifest's ``channel_map`` keys.
+    options : ReadOptions, optional
+        Gap interpolation, resampling, jitter tolerance.
+
+    Returns
+    -------
+    DatasetScan
+
+    Raises
+    ------
+    DataError
+        If the folder or manifest is missing or the manifest is not a JSON object with an
+        ``experiments`` list, or ``channel_map`` is unusable.
+    """
+    manifest = read_manifest(path)
+    override = load_channel_map(channel_map) if channel_map is not None else None
+    cache: dict[Path, ChannelMap] = {}
+    problems = list(manifest.problems)
+    traces: list[Trace | None] = []
+    reports: list[LoadReport] = []
+    for entry in manifest.entries:
+        try:
+            cmap = _resolve_map(override, entry.channel_map, cache)
+        except DataError as exc:
+            problems += [f"{entry.where}: {p}" for p in exc.problems or [str(exc)]]
+            continue
+        if entry.file.suffix.lower() not in FORMATS:
+            problems.append(
+                f"{entry.where}: file {entry.file.name!r}: unsupported format "
+                f"{entry.file.suffix!r}; supported: {', '.join(FORMATS)}"
+            )
+            continue
+        trace, report = check_log(
+            entry.file, name=entry.file.stem, meta=entry.meta, channel_map=cmap, options=options
+        )
+        prefixed = tuple(f"{entry.where}: {p}" for p in report.problems)
+        reports.append(replace(report, problems=prefixed))
+        traces.append(trace)
+    return DatasetScan(manifest, tuple(traces), tuple(reports), tuple(problems))
+
+
+def load_dataset(
+    path: str | Path,
+    channel_map: ChannelMapLike = None,
+    *,
+    options: ReadOptions | None = None,
+) -> Dataset:
+    """Load a dataset folder, every experiment validated and in canonical units.
 
     Parameters
     ----------
     path : path-like
         Dataset folder, or its ``manifest.json``. The manifest is
         ``{"experiments": [{"file": ..., "ramp": ..., ...}, ...], ...}``; file paths are
-        relative to the folder.
+        relative to the folder; files may be CSV, Parquet or MF4.
+    channel_map : ChannelMap, path-like or mapping, optional
+        Source channel → canonical signal with units and defaults, applied to every
+        experiment. Without it, the manifest's ``channel_map`` keys apply (an entry's key
+        overrides the top-level key; paths relative to the folder); without any map,
+        channel names must be canonical.
+    options : ReadOptions, optional
+        ``interpolate_gaps`` (samples), ``rate_Hz`` (Hz), ``max_jitter`` (fraction of the
+        sample interval).
 
     Returns
     -------
     Dataset
         Experiments in manifest order, named by file stem, with every manifest key except
-        ``"file"`` in :attr:`Trace.meta`; other top-level keys in ``manifest_extra``.
+        ``file`` and ``channel_map`` in :attr:`Trace.meta`; other top-level keys in
+        ``manifest_extra``; how each file was read in :attr:`Dataset.reports`.
 
     Raises
     ------
     DataError
         Naming the manifest and listing every problem, each with its entry index
-        (``experiments[i]``): missing or invalid manifest, missing ``experiments`` list,
-        entries without ``file`` or ``ramp``, missing files, unsupported formats, duplicate
-        names, and every problem of the experiment files themselves.
+        (``experiments[i]``) and, for problems inside a file, the file, column and row:
+        missing or invalid manifest, entries without ``file`` or ``ramp``, misspelt reserved
+        keys, missing files, unsupported formats, duplicate names, and every problem of the
+        experiment files (see :func:`~clutchlab.data.reading.read_log`).
     """
-    path = Path(path)
-    if path.suffix.lower() == ".json" and path.is_file():
-        root, manifest_path = path.parent, path
-    else:
-        root, manifest_path = path, path / MANIFEST_NAME
-    if not root.is_dir():
-        raise DataError(f"{root}: dataset folder not found")
-    if not manifest_path.is_file():
-        raise DataError(f"{manifest_path}: manifest not found")
-    try:
-        manifest = json.loads(manifest_path.read_text(encoding="utf-8-sig"))
-    except UnicodeDecodeError as exc:
-        raise DataError(f"{manifest_path}: not UTF-8 text ({exc})") from None
-    except json.JSONDecodeError as exc:
-        raise DataError(
-            f"{manifest_path}: invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}"
-        ) from None
-    if not isinstance(manifest, dict):
-        raise DataError(f"{manifest_path}: must be a JSON object with an 'experiments' list")
-    entries = manifest.get("experiments")
-    if not isinstance(entries, list):
-        what = "missing" if entries is None else f"a {type(entries).__name__}, not a list"
-        raise DataError(f"{manifest_path}: 'experiments' is {what}")
-
-    problems: list[str] = []
-    valid: list[tuple[int, Path, dict[str, Any]]] = []
-    names: dict[str, int] = {}
-    for i, entry in enumerate(entries):
-        where = f"experiments[{i}]"
-        if not isinstance(entry, dict):
-            problems.append(f"{where}: must be an object, got {json.dumps(entry)}")
-            continue
-        file = _required_string(entry, "file", where, problems)
-        ramp = _required_string(entry, "ramp", where, problems)
-        if file is None or ramp is None:
-            continue
-        ok = True
-        file_path = root / file
-        name = file_path.stem
-        if not file_path.is_file():
-            problems.append(f"{where}: file {file!r} not found ({file_path})")
-            ok = False
-        elif file_path.suffix.lower() not in FORMATS:
-            problems.append(
-                f"{where}: file {file!r}: unsupported format {file_path.suffix!r}; supported: "
-                f"{', '.join(FORMATS)}"
-            )
-            ok = False
-        if name in names:
-            problems.append(
-                f"{where}: experiment name {name!r} (file stem) already used by "
-                f"experiments[{names[name]}]"
-            )
-            ok = False
-        names.setdefault(name, i)
-        if ok:
-            valid.append((i, file_path, {k: v for k, v in entry.items() if k != "file"}))
-
-    traces: list[Trace] = []
-    for i, file_path, meta in valid:
-        reader = FORMATS[file_path.suffix.lower()][0]
-        try:
-            traces.append(reader(file_path, name=file_path.stem, meta=meta))
-        except DataError as exc:
-            problems += [f"experiments[{i}]: {p}" for p in exc.problems or [str(exc)]]
+    scan = scan_dataset(path, channel_map, options=options)
+    problems = scan.all_problems
     if problems:
-        raise DataError(f"{manifest_path}: invalid dataset", problems)
-    extra = {k: v for k, v in manifest.items() if k != "experiments"}
-    return Dataset(traces, root=root, manifest_extra=extra)
+        raise DataError(f"{scan.manifest.path}: invalid dataset", problems)
+    return Dataset(
+        [t for t in scan.traces if t is not None],
+        root=scan.manifest.root,
+        manifest_extra=scan.manifest.extra,
+        reports={r.name: r for r in scan.reports},
+    )

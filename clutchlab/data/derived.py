@@ -1,0 +1,116 @@
+"""Derived signals used by every layer: one-dither-period mean and a filtered dI/dt.
+
+Both work on uniformly sampled arrays (a trace read by :mod:`clutchlab.data` is uniform when
+its log was irregular or multi-rate).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ..errors import DataError
+
+__all__ = ["didt", "dither_period_mean"]
+
+
+def _finite_1d(x: ArrayLike, name: str) -> np.ndarray:
+    arr = np.asarray(x, dtype=np.float64)
+    if arr.ndim != 1:
+        raise DataError(f"{name} must be 1-D, got shape {arr.shape}")
+    if arr.size and not np.isfinite(arr).all():
+        i = int(np.flatnonzero(~np.isfinite(arr))[0])
+        raise DataError(f"{name} has a non-finite value at row {i + 1}")
+    return arr
+
+
+def dither_period_mean(x: ArrayLike, n: float | ArrayLike) -> np.ndarray:
+    """Centered moving average over exactly one dither period.
+
+    The average is the integral of the sample-and-hold signal over a window of exactly ``n``
+    samples centred on each sample, so a fractional period (1000 Hz / 70 Hz = 14.29 samples)
+    removes the dither and all its harmonics as well as an integer one would. Near the ends
+    the window is shifted to stay inside the data.
+
+    Parameters
+    ----------
+    x : array_like
+        Uniformly sampled signal, any unit (e.g. current in mA, pressure in bar); finite.
+    n : float or array_like
+        Window length in samples (sample rate / dither frequency), > 0; one value or one per
+        sample. Values below 1 leave the signal unchanged; a window longer than the signal
+        gives the signal mean.
+
+    Returns
+    -------
+    numpy.ndarray
+        float64 moving average, same unit and length as ``x``.
+
+    Raises
+    ------
+    DataError
+        If ``x`` is not 1-D or has non-finite values, or ``n`` is not positive and finite.
+    """
+    arr = _finite_1d(x, "x")
+    size = arr.size
+    width = np.broadcast_to(np.asarray(n, dtype=np.float64), (size,))
+    if size == 0:
+        return arr.copy()
+    if not np.isfinite(width).all() or (width <= 0).any():
+        raise DataError(f"window length n must be positive and finite, got {n!r}")
+    width = np.clip(width, 1.0, float(size))
+    offset = arr.mean()
+    cum = np.concatenate([[0.0], np.cumsum(arr - offset)])  # integral up to k - 1/2 at index k
+    center = np.arange(size, dtype=np.float64)
+    lo = np.clip(center - width / 2.0, -0.5, size - 0.5 - width)
+    hi = lo + width
+    knots = np.arange(size + 1, dtype=np.float64)
+    integral = np.interp(hi + 0.5, knots, cum) - np.interp(lo + 0.5, knots, cum)
+    return integral / width + offset
+
+
+def didt(x: ArrayLike, sample_rate_Hz: float, n: float, *, polyorder: int = 2) -> np.ndarray:
+    """Filtered time derivative (Savitzky–Golay) over about one dither period.
+
+    Fits a polynomial of degree ``polyorder`` over a sliding window of ``n`` samples (rounded
+    up to odd) and takes its slope at the centre: the least-squares slope, so white noise of
+    standard deviation σ gives a derivative noise of about ``σ · fs · sqrt(12 / n³)``.
+    Typical use: ``x`` the nominal current (mA), ``n`` one dither period (fs / f_dither) or a
+    few, giving dI/dt in mA/s.
+
+    Parameters
+    ----------
+    x : array_like
+        Uniformly sampled signal (e.g. nominal current, mA); finite.
+    sample_rate_Hz : float
+        Sample rate, Hz.
+    n : float
+        Window length, samples (at least ``polyorder + 2``; rounded up to odd).
+    polyorder : int, optional
+        Degree of the local polynomial (default 2; the slope at the centre equals that of a
+        straight-line fit for degree 1 or 2).
+
+    Returns
+    -------
+    numpy.ndarray
+        Derivative in units of ``x`` per second (mA/s for a current in mA).
+
+    Raises
+    ------
+    DataError
+        If ``x`` is not finite and 1-D, or the rate or window is not usable.
+    """
+    from scipy.signal import savgol_filter
+
+    arr = _finite_1d(x, "x")
+    if not np.isfinite(sample_rate_Hz) or sample_rate_Hz <= 0:
+        raise DataError(f"sample_rate_Hz must be positive, got {sample_rate_Hz!r}")
+    if not np.isfinite(n) or n <= 0:
+        raise DataError(f"window length n must be positive, got {n!r}")
+    window = max(int(np.ceil(n)), polyorder + 2)
+    window += 1 - window % 2
+    if arr.size < window:
+        if arr.size < 2:
+            return np.zeros_like(arr)
+        return np.full(arr.size, np.polyfit(np.arange(arr.size), arr, 1)[0] * sample_rate_Hz)
+    return savgol_filter(arr, window, polyorder, deriv=1, delta=1.0 / sample_rate_Hz, mode="interp")

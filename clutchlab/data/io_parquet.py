@@ -1,0 +1,203 @@
+"""Parquet reader and writer (pyarrow).
+
+Written files hold one float64 column per canonical signal present, in canonical order, each
+field with its unit in the field metadata (``unit``), and the trace name and metadata as JSON
+in the schema metadata (key ``clutchlab``). Read files may hold any names and numeric types
+(integers, floats, decimals; a timestamp or duration time column is turned into seconds since
+its first sample); rows are named ``row N`` (1-based) in messages.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..errors import DataError
+from .meta_json import embedded_meta_json, parse_embedded_meta
+from .rawlog import RawChannel, RawLog
+from .signals import CANONICAL_ORDER, SIGNALS
+from .trace import Trace
+
+if TYPE_CHECKING:
+    from .channel_map import ChannelMap
+    from .options import ReadOptions
+
+__all__ = ["decode_parquet", "read_parquet", "write_parquet"]
+
+#: Schema metadata key holding ``{"name": ..., "meta": {...}}`` as JSON.
+META_KEY = b"clutchlab"
+
+
+def write_parquet(trace: Trace, path: str | Path) -> Path:
+    """Write a trace to a Parquet file.
+
+    Parameters
+    ----------
+    trace : Trace
+        Trace to write; every signal present, float64, canonical order and units
+        (s, mA, Hz, bar, °C). Units go to the field metadata, name and metadata to the
+        schema metadata.
+    path : path-like
+        Destination file; overwritten if it exists.
+
+    Returns
+    -------
+    pathlib.Path
+        The file written.
+    """
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    if not isinstance(trace, Trace):
+        raise TypeError(f"write_parquet expects a Trace, got {type(trace)!r}")
+    path = Path(path)
+    names = [n for n in CANONICAL_ORDER if trace.has(n)]
+    fields = [
+        pa.field(n, pa.float64(), nullable=True, metadata={"unit": SIGNALS[n].unit}) for n in names
+    ]
+    schema = pa.schema(fields, metadata={META_KEY: embedded_meta_json(trace).encode()})
+    table = pa.table([pa.array(np.asarray(trace.signals[n])) for n in names], schema=schema)
+    pq.write_table(table, path)
+    return path
+
+
+def _to_float(column: Any, name: str) -> tuple[np.ndarray | None, str | None, str | None]:
+    """float64 values of an Arrow column; or None with the reason; plus a note."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    t = column.type
+    if pa.types.is_timestamp(t) or pa.types.is_duration(t):
+        ints = pc.cast(column, pa.int64()).to_numpy(zero_copy_only=False)
+        unit = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}[t.unit]
+        ints = np.asarray(ints, dtype=np.float64)
+        nulls = column.is_null().to_numpy(zero_copy_only=False)
+        ints[np.asarray(nulls, dtype=bool)] = np.nan
+        finite = ints[np.isfinite(ints)]
+        first = finite[0] if finite.size else 0.0
+        note = f"column {name!r}: {t} converted to seconds since its first sample"
+        return (ints - first) * unit, None, note
+    if pa.types.is_integer(t) or pa.types.is_floating(t) or pa.types.is_decimal(t):
+        try:
+            values = pc.cast(column, pa.float64(), safe=False).to_numpy(zero_copy_only=False)
+        except (pa.ArrowInvalid, pa.ArrowNotImplementedError) as exc:
+            return None, f"cannot convert type {t} to float64 ({exc})", None
+        return np.asarray(values, dtype=np.float64), None, None
+    return None, f"not numeric (type {t})", None
+
+
+def decode_parquet(path: str | Path, wanted: Callable[[str], bool] | None = None) -> RawLog:
+    """Decode a Parquet file into named float64 columns (no mapping, no value checks).
+
+    Parameters
+    ----------
+    path : path-like
+        Parquet file with one column per channel.
+    wanted : callable, optional
+        ``wanted(name)`` tells whether a column's values are needed; other columns are
+        listed without values. Default: every column.
+
+    Returns
+    -------
+    RawLog
+        One channel per column (non-numeric columns with ``values=None`` and the reason);
+        embedded clutchlab metadata in ``meta``.
+
+    Raises
+    ------
+    DataError
+        Missing file, not a readable Parquet file (wrong magic, truncated, corrupt), no
+        columns or no rows, duplicate column names.
+    """
+    import pyarrow.parquet as pq
+
+    path = Path(path)
+    if not path.exists():
+        raise DataError(f"{path}: file not found")
+    if not path.is_file():
+        raise DataError(f"{path}: not a file")
+    if path.stat().st_size == 0:
+        raise DataError(f"{path}: empty file")
+    try:
+        table = pq.read_table(path)
+        names = [str(n) for n in table.column_names]  # decoding may fail on damaged names
+        schema_meta = dict(table.schema.metadata or {})
+        field_meta = [table.schema.field(i).metadata or {} for i in range(len(names))]
+    except Exception as exc:  # pyarrow raises many types on corrupt input
+        raise DataError(
+            f"{path}: not a readable Parquet file (truncated or corrupt?): "
+            f"{type(exc).__name__}: {exc}"
+        ) from None
+    if not names:
+        raise DataError(f"{path}: empty file (no columns)")
+    if table.num_rows == 0:
+        raise DataError(f"{path}: empty file (no rows)")
+    dupes = sorted({n for n in names if names.count(n) > 1})
+    if dupes:
+        raise DataError(f"{path}: duplicate column(s) {', '.join(map(repr, dupes))}")
+
+    meta = None
+    if META_KEY in schema_meta:
+        meta = parse_embedded_meta(schema_meta[META_KEY])
+    channels: list[RawChannel] = []
+    notes: list[str] = []
+    for i, name in enumerate(names):
+        unit = None
+        if b"unit" in field_meta[i]:
+            unit = field_meta[i][b"unit"].decode("utf-8", errors="replace") or None
+        if wanted is not None and not wanted(name):
+            channels.append(
+                RawChannel(name, None, unit, where=f"column {name!r}", problem="not loaded")
+            )
+            continue
+        try:
+            values, problem, note = _to_float(table.column(i), name)
+        except Exception as exc:  # conversion of exotic Arrow types
+            values, problem, note = None, f"unreadable column ({type(exc).__name__}: {exc})", None
+        if note:
+            notes.append(note)
+        channels.append(RawChannel(name, values, unit, where=f"column {name!r}", problem=problem))
+    return RawLog(path, "parquet", channels, meta=meta, notes=notes)
+
+
+def read_parquet(
+    path: str | Path,
+    name: str | None = None,
+    meta: Mapping[str, Any] | None = None,
+    *,
+    channel_map: ChannelMap | str | Path | None = None,
+    options: ReadOptions | None = None,
+) -> Trace:
+    """Read one experiment from a Parquet file.
+
+    Parameters
+    ----------
+    path : path-like
+        Parquet file. Without ``channel_map`` the columns must be canonical names; a unit in
+        the field metadata must then be the canonical one.
+    name : str, optional
+        Trace name; defaults to the embedded name, else the file stem.
+    meta : dict, optional
+        Trace metadata; defaults to the metadata embedded by :func:`write_parquet`.
+    channel_map : ChannelMap or path-like, optional
+        Source column → canonical signal with units.
+    options : ReadOptions, optional
+        Gap interpolation, resampling and jitter tolerance.
+
+    Returns
+    -------
+    Trace
+
+    Raises
+    ------
+    DataError
+        Naming the file and listing every problem with column and row.
+    """
+    from .reading import read_log
+
+    return read_log(
+        path, name=name, meta=meta, channel_map=channel_map, options=options, format="parquet"
+    )[0]

@@ -1,0 +1,138 @@
+"""``clutchlab data check`` / ``clutchlab data convert`` through a subprocess; atomic convert."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from clutchlab.data import FORMATS, Dataset, FileFormat, Trace, load_dataset, save_dataset
+from clutchlab.data.convert import convert
+from clutchlab.errors import DataError
+from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
+
+
+def cli(*args, cwd=None):
+    return subprocess.run(
+        [sys.executable, "-m", "clutchlab.cli", "data", *map(str, args)],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+    )
+
+
+@pytest.fixture(scope="module")
+def stand_ds(tmp_path_factory):
+    run = run_stand(
+        StandConfig(settings=(DitherSetting(50.0, "B"),), ramps=(RampProfile("medium", 10.0),)),
+        progress=False,
+    )
+    return save_dataset(run.dataset, tmp_path_factory.mktemp("stand") / "ds")
+
+
+def test_check_good_dataset(stand_ds, tmp_path):
+    out = tmp_path / "check.json"
+    res = cli("check", stand_ds, "--json", out)
+    assert res.returncode == 0, res.stderr
+    lines = res.stdout.splitlines()
+    assert lines[0].split() == [
+        "file", "ramp", "samples", "dur", "s", "rate", "Hz", "current", "mA", "p_clutch", "bar", "!"
+    ]  # fmt: skip
+    row = lines[2].split()
+    assert row[:5] == ["medium_50Hz_B.csv", "medium", "23001", "23.000", "1000"]
+    assert row[-1] == "0" and lines[-1] == f"{stand_ds}: OK"
+    report = json.loads(out.read_text())
+    assert report["ok"] is True and report["problems"] == []
+    exp = report["experiments"][0]
+    assert exp["ramp"] == "medium" and exp["samples"] == 23001 and exp["problems"] == []
+    assert exp["rate_Hz"] == pytest.approx(1000.0) and exp["duration_s"] == pytest.approx(23.0)
+    assert exp["ranges"]["clutch_pressure_bar"][1] > 15.0
+    assert exp["timing"][0]["jitter_max_s"] < 1e-9
+
+
+def test_check_bad_dataset_exits_non_zero_and_lists_every_problem(tmp_path):
+    n = 100
+    t = np.arange(n) * 1e-3
+    good = Trace(
+        "good",
+        {"time_s": t, "current_mA": np.full(n, 300.0), "clutch_pressure_bar": t},
+        meta={"ramp": "fast"},
+    )
+    root = save_dataset(Dataset([good]), tmp_path / "bad")
+    lines = ["time_s,current_mA,clutch_pressure_bar"]
+    lines += [f"{k * 1e-3:.3f},{0.3 if k != 7 else 'nan'},1.0" for k in range(n)]
+    (root / "amps.csv").write_text("\n".join(lines) + "\n")
+    manifest = json.loads((root / "manifest.json").read_text())
+    manifest["experiments"] += [
+        {"file": "amps.csv", "ramp": "slow"},
+        {"file": "gone.csv", "ramp": "slow"},
+    ]
+    (root / "manifest.json").write_text(json.dumps(manifest))
+    out = tmp_path / "bad.json"
+    res = cli("check", root, "--json", out)
+    assert res.returncode == 1
+    text = res.stdout
+    assert "good.csv" in text and "amps.csv" in text
+    assert "3 problem(s)" in text
+    assert f"experiments[2]: file 'gone.csv' not found ({root / 'gone.csv'})" in text
+    assert (
+        f"experiments[1]: {root / 'amps.csv'}: column 'current_mA': missing values (NaN/inf) "
+        "at line 9 (data row 8) (1 × NaN)" in text
+    )
+    assert f"{root / 'amps.csv'}: column 'current_mA': implausible unit: values look like" in text
+    report = json.loads(out.read_text())
+    assert report["ok"] is False and len(report["experiments"]) == 2
+    assert report["experiments"][0]["problems"] == []
+    assert len(report["experiments"][1]["problems"]) == 2
+    # with the right options the same file passes
+    (tmp_path / "amps.toml").write_text(
+        '[signals]\ncurrent_mA = { channel = "current_mA", unit = "A" }\n'
+    )
+    res = cli("check", root / "amps.csv", "--map", tmp_path / "amps.toml", "--interpolate-gaps", 1)
+    assert res.returncode == 0, res.stdout
+    assert "interpolated line 9 (data row 8)" in res.stdout
+
+
+def test_convert_dataset_to_every_format(stand_ds, tmp_path):
+    original = load_dataset(stand_ds)
+    for fmt in ("parquet", "mf4"):
+        res = cli("convert", stand_ds, tmp_path / fmt, "--format", fmt)
+        assert res.returncode == 0, res.stderr
+        back = load_dataset(tmp_path / fmt)
+        assert back.names == original.names and back[0].meta == original[0].meta
+        for name in original[0].signals:
+            np.testing.assert_array_equal(back[0].get(name), original[0].get(name))
+    res = cli("convert", stand_ds, tmp_path / "mf4", "--format", "mf4")
+    assert res.returncode == 2 and "folder exists and is not empty" in res.stderr
+    res = cli("convert", tmp_path / "mf4" / "medium_50Hz_B.mf4", tmp_path / "one.parquet")
+    assert res.returncode == 0, res.stderr
+    assert load_dataset(tmp_path / "parquet")[0].meta["ramp"] == "medium"
+
+
+def test_failed_convert_leaves_no_partial_output(stand_ds, tmp_path, monkeypatch):
+    # bad input: nothing written
+    src = tmp_path / "src"
+    save_dataset(load_dataset(stand_ds), src)
+    (src / "medium_50Hz_B.csv").write_text("time_s,current_mA\n0,1\n")
+    res = cli("convert", src, tmp_path / "dst", "--format", "mf4")
+    assert res.returncode == 2
+    assert res.stderr.startswith("clutchlab data convert: error: ")
+    assert "required column 'clutch_pressure_bar' is missing" in res.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["src"]
+
+    # a writer failing half-way: no folder, no file, no temporary left behind
+    def failing(trace, path):
+        path.write_bytes(b"partial")
+        raise OSError("disk full")
+
+    monkeypatch.setitem(FORMATS, ".mf4", FileFormat("mf4", FORMATS[".mf4"].decode, failing))
+    with pytest.raises(OSError, match="disk full"):
+        convert(stand_ds, tmp_path / "dst", format="mf4")
+    with pytest.raises(OSError, match="disk full"):
+        convert(stand_ds / "medium_50Hz_B.csv", tmp_path / "one.mf4")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["src"]
+    with pytest.raises(DataError, match="suffix does not match the format 'csv'"):
+        convert(stand_ds / "medium_50Hz_B.csv", tmp_path / "one.mf4", format="csv")

@@ -1,0 +1,250 @@
+"""Parquet and MF4 readers/writers, round trips, multi-rate and irregular logs."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from asammdf import MDF, Signal
+
+from clutchlab.data import (
+    CANONICAL_ORDER,
+    SIGNALS,
+    Dataset,
+    ReadOptions,
+    Trace,
+    load_dataset,
+    read_csv,
+    read_log,
+    read_mf4,
+    read_parquet,
+    save_dataset,
+    write_csv,
+    write_mf4,
+    write_parquet,
+)
+from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
+
+FLOAT32_EPS = float(np.finfo(np.float32).eps)
+
+
+@pytest.fixture(scope="module")
+def stand_dataset() -> Dataset:
+    """Two realistic stand experiments (every canonical signal) with rich metadata."""
+    run = run_stand(
+        StandConfig(
+            settings=(DitherSetting(50.0, "B"), DitherSetting(30.0, "A", "triangle")),
+            ramps=(RampProfile("fast", 2.5),),
+        ),
+        progress=False,
+    )
+    traces = [
+        Trace(t.name, t.signals, meta={**t.meta, "operator": "ü-test", "tags": [1, "a", None]})
+        for t in run.dataset
+    ]
+    extra = {**run.dataset.manifest_extra, "stand": {"id": 7, "limits": [0.5, 17.7]}}
+    return Dataset(traces, manifest_extra=extra)
+
+
+def _manifest(root):
+    return json.loads((root / "manifest.json").read_text(encoding="utf-8"))
+
+
+def test_round_trip_csv_parquet_mf4_csv_within_float32(tmp_path, stand_dataset):
+    # Must-show 1: CSV → Parquet → MF4 → CSV, every signal equal within float32 precision,
+    # manifest metadata preserved.
+    roots = []
+    ds = stand_dataset
+    for fmt in ("csv", "parquet", "mf4", "csv"):
+        roots.append(save_dataset(ds, tmp_path / f"{len(roots)}_{fmt}", fmt))
+        ds = load_dataset(roots[-1])
+    first, last = roots[0], roots[-1]
+    suffixes = [sorted(p.suffix for p in root.iterdir()) for root in roots]
+    assert suffixes[1] == [".json", ".parquet", ".parquet"]
+    assert suffixes[2] == [".json", ".mf4", ".mf4"]
+    assert _manifest(last) == _manifest(first)  # same files, ramps, every free key
+    assert ds.manifest_extra == stand_dataset.manifest_extra
+    for a, b in zip(stand_dataset, ds, strict=True):
+        assert b.name == a.name and b.meta == a.meta
+        assert list(b.signals) == list(a.signals) == list(CANONICAL_ORDER)
+        for name in a.signals:
+            np.testing.assert_allclose(b.get(name), a.get(name), rtol=FLOAT32_EPS, atol=0)
+
+
+def test_parquet_and_mf4_are_exact_and_carry_units_and_meta(tmp_path, stand_dataset):
+    trace = stand_dataset[0]
+    pq_path = write_parquet(trace, tmp_path / "x.parquet")
+    mf_path = write_mf4(trace, tmp_path / "x.mf4")
+    for back in (read_parquet(pq_path), read_mf4(mf_path)):
+        assert back.name == trace.name  # embedded, not the file stem
+        assert back.meta == trace.meta
+        for name in trace.signals:
+            np.testing.assert_array_equal(back.get(name), trace.get(name), err_msg=name)
+
+    import pyarrow.parquet as pq
+
+    schema = pq.read_schema(pq_path)
+    assert {f.name: f.metadata[b"unit"].decode() for f in schema} == trace.units
+    mdf = MDF(mf_path)
+    try:
+        units = {ch.name: ch.unit for g in mdf.groups for ch in g.channels}
+    finally:
+        mdf.close()
+    assert units["time"] == "s"
+    for name in trace.signals:
+        if name != "time_s":
+            assert units[name] == SIGNALS[name].unit, name
+
+
+def _identity(x):
+    return x
+
+
+def _write_multirate(path, names=None, units=None, to_units=(_identity,) * 3):
+    """Three groups: 1 kHz from 0 s, 500 Hz from 0.010 s, 10 Hz from 0.050 s, to ~2 s.
+
+    Current 100 + 200 t mA, pressure 1 + 2 t bar, temperature 40 + 10 sin(t) °C, each
+    converted to the logged unit by ``to_units``.
+    """
+    names = names or ("current_mA", "clutch_pressure_bar", "oil_temp_C")
+    units = units or ("mA", "bar", "°C")
+    t1 = np.arange(0, 2000) * 1e-3
+    t2 = 0.010 + np.arange(0, 995) * 2e-3
+    t3 = 0.050 + np.arange(0, 20) * 0.1
+    values = (100.0 + 200.0 * t1, 1.0 + 2.0 * t2, 40.0 + 10.0 * np.sin(t3))
+    mdf = MDF(version="4.10")
+    for t, v, name, unit, conv in zip((t1, t2, t3), values, names, units, to_units, strict=True):
+        mdf.append([Signal(conv(v), t, name=name, unit=unit)])
+    mdf.save(path, overwrite=True)
+    mdf.close()
+    return t1, t2, t3
+
+
+def test_multirate_mf4_three_rates_on_one_grid(tmp_path):
+    # Must-show 4: current 1 kHz, pressure 500 Hz, temperature 10 Hz → one 1 kHz grid.
+    path = tmp_path / "multi.mf4"
+    t1, t2, t3 = _write_multirate(path)
+    trace, report = read_log(path)
+    t = trace.time_s
+    np.testing.assert_allclose(np.diff(t), 1e-3, rtol=1e-9)
+    assert t[0] == pytest.approx(0.050) and t[-1] == pytest.approx(min(t1[-1], t2[-1], t3[-1]))
+    assert sorted(round(tm.rate_Hz, 6) for tm in report.timing) == [10.0, 500.0, 1000.0]
+    assert "3 time bases" in report.resampled
+    assert any("[0.05, 1.95] s, the span every channel covers" in n for n in report.notes)
+
+    def at(name, when):
+        return float(np.interp(when, t, trace.get(name)))
+
+    for when in (0.050, 0.5, 1.0, 1.2345, 1.75, 1.950):
+        i = int(np.argmin(np.abs(t - when)))
+        assert t[i] == pytest.approx(when, abs=1e-9) or when == 1.2345
+        # linear channels are reproduced exactly at any instant
+        assert at("current_mA", when) == pytest.approx(100.0 + 200.0 * when, abs=1e-9)
+        assert at("clutch_pressure_bar", when) == pytest.approx(1.0 + 2.0 * when, abs=1e-9)
+    for k in (0, 4, 10, 19):  # the 10 Hz samples fall on the grid: exact there
+        when = 0.050 + 0.1 * k
+        i = int(np.argmin(np.abs(t - when)))
+        assert trace.get("oil_temp_C")[i] == pytest.approx(40.0 + 10.0 * np.sin(when), abs=1e-9)
+    mid = 0.050 + 0.1 * 7.5  # between two 10 Hz samples: linear interpolation
+    expected = 40.0 + 5.0 * (np.sin(0.050 + 0.7) + np.sin(0.050 + 0.8))
+    assert at("oil_temp_C", mid) == pytest.approx(expected, abs=1e-9)
+
+
+def test_multirate_mf4_with_channel_map_and_units(tmp_path):
+    path = tmp_path / "logger.mf4"
+    _write_multirate(
+        path,
+        names=("I_VFS", "P_CL", "T_oil"),
+        units=("A", "kPa", "degF"),
+        to_units=(lambda i: i / 1000.0, lambda p: p * 100.0, lambda c: c * 1.8 + 32.0),
+    )
+    cmap = {
+        "signals": {
+            "current_mA": "I_VFS",  # unit taken from the file (A)
+            "clutch_pressure_bar": {"channel": "P_CL"},
+            "oil_temp_C": {"channel": "T_oil", "unit": "°F"},
+        },
+        "defaults": {"line_pressure_bar": 18.0},
+    }
+    trace, report = read_log(path, channel_map=cmap)
+    t = trace.time_s
+    i = int(np.argmin(np.abs(t - 1.0)))
+    assert trace.get("current_mA")[i] == pytest.approx(300.0, rel=1e-12)
+    assert trace.get("clutch_pressure_bar")[i] == pytest.approx(3.0, rel=1e-12)
+    k = int(np.argmin(np.abs(t - 1.050)))  # a 10 Hz sample instant
+    assert trace.get("oil_temp_C")[k] == pytest.approx(40.0 + 10.0 * np.sin(1.050), rel=1e-12)
+    assert trace.get("line_pressure_bar")[i] == 18.0
+    assert report.defaults == {"line_pressure_bar": 18.0}
+    assert "[A → mA]" in report.sources["current_mA"]
+    assert "[kPa → bar]" in report.sources["clutch_pressure_bar"]
+    assert "[°F → °C]" in report.sources["oil_temp_C"]
+
+
+def test_irregular_csv_is_resampled_and_jitter_reported(tmp_path):
+    rng = np.random.default_rng(3)
+    n = 3000
+    t = 5.0 + np.arange(n) * 1e-3 + rng.uniform(-0.2e-3, 0.2e-3, n)  # ±20 % jitter
+    trace = Trace(
+        "jit",
+        {"time_s": t, "current_mA": 200.0 + 100.0 * t, "clutch_pressure_bar": 2.0 + 0.5 * t},
+    )
+    path = write_csv(trace, tmp_path / "jit.csv")
+    back, report = read_log(path)
+    jitter = report.timing[0]
+    assert 0.15e-3 < jitter.jitter_max_s < 0.25e-3
+    assert "jitter up to" in report.resampled
+    grid = back.time_s
+    np.testing.assert_allclose(np.diff(grid), np.diff(grid).mean(), rtol=1e-9)
+    assert grid[0] >= t[0] and grid[-1] <= t[-1]
+    np.testing.assert_allclose(back.get("current_mA"), 200.0 + 100.0 * grid, rtol=1e-8)
+    # within the tolerance (default 1 % of the interval) the time stamps are kept as logged
+    regular = 5.0 + np.arange(n) * 1e-3 + rng.uniform(-5e-6, 5e-6, n)  # ±0.5 %
+    small = Trace("ok", {**trace.signals, "time_s": regular})
+    kept, report = read_log(write_csv(small, tmp_path / "ok.csv"))
+    assert report.resampled is None and report.timing[0].jitter_max_s < 6e-6
+    np.testing.assert_allclose(kept.time_s, small.time_s, rtol=5e-9, atol=0)
+    resampled = read_csv(tmp_path / "ok.csv", options=ReadOptions(rate_Hz=500.0))
+    assert resampled.sample_rate_Hz == pytest.approx(500.0)
+
+
+def test_time_gaps_are_errors_unless_interpolated(tmp_path):
+    t = np.delete(np.arange(1000) * 1e-3, [300, 301, 302])  # 3 samples dropped
+    trace = Trace("gap", {"time_s": t, "current_mA": 500.0 + t, "clutch_pressure_bar": 1.0 + t})
+    path = write_parquet(trace, tmp_path / "gap.parquet")
+    with pytest.raises(Exception) as info:
+        read_parquet(path)
+    text = str(info.value)
+    assert "gap.parquet: column 'time_s': time gap(s) of missing samples before row 301" in text
+    assert "(3 missing)" in text and "interpolate_gaps=3" in text
+    back, report = read_log(path, options=ReadOptions(interpolate_gaps=3))
+    assert len(back) == 1000
+    assert any("interpolated time gap" in f for f in report.filled)
+    np.testing.assert_allclose(back.get("current_mA"), 500.0 + back.time_s, rtol=1e-12)
+
+
+def test_save_dataset_in_every_format_and_reports(tmp_path, stand_dataset):
+    for fmt, suffix in (("csv", ".csv"), ("parquet", ".parquet"), ("mf4", ".mf4")):
+        root = save_dataset(stand_dataset, tmp_path / fmt, format=fmt)
+        manifest = _manifest(root)
+        assert [e["file"] for e in manifest["experiments"]] == [
+            t.name + suffix for t in stand_dataset
+        ]
+        back = load_dataset(root)
+        assert set(back.reports) == set(back.names)
+        report = back.reports[back.names[0]]
+        assert report.format == fmt and report.rate_Hz == pytest.approx(1000.0)
+        assert report.ok and report.resampled is None
+
+
+def test_data_layer_does_not_import_physics():
+    code = (
+        "import sys, clutchlab.data, clutchlab.data.demodulate, clutchlab.data.check, "
+        "clutchlab.data.convert\n"
+        "bad = [m for m in sys.modules if m.startswith(('clutchlab.physics', "
+        "'clutchlab.residual_ml', 'clutchlab.validation'))]\n"
+        "assert not bad, bad\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)
