@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from clutchlab.data import load_dataset
+from clutchlab.errors import FitError
 from clutchlab.physics import CircuitModel, simulate
 from clutchlab.physics.fit import FitSettings, PhysicsFitter, dither_period_samples, period_mean
 from clutchlab.physics.stand import StandConfig, write_stand
@@ -56,14 +57,17 @@ def main() -> None:
         f"({sum(t.duration_s for t in train):.0f} s at 1 kHz); test: medium ramp"
     )
     kw = {"progress": False} | ({"method": args.method} if args.method else {})
-    walls, fitter = [], None
+    walls, res = [], None
     for _ in range(args.runs):
         t0 = time.perf_counter()
-        fitter = PhysicsFitter(settings=FitSettings(**kw)).fit(ds)
+        try:
+            res = PhysicsFitter(settings=FitSettings(**kw)).fit(ds).result_
+        except FitError as exc:  # not converged: report it, score the best iterate
+            res = exc.result
+            print(f"run did not converge: {exc}")
         walls.append(time.perf_counter() - t0)
-    res = fitter.result_
     rmse_default = medium_rmse(ds, CircuitModel(), None)
-    rmse_fit = medium_rmse(ds, fitter.model_, fitter.params_)
+    rmse_fit = medium_rmse(ds, res.model(), res.params())
     med = statistics.median(walls)
     print(f"\nfit wall times (s): {', '.join(f'{w:.1f}' for w in walls)}")
     print(
@@ -80,9 +84,12 @@ def main() -> None:
         print(f"\n{'decimate':>8s} {'wall (s)':>9s} {'medium RMSE (bar)':>18s}")
         for d in (int(x) for x in args.decimation.split(",")):
             t0 = time.perf_counter()
-            f = PhysicsFitter(settings=FitSettings(**kw, decimate=d)).fit(ds)
+            try:
+                r = PhysicsFitter(settings=FitSettings(**kw, decimate=d)).fit(ds).result_
+            except FitError as exc:
+                r = exc.result
             wall = time.perf_counter() - t0
-            print(f"{d:8d} {wall:9.1f} {medium_rmse(ds, f.model_, f.params_):18.4f}")
+            print(f"{d:8d} {wall:9.1f} {medium_rmse(ds, r.model(), r.params()):18.4f}")
 
 
 if __name__ == "__main__":

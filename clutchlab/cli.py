@@ -214,6 +214,9 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--overwrite", action="store_true", help="replace an existing destination")
     _add_read_options(q)
     q.set_defaults(func=_cmd_data_convert)
+    from .cli_fit import register as register_fit
+
+    register_fit(sub)
     return parser
 
 

@@ -1,0 +1,82 @@
+"""``clutchlab fit-physics`` through the console entry point."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+from clutchlab.data import save_dataset
+from clutchlab.physics.fit import FitResult
+from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
+
+#: Datasheet values except the three parameters the CLI fits: the model is then exact.
+TRUTH = {
+    "reg_F_c": 1.0,
+    "vfs_d_orf": 0.45,
+    "latch_F0": 27.7,
+    "cacc_k": 40.0,
+    "fluid_beta": 1.5,
+    "vfs_K_m": 14.4,
+    "vfs_F_pre": 1.1,
+    "reg_F0": -1.6,
+}
+
+
+def test_fit_physics_cli_writes_model_and_json(tmp_path):
+    config = StandConfig(
+        builtin_effects=False,
+        settings=(DitherSetting(50.0, "A"),),
+        ramps=(RampProfile("fast", 1.5, 0.3), RampProfile("medium", 2.0, 0.3)),
+        seed=4,
+        substeps=2,
+        overrides=TRUTH,
+    )
+    data = tmp_path / "stand"
+    save_dataset(run_stand(config, progress=False).dataset, data)
+    out, js = tmp_path / "model.json", tmp_path / "fit.json"
+    res = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "clutchlab.cli",
+            "fit-physics",
+            str(data),
+            "--out",
+            str(out),
+            "--train",
+            "fast",
+            "--free",
+            "vfs_K_m,vfs_F_pre,reg_F0",
+            "--quiet",
+            "--json",
+            str(js),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=True,
+    )
+    assert "model written to" in res.stdout and "vfs_K_m" in res.stdout
+    fit = FitResult.from_json(out)
+    assert fit.free == ["vfs_K_m", "vfs_F_pre", "reg_F0"]
+    assert fit.train == ["fast_50Hz_A"]  # the medium ramp is never fitted on
+    assert json.loads(js.read_text())["values"] == fit.values
+    bad = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "clutchlab.cli",
+            "fit-physics",
+            str(data),
+            "--out",
+            str(out),
+            "--free",
+            "nope",
+            "--quiet",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert bad.returncode == 2 and "unknown parameter(s) nope" in bad.stderr
