@@ -87,7 +87,7 @@ def test_measured_and_command_drive_agree_on_stand_data(stand_run):
     Tolerance 0.05 bar on the dither-period mean: what the current noise and the
     1 kHz linear interpolation of a 30–70 Hz dither cost.
     """
-    from clutchlab.physics.stand import period_mean
+    from clutchlab.data import dither_period_mean as period_mean
 
     trace = stand_run.dataset["medium_50Hz_B"]
     meas = simulate(MODEL, PARAMS, trace)

@@ -10,8 +10,8 @@ import sys
 import numpy as np
 import pytest
 
+from clutchlab.data import dither_period_mean as period_mean
 from clutchlab.data import load_dataset
-from clutchlab.physics.stand import period_mean
 
 BIN_MA = 25.0
 

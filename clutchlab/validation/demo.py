@@ -19,9 +19,9 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from .. import __version__
-from ..data import Dataset, load_dataset
+from ..data import Dataset, dither_period_mean, load_dataset
 from ..physics import CircuitModel, simulate
-from ..physics.stand import StandConfig, period_mean, write_stand
+from ..physics.stand import StandConfig, write_stand
 from .metrics import pressure_metrics
 
 __all__ = ["run_demo"]
@@ -37,7 +37,7 @@ def _stand_data(out: Path, progress: bool) -> tuple[Dataset, bool]:
 
 def _period_avg(trace, p):
     f = float(trace.meta.get("dither_freq_Hz", 0.0)) or 50.0
-    return period_mean(p, round(trace.sample_rate_Hz / f))
+    return dither_period_mean(p, trace.sample_rate_Hz / f)
 
 
 def run_demo(
@@ -58,10 +58,7 @@ def run_demo(
     -------
     Path of ``report.html``.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -101,7 +98,8 @@ def run_demo(
     (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
 
     first = test[0]
-    fig, ax = plt.subplots(figsize=(7.5, 5), constrained_layout=True)
+    fig = Figure(figsize=(7.5, 5), layout="constrained")
+    ax = fig.subplots()
     i_nom = first.get("current_cmd_mA")
     ax.plot(i_nom, meas[0], color="black", lw=1.0, label="measured (stand)")
     ax.plot(i_nom, pred[0], color="goldenrod", lw=1.0, label="physics_default")
@@ -115,7 +113,6 @@ def run_demo(
     fig.savefig(out / "pressure_vs_current_medium.png", dpi=120)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=100)
-    plt.close(fig)
     png = base64.b64encode(buf.getvalue()).decode()
 
     rows = "".join(

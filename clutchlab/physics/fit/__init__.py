@@ -1,7 +1,7 @@
 """Multi-experiment fitting of the physics model (CasADi sensitivities + IPOPT)."""
 
 from .fitter import PhysicsFitter, resolve_free
-from .problem import FitProblem, dither_period_samples, period_mean
+from .problem import FitProblem, dither_period_samples
 from .result import FitResult, identifiability
 from .sensitivity import SensitivityRun, sensitivity_chunk, simulate_sensitivities
 from .settings import DEFAULT_FREE, FitSettings
@@ -15,7 +15,6 @@ __all__ = [
     "SensitivityRun",
     "dither_period_samples",
     "identifiability",
-    "period_mean",
     "resolve_free",
     "sensitivity_chunk",
     "simulate_sensitivities",

@@ -9,7 +9,7 @@ import numpy as np
 from sklearn.exceptions import NotFittedError
 from tqdm.auto import tqdm
 
-from ...data import Dataset, Trace
+from ...data import Dataset, Trace, dither_period_mean
 from ...errors import FitError, ModelError
 from ..effects import EFFECTS
 from ..model import CircuitModel
@@ -17,7 +17,7 @@ from ..parameters import ParameterSet
 from ..settings import SimulationSettings
 from ..simulate import simulate
 from .nlp import solve_ipopt
-from .problem import FitProblem, dither_period_samples, period_mean
+from .problem import FitProblem, dither_period_samples
 from .result import FitResult, identifiability
 from .settings import DEFAULT_FREE, FitSettings
 
@@ -104,7 +104,7 @@ class PhysicsFitter:
             cur = tr.get("current_mA") if tr.has("current_mA") else tr.get("current_cmd_mA")
             span = float(np.ptp(cur))
             n = dither_period_samples(tr)
-            p_span = float(np.ptp(period_mean(tr.get("clutch_pressure_bar"), n)))
+            p_span = float(np.ptp(dither_period_mean(tr.get("clutch_pressure_bar"), n)))
             if span < settings.min_current_span_mA:
                 problems.append(
                     f"{tr.name}: no excitation — the current spans only "
@@ -375,7 +375,10 @@ class PhysicsFitter:
             ps = problem.parameter_set(z, e)
             pred = simulate(model, ps, tr, SimulationSettings()).pressure_bar
             n = dither_period_samples(tr)
-            y, yh = period_mean(tr.get("clutch_pressure_bar"), n), period_mean(pred, n)
+            y, yh = (
+                dither_period_mean(tr.get("clutch_pressure_bar"), n),
+                dither_period_mean(pred, n),
+            )
             err = yh - y
             per_exp[tr.name] = {
                 "rmse_bar": float(np.sqrt(np.mean(err**2))),

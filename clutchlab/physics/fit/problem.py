@@ -26,7 +26,7 @@ from ..simulate import initial_state, simulate_inputs
 from .sensitivity import simulate_sensitivities
 from .settings import FitSettings
 
-__all__ = ["FitProblem", "dither_period_samples", "period_mean"]
+__all__ = ["FitProblem", "dither_period_samples"]
 
 _K_FREQ = [s.name for s in MODEL_INPUTS].index("dither_freq_Hz")
 
@@ -42,8 +42,9 @@ def dither_period_samples(trace: Trace) -> int:
     return max(1, round(trace.sample_rate_Hz / f))
 
 
-def period_mean(x: np.ndarray, n: int) -> np.ndarray:
-    """Centered moving average over ``n`` samples along axis 0 (edges: shorter windows)."""
+def _period_mean(x: np.ndarray, n: int) -> np.ndarray:
+    """Centered ``n``-sample moving average (edges: shorter windows) — the same integer
+    window as the residuals use, so target and prediction see one operator."""
     x = np.asarray(x, dtype=float)
     if n <= 1:
         return x.copy()
@@ -204,7 +205,7 @@ class FitProblem:
         k_phase = [s.name for s in MODEL_INPUTS].index("dither_phase")
         su[:, k_phase] = u[0, k_phase] + u[0, _K_FREQ] * dt * (np.arange(ns) - (ns - 1))
         st = trace.time_s[0] + dt * (np.arange(ns) - (ns - 1))
-        target = period_mean(y, n)
+        target = _period_mean(y, n)
         return _Experiment(
             trace.name,
             np.asarray(trace.time_s, float),

@@ -1,6 +1,6 @@
 """The synthetic test stand: the embedded, higher-fidelity data source."""
 
-from .overview import period_mean, plot_pressure_vs_current
+from .overview import plot_pressure_vs_current
 from .scenarios import DITHER_SHAPES, RAMPS, DitherSetting, RampProfile, dither_amplitude
 from .stand import (
     BUILTIN_EFFECTS,
@@ -24,7 +24,6 @@ __all__ = [
     "StandRun",
     "as_built_values",
     "dither_amplitude",
-    "period_mean",
     "plot_pressure_vs_current",
     "run_stand",
     "truth_path",

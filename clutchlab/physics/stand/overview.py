@@ -2,24 +2,13 @@
 
 from __future__ import annotations
 
-import matplotlib
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
-import numpy as np
-
-from ...data import Dataset
+from ...data import Dataset, dither_period_mean
 
 __all__ = ["plot_pressure_vs_current"]
 
 _COLORS = {"fast": "tab:blue", "medium": "black", "slow": "tab:green"}
-
-
-def period_mean(x: np.ndarray, n: int) -> np.ndarray:
-    """Centered moving average over ``n`` samples (one dither period)."""
-    n = max(int(n), 1)
-    kernel = np.ones(n) / n
-    return np.convolve(np.pad(x, (n // 2, n - 1 - n // 2), mode="edge"), kernel, mode="valid")
 
 
 def plot_pressure_vs_current(dataset: Dataset, setting: str | None = None):
@@ -33,14 +22,14 @@ def plot_pressure_vs_current(dataset: Dataset, setting: str | None = None):
         Only experiments whose name ends with this dither tag (e.g. ``50Hz_A``);
         the first experiment's tag when omitted.
     """
-    fig, ax = plt.subplots(figsize=(7.5, 5), constrained_layout=True)
+    fig = Figure(figsize=(7.5, 5), layout="constrained")  # no pyplot: no global backend
+    ax = fig.subplots()
     tag = setting or "_".join(dataset[0].name.split("_")[1:])
     for trace in dataset:
         if not trace.name.endswith(tag) or not trace.has("current_cmd_mA"):
             continue
         f = float(trace.meta.get("dither_freq_Hz", 50.0)) or 50.0
-        n = round(trace.sample_rate_Hz / f)
-        p = period_mean(trace.get("clutch_pressure_bar"), n)
+        p = dither_period_mean(trace.get("clutch_pressure_bar"), trace.sample_rate_Hz / f)
         ax.plot(
             trace.get("current_cmd_mA"),
             p,

@@ -288,7 +288,4 @@ def write_stand(
 
         fig = plot_pressure_vs_current(run.dataset)
         fig.savefig(out / "pressure_vs_current.png", dpi=120)
-        import matplotlib.pyplot as plt
-
-        plt.close(fig)
     return run
