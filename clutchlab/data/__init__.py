@@ -25,6 +25,7 @@ from .io_csv import read_csv, write_csv
 from .io_dataset import DatasetScan, load_dataset, save_dataset, scan_dataset
 from .io_mf4 import read_mf4, write_mf4
 from .io_parquet import read_parquet, write_parquet
+from .metrics import pressure_metrics
 from .options import ReadOptions
 from .reading import check_log, read_log
 from .report import LoadReport
@@ -63,6 +64,7 @@ __all__ = [
     "nominal_current",
     "nominal_didt",
     "parse_unit",
+    "pressure_metrics",
     "read_csv",
     "read_log",
     "read_mf4",

@@ -1,31 +1,9 @@
-"""Error metrics of a predicted clutch pressure against the measured one (DESIGN §5 names)."""
+"""Error metrics of the validation protocol (DESIGN §5 names).
 
-from __future__ import annotations
+The pressure metrics live in the data layer so that the physics fit reports the same
+numbers; they are re-exported here, where the protocol uses them.
+"""
 
-import numpy as np
+from ..data.metrics import pressure_metrics
 
 __all__ = ["pressure_metrics"]
-
-
-def pressure_metrics(measured: np.ndarray, predicted: np.ndarray) -> dict[str, float]:
-    """RMSE, MAE, max |e| (bar) and fit % = 100·(1 − ‖e‖/‖y − ȳ‖).
-
-    Parameters
-    ----------
-    measured, predicted : array_like
-        Clutch pressure (bar), same length; concatenate experiments before calling.
-
-    Returns
-    -------
-    dict with ``rmse_bar``, ``mae_bar``, ``max_abs_bar``, ``fit_pct``.
-    """
-    y = np.asarray(measured, dtype=float)
-    e = np.asarray(predicted, dtype=float) - y
-    if y.shape != e.shape or y.size == 0:
-        raise ValueError(f"measured {y.shape} and predicted {e.shape} must be equal, non-empty")
-    return {
-        "rmse_bar": float(np.sqrt(np.mean(e * e))),
-        "mae_bar": float(np.mean(np.abs(e))),
-        "max_abs_bar": float(np.max(np.abs(e))),
-        "fit_pct": float(100.0 * (1.0 - np.linalg.norm(e) / np.linalg.norm(y - y.mean()))),
-    }

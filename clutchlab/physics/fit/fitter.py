@@ -9,7 +9,7 @@ import numpy as np
 from sklearn.exceptions import NotFittedError
 from tqdm.auto import tqdm
 
-from ...data import Dataset, Trace, dither_period_mean
+from ...data import Dataset, Trace, dither_period_mean, pressure_metrics
 from ...errors import FitError, ModelError
 from ..effects import EFFECTS
 from ..model import CircuitModel
@@ -379,11 +379,8 @@ class PhysicsFitter:
                 dither_period_mean(tr.get("clutch_pressure_bar"), n),
                 dither_period_mean(pred, n),
             )
-            err = yh - y
-            per_exp[tr.name] = {
-                "rmse_bar": float(np.sqrt(np.mean(err**2))),
-                "fit_pct": float(100 * (1 - np.linalg.norm(err) / np.linalg.norm(y - y.mean()))),
-            }
+            m = pressure_metrics(y, yh)
+            per_exp[tr.name] = {"rmse_bar": m["rmse_bar"], "fit_pct": m["fit_pct"]}
         stats = best["stats"] or {"return_status": "not run", "iter_count": 0}
         return FitResult(
             effects=list(model.effect_names),
