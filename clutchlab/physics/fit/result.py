@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -122,7 +123,8 @@ class FitResult:
         for n in self.free:
             flag = "  (not identifiable)" if n in self.unidentifiable else ""
             lines.append(
-                f"{n:18s} {self.values[n]:12.5g} {self.std_errors[n]:12.3g}  {self.units[n]}{flag}"
+                f"{n:18s} {self.values[n]:12.5g} {self.std_errors.get(n, math.nan):12.3g}  "
+                f"{self.units[n]}{flag}"
             )
         return "\n".join(lines)
 
