@@ -20,10 +20,10 @@ from pathlib import Path
 import numpy as np
 
 from clutchlab.data import dither_period_mean as period_mean
-from clutchlab.data import load_dataset
+from clutchlab.data import dither_period_samples, load_dataset
 from clutchlab.errors import FitError
 from clutchlab.physics import CircuitModel, simulate
-from clutchlab.physics.fit import FitSettings, PhysicsFitter, dither_period_samples
+from clutchlab.physics.fit import FitSettings, PhysicsFitter
 from clutchlab.physics.stand import StandConfig, write_stand
 from clutchlab.validation import pressure_metrics
 

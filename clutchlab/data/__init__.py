@@ -19,7 +19,7 @@ from .demodulate import (
     nominal_current,
     nominal_didt,
 )
-from .derived import didt, dither_period_mean
+from .derived import didt, dither_period_mean, dither_period_samples
 from .formats import FORMATS, FileFormat
 from .io_csv import read_csv, write_csv
 from .io_dataset import DatasetScan, load_dataset, save_dataset, scan_dataset
@@ -59,6 +59,7 @@ __all__ = [
     "demodulate_trace",
     "didt",
     "dither_period_mean",
+    "dither_period_samples",
     "load_channel_map",
     "load_dataset",
     "nominal_current",

@@ -114,3 +114,16 @@ def didt(x: ArrayLike, sample_rate_Hz: float, n: float, *, polyorder: int = 2) -
             return np.zeros_like(arr)
         return np.full(arr.size, np.polyfit(np.arange(arr.size), arr, 1)[0] * sample_rate_Hz)
     return savgol_filter(arr, window, polyorder, deriv=1, delta=1.0 / sample_rate_Hz, mode="interp")
+
+
+def dither_period_samples(trace) -> float:
+    """Samples in one dither period of ``trace`` (fractional; 1.0 without dither).
+
+    The dither frequency (Hz) is the median of the ``dither_freq_Hz`` signal, else the
+    manifest's ``dither_freq_Hz``; the sample rate (Hz) is the trace's.
+    """
+    if trace.has("dither_freq_Hz"):
+        f = float(np.median(trace.get("dither_freq_Hz")))
+    else:
+        f = float(trace.meta.get("dither_freq_Hz", 0.0) or 0.0)
+    return max(1.0, trace.sample_rate_Hz / f) if f > 0 else 1.0

@@ -19,7 +19,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from .. import __version__
-from ..data import Dataset, dither_period_mean, load_dataset
+from ..data import Dataset, dither_period_mean, dither_period_samples, load_dataset
 from ..physics import CircuitModel, simulate
 from ..physics.stand import StandConfig, write_stand
 from .metrics import pressure_metrics
@@ -36,8 +36,7 @@ def _stand_data(out: Path, progress: bool) -> tuple[Dataset, bool]:
 
 
 def _period_avg(trace, p):
-    f = float(trace.meta.get("dither_freq_Hz", 0.0)) or 50.0
-    return dither_period_mean(p, trace.sample_rate_Hz / f)
+    return dither_period_mean(p, dither_period_samples(trace))
 
 
 def run_demo(

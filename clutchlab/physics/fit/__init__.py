@@ -1,7 +1,7 @@
 """Multi-experiment fitting of the physics model (CasADi sensitivities + IPOPT)."""
 
 from .fitter import PhysicsFitter, resolve_free
-from .problem import FitProblem, dither_period_samples
+from .problem import FitProblem
 from .result import FitResult, identifiability
 from .sensitivity import SensitivityRun, sensitivity_chunk, simulate_sensitivities
 from .settings import DEFAULT_FREE, FitSettings
@@ -13,7 +13,6 @@ __all__ = [
     "FitSettings",
     "PhysicsFitter",
     "SensitivityRun",
-    "dither_period_samples",
     "identifiability",
     "resolve_free",
     "sensitivity_chunk",

@@ -9,7 +9,7 @@ import numpy as np
 from sklearn.exceptions import NotFittedError
 from tqdm.auto import tqdm
 
-from ...data import Dataset, Trace, dither_period_mean, pressure_metrics
+from ...data import Dataset, Trace, dither_period_mean, dither_period_samples, pressure_metrics
 from ...errors import FitError, ModelError
 from ..effects import EFFECTS
 from ..model import CircuitModel
@@ -17,7 +17,7 @@ from ..parameters import ParameterSet
 from ..settings import SimulationSettings
 from ..simulate import simulate
 from .nlp import solve_ipopt
-from .problem import FitProblem, dither_period_samples
+from .problem import FitProblem
 from .result import FitResult, identifiability
 from .settings import DEFAULT_FREE, FitSettings
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ...data import Trace
+from ...data import Trace, dither_period_samples
 from ...errors import FitError, SimulationError
 from ..assembly import MODEL_INPUTS
 from ..inputs import choose_drive, input_matrix
@@ -26,20 +26,9 @@ from ..simulate import initial_state, simulate_inputs
 from .sensitivity import simulate_sensitivities
 from .settings import FitSettings
 
-__all__ = ["FitProblem", "dither_period_samples"]
+__all__ = ["FitProblem"]
 
 _K_FREQ = [s.name for s in MODEL_INPUTS].index("dither_freq_Hz")
-
-
-def dither_period_samples(trace: Trace) -> int:
-    """Samples in one dither period (1 when the trace carries no dither frequency)."""
-    if trace.has("dither_freq_Hz"):
-        f = float(np.median(trace.get("dither_freq_Hz")))
-    else:
-        f = float(trace.meta.get("dither_freq_Hz", 0.0) or 0.0)
-    if f <= 0:
-        return 1
-    return max(1, round(trace.sample_rate_Hz / f))
 
 
 def _period_mean(x: np.ndarray, n: int) -> np.ndarray:
@@ -198,7 +187,8 @@ class FitProblem:
         drive = choose_drive(trace, self.sim)
         u = input_matrix(trace, drive, self.sim)
         y = np.asarray(trace.get("clutch_pressure_bar"), dtype=float)
-        n = dither_period_samples(trace) if self.settings.objective == "period_mean" else 1
+        period = round(dither_period_samples(trace))
+        n = period if self.settings.objective == "period_mean" else 1
         dt = float(np.median(np.diff(trace.time_s)))
         ns = max(2, round(self.settings.settle_s / dt) + 1)
         su = np.repeat(u[:1], ns, axis=0)

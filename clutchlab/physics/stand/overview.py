@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from matplotlib.figure import Figure
 
-from ...data import Dataset, dither_period_mean
+from ...data import Dataset, dither_period_mean, dither_period_samples
 
 __all__ = ["plot_pressure_vs_current"]
 
@@ -28,8 +28,7 @@ def plot_pressure_vs_current(dataset: Dataset, setting: str | None = None):
     for trace in dataset:
         if not trace.name.endswith(tag) or not trace.has("current_cmd_mA"):
             continue
-        f = float(trace.meta.get("dither_freq_Hz", 50.0)) or 50.0
-        p = dither_period_mean(trace.get("clutch_pressure_bar"), trace.sample_rate_Hz / f)
+        p = dither_period_mean(trace.get("clutch_pressure_bar"), dither_period_samples(trace))
         ax.plot(
             trace.get("current_cmd_mA"),
             p,
