@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from dataclasses import asdict
+from dataclasses import asdict, replace
 
 import numpy as np
 from sklearn.exceptions import NotFittedError
@@ -262,10 +262,25 @@ class PhysicsFitter:
                     used += len(t)
                 elif queue:
                     queue.pop(0)
-        refine = FitSettings(
-            **{**asdict(settings), "max_iter": settings.refine_max_iter, "multistart": 0}
+        user = dict(settings.ipopt_options)
+        prefit = replace(
+            settings,
+            ipopt_options={
+                "acceptable_obj_change_tol": settings.prefit_obj_change_tol,
+                "acceptable_tol": 0.1,
+                "acceptable_iter": 2,
+                **user,
+            },
         )
-        return [(subset, settings), (traces, refine)]
+        # The refinement starts at the pre-fit optimum, possibly on a bound: keep it
+        # there (no push into the interior) and start with a small barrier parameter.
+        refine = replace(
+            settings,
+            max_iter=settings.refine_max_iter,
+            multistart=0,
+            ipopt_options={"bound_push": 1e-8, "bound_frac": 1e-8, "mu_init": 1e-6, **user},
+        )
+        return [(subset, prefit), (traces, refine)]
 
     @staticmethod
     def _multistarts(problem: FitProblem, settings: FitSettings) -> list[np.ndarray]:

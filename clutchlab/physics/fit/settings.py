@@ -81,6 +81,11 @@ class FitSettings:
         all of them for at most ``refine_max_iter`` iterations. None: one stage.
     refine_max_iter : int
         Iteration limit of the refinement on all training experiments.
+    prefit_obj_change_tol : float
+        The pre-fit stops once the cost changes by less than this fraction on two
+        successive iterations and the scaled optimality error is below 0.1 (IPOPT
+        ``acceptable_obj_change_tol``, ``acceptable_tol``): its optimum only starts
+        the refinement, so a tight pre-fit tolerance buys nothing.
     tol : float
         IPOPT convergence tolerance.
     time_limit_s : float
@@ -116,6 +121,7 @@ class FitSettings:
     max_iter: int = 50
     prefit_samples: int | None = 160_000
     refine_max_iter: int = 3
+    prefit_obj_change_tol: float = 1e-3
     tol: float = 1e-6
     time_limit_s: float = 900.0
     multistart: int = 0
