@@ -20,23 +20,33 @@ need are estimated per sample:
    period, then averaged over at least 2 periods and 50 ms) divided by the fundamental of
    the unit waveform (:data:`FUNDAMENTAL_RATIO`: 1, 8/π², 4/π). Linear in the amplitude, so
    an amplitude that changes along a ramp is not biased, unlike an RMS.
-5. **clipping** — a PWM driver cannot drive negative current, so where the dither would
-   take the current below 0 mA its troughs are cut off and the period mean is biased
-   upwards. Such periods (running minimum within ±5 σ of 0 mA, and the clipped waveform
-   fitting the period better than the plain one) are flagged in ``clipped``; there the
-   amplitude is fitted to the unclipped part of the waveform (template at the demodulated
-   phase) and the nominal current solved from the period mean of the clipped waveform,
-   ``mean = A · g(I / A)``. A clipped square wave cannot be separated into I and A (its top
-   is flat): its periods are flagged but keep the period mean.
+5. **clipping** — a PWM driver cannot drive negative current, so where the nominal current I
+   is below the dither amplitude A the command is ``max(0, I + A·w)`` and the period mean is
+   biased upwards; behind the current loop the measured current also lags the command, so
+   the troughs decay towards 0 mA instead of being cut flat. Candidate periods have their
+   troughs in the lowest third of the swing, in stretches whose troughs reach 0 mA (within
+   ±5 σ) and never go clearly below it (a driver that reverses the current has no floor).
+   There :func:`~clutchlab.data._dither_clip.fit_clipped` fits the measured current, by
+   least squares over windows of at least 2 periods and 50 ms, with the clipped command
+   through a first-order loop, ``L_τ[max(0, I(t) + A(t)·w(θ + atan 2πfτ))]``, I and A
+   straight lines in each window (linear in them once the samples where the command is
+   positive are fixed, so the fit alternates between that mask and the solve). The loop time
+   constant τ is one per trace, estimated as the one that minimises that residual on the
+   most deeply clipped stretches (0 without a loop; reported as ``loop_tau_s``). Periods
+   where the fitted command goes below 0 mA are flagged in ``clipped`` and take the fitted
+   nominal current; their amplitude is the fundamental of the measured current divided by
+   the share of the fundamental the clipped waveform keeps (``clipped_fundamental`` of
+   I/A; the loop scales every harmonic alike), or the fitted amplitude where the command is
+   off more than half the time. A clipped square wave cannot be separated into I and A
+   (its top is flat): its periods are flagged but keep the period mean.
 
 The noise σ is the smaller of the spectral floor above the dither band and the robust
 spread (MAD) of the residual of the fitted waveform.
 
 The amplitude is that of the dither *in the measured current*: behind a current loop with
 time constant τ it is the commanded amplitude times ``|1 / (1 + j·2πf·τ)|`` (4.6 % less at
-50 Hz for τ = 1 ms), which the data layer cannot know. For the same reason, in clipped
-periods behind such a loop the nominal current is biased by a few mA (the clipped-waveform
-model assumes the unfiltered shape).
+50 Hz for τ = 1 ms); the loop time constant is only known (``loop_tau_s``) when the dither
+is clipped somewhere in the trace.
 """
 
 from __future__ import annotations
@@ -48,6 +58,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..errors import DataError
+from ._dither_clip import clipped_fundamental, fit_clipped
+from ._dither_clip import runs as _runs
+from ._dither_clip import template as _template
 from .derived import didt, dither_period_mean
 from .manifest import WAVEFORMS
 from .trace import Trace
@@ -92,6 +105,9 @@ class DitherEstimate:
         Boolean, True where the dither troughs are cut off at 0 mA.
     noise_mA : float
         Standard deviation of the broadband noise on the current, mA.
+    loop_tau_s : float
+        Time constant of the current loop (first order) estimated from the clipped periods,
+        s; NaN if no period is clipped (or the waveform is square).
     """
 
     nominal_mA: np.ndarray
@@ -101,6 +117,7 @@ class DitherEstimate:
     present: np.ndarray
     clipped: np.ndarray
     noise_mA: float
+    loop_tau_s: float = math.nan
 
 
 def _windows(n: int, length: int, hop: int) -> np.ndarray:
@@ -160,27 +177,6 @@ def _track(
     noise = float(np.sqrt(np.median(floor_var)))
     valid &= amp >= _AMP_MIN_NOISE * noise
     return starts + (length - 1) / 2.0, f_peak, valid, amp, noise
-
-
-def _template(theta: np.ndarray, waveform: str) -> np.ndarray:
-    s = np.sin(theta)
-    if waveform == "triangle":
-        return (2.0 / math.pi) * np.arcsin(np.clip(s, -1.0, 1.0))
-    if waveform == "square":
-        return np.sign(s)
-    return s
-
-
-def _clipped_mean_ratio(waveform: str) -> tuple[np.ndarray, np.ndarray]:
-    """Table of r = I/A → g(r) = mean(max(0, r + w)) for the unit waveform w."""
-    r = np.linspace(-1.0, 1.0, 4001)
-    if waveform == "triangle":
-        g = (1.0 + r) ** 2 / 4.0
-    elif waveform == "square":
-        g = (1.0 + r) / 2.0
-    else:
-        g = (r * (math.pi / 2.0 + np.arcsin(r)) + np.sqrt(1.0 - r * r)) / math.pi
-    return r, g
 
 
 def _running(x: np.ndarray, size: int, fn: str) -> np.ndarray:
@@ -270,12 +266,20 @@ def demodulate_dither(
     size = math.ceil(float(period.max())) + 1
     low = _running(x, size, "min")
     high = _running(x, size, "max")
-    clipped = present & (np.abs(low) <= 5.0 * noise) & (fundamental > 3.0 * noise)
+    # Where the dither may reach the 0 mA floor: troughs in the lowest third of the swing
+    # (behind a current loop the measured troughs stay above 0 when the command just clips).
+    zone = present & (fundamental > 3.0 * noise) & (low < 0.35 * (high - low) + 5.0 * noise)
+    for lo, hi in _runs(zone):  # the troughs must reach 0 mA somewhere, and not go below
+        if not -5.0 * noise <= low[lo:hi].min() <= 5.0 * noise:
+            zone[lo:hi] = False
+    clear = present & ~zone
 
     if waveform == "auto":
         z3 = d * e1**3
         a3 = dither_period_mean(z3.real, period) + 1j * dither_period_mean(z3.imag, period)
-        sel = present & ~clipped & (fundamental > 5.0 * noise) & (np.abs(a1) > 0)
+        sel = clear & (fundamental > 5.0 * noise) & (np.abs(a1) > 0)
+        if sel.sum() < 16:
+            sel = present & (fundamental > 5.0 * noise) & (np.abs(a1) > 0)
         if sel.any():
             q = a3[sel] * np.abs(a1[sel]) ** 2 / a1[sel] ** 3
             q_med = float(np.median(q.real))
@@ -285,14 +289,15 @@ def demodulate_dither(
         else:
             waveform = "sine"
     amplitude = fundamental / FUNDAMENTAL_RATIO[waveform]
-    theta = 2.0 * math.pi * cycles + np.angle(a1_smooth) + math.pi / 2.0
+    phase = np.unwrap(np.angle(a1_smooth))
+    theta = 2.0 * math.pi * cycles + phase + math.pi / 2.0
     w = _template(theta, waveform)
     if waveform == "square":
         # A sampled square wave whose period is not a whole number of samples puts one
         # sample more on one side of an edge in some periods, so its one-period mean is off
         # by up to 2A/P. With sharp edges (no samples in transition: an unfiltered square)
         # the mean of the template over the same window removes that error.
-        sel = present & ~clipped & (amplitude > 5.0 * noise)
+        sel = clear & (amplitude > 5.0 * noise)
         ratio = np.abs(d[sel]) / amplitude[sel]
         if ratio.size and float(np.mean(ratio < 0.5)) < _SHARP_EDGES:
             offset = dither_period_mean(w, period)
@@ -301,38 +306,32 @@ def demodulate_dither(
     # The spectral floor overestimates the noise when the waveform's harmonics (and their
     # aliases) fill the spectrum (an ideal square wave); the residual of the ideal waveform
     # overestimates it when the waveform is filtered. Take the smaller (robust: MAD).
-    fit = present & ~clipped
-    if fit.sum() >= 16:
-        resid = (x - nominal - amplitude * w)[fit]
+    if clear.sum() >= 16:
+        resid = (x - nominal - amplitude * w)[clear]
         mad = 1.4826 * float(np.median(np.abs(resid - np.median(resid))))
         noise = min(noise, mad)
 
-    if clipped.any():
-        thr = np.maximum(4.0 * noise, low + 0.3 * (high - low))
-        m = (x > thr).astype(np.float64)
-        span = 2.0 * period
-        s_m = dither_period_mean(m, span)
-        s_w = dither_period_mean(m * w, span)
-        s_ww = dither_period_mean(m * w * w, span)
-        s_x = dither_period_mean(m * x, span)
-        s_xw = dither_period_mean(m * x * w, span)
-        det = s_m * s_ww - s_w**2
-        ok = clipped & (det > 1e-3 * np.maximum(s_m, 1e-12))
-        a_fit = np.where(ok, (s_m * s_xw - s_w * s_x) / np.where(ok, det, 1.0), 0.0)
-        ok &= a_fit > 3.0 * noise
-        r_tab, g_tab = _clipped_mean_ratio(waveform)
-        ratio = np.where(ok, nominal / np.where(ok, a_fit, 1.0), 0.0)
-        i_fit = np.interp(ratio, g_tab, r_tab) * a_fit
-        # Keep the clipped model only where it explains the period better than the plain one.
-        err_plain = (x - nominal - amplitude * w) ** 2
-        err_clip = (x - np.maximum(i_fit + a_fit * w, 0.0)) ** 2
-        better = dither_period_mean(err_clip, period) < 0.8 * dither_period_mean(err_plain, period)
-        use = ok & better & (ratio < g_tab[-1])
-        clipped = use | (clipped & ~ok)  # detected but not solvable (flat top): still flagged
-        nominal = np.where(use, i_fit, nominal)
-        amplitude = np.where(use, a_fit, amplitude)
+    clipped = np.zeros(n, dtype=bool)
+    loop_tau = math.nan
+    if zone.any() and waveform != "square":
+        nominal, amp_fit, fitted, command_amp, loop_tau = fit_clipped(
+            x, zone, theta, freq, fs, nominal, amplitude, smooth, waveform
+        )
+        clipped = fitted & (nominal < command_amp)
+        # The fundamental of the measured current is that of the clipped command through
+        # the loop: divided by the clipped waveform's share it is the amplitude in the
+        # measured current (the plain estimate where nothing is clipped). Where the command
+        # is off more than half the time (I < 0) that share is small: the fitted amplitude.
+        ratio = np.where(clipped, nominal / np.where(clipped, command_amp, 1.0), 1.0)
+        share = clipped_fundamental(ratio, waveform)
+        amplitude = (
+            2.0 * dither_period_mean(np.abs(a1) / np.maximum(share, 0.5), smooth)
+        ) / FUNDAMENTAL_RATIO[waveform]
+        amplitude = np.where(clipped & (share < 0.5), amp_fit, amplitude)
+    elif zone.any():  # a clipped square wave has a flat top: I and A are not separable
+        clipped = zone & (np.abs(low) <= 5.0 * noise)
     amplitude = np.where(present, amplitude, 0.0)
-    return DitherEstimate(nominal, amplitude, freq, waveform, present, clipped, noise)
+    return DitherEstimate(nominal, amplitude, freq, waveform, present, clipped, noise, loop_tau)
 
 
 def _samples_per_period(trace: Trace, estimate: DitherEstimate | None = None) -> float:
