@@ -217,6 +217,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .cli_fit import register as register_fit
 
     register_fit(sub)
+    from .cli_sweep import register as register_sweep
+
+    register_sweep(sub)
     return parser
 
 

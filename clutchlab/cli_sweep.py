@@ -1,0 +1,74 @@
+"""``clutchlab sweep``: a design study over model parameters and dither settings."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+__all__ = ["register"]
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    from .physics.design import design_points, load_spec, run_sweep
+
+    spec = load_spec(args.spec)
+    if args.scheduler and args.workers is not None:
+        raise SystemExit("clutchlab sweep: --workers is for local runs; a Dask cluster has its own")
+    if args.dry_run:
+        points = design_points(spec)
+        print(
+            f"{spec.name}: {len(points)} points ({spec.sampling.method}), "
+            f"variables {', '.join(spec.variable_names)}; spec core {spec.core_hash}"
+        )
+        return 0
+    res = run_sweep(
+        spec,
+        args.out,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        progress=not args.quiet,
+        overwrite=args.overwrite,
+        retry_failed=args.retry_failed,
+        figures=not args.no_figures,
+        flush_s=args.flush_s,
+    )
+    where = f"Dask {args.scheduler}" if args.scheduler else "local"
+    print(
+        f"{res.n_points} points: {res.n_run} run, {res.n_skipped} already done; "
+        f"{res.n_failed} failed; {res.wall_s:.1f} s on {res.workers} {where} workers "
+        f"({res.points_per_s:.2f} points/s)"
+    )
+    for f in res.summary()["failures"][:5]:
+        print(f"  failed {f['point_id']}: {f['error']}")
+    print(f"results: {res.out}")
+    if res.figures:
+        print(f"figures: {res.figures[0].parent}")
+    if args.json:
+        Path(args.json).write_text(json.dumps(res.summary(), indent=2) + "\n", encoding="utf-8")
+    return 0
+
+
+def register(sub) -> None:
+    """Add the ``sweep`` subcommand to the ``clutchlab`` parser."""
+    p = sub.add_parser("sweep", help="design study: simulate a grid / Latin hypercube of designs")
+    p.add_argument("spec", help="sweep spec (TOML): model, scenario, variables, sampling")
+    p.add_argument("--out", required=True, help="results file (.parquet); parts and figures beside")
+    p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786): run there")
+    p.add_argument(
+        "--workers", type=int, default=None, help="local worker processes (default: CPU count)"
+    )
+    p.add_argument("--overwrite", action="store_true", help="discard existing results first")
+    p.add_argument("--retry-failed", action="store_true", help="run failed points again")
+    p.add_argument("--no-figures", action="store_true", help="no tornado / scatter figures")
+    p.add_argument(
+        "--flush-s",
+        type=float,
+        default=5.0,
+        metavar="S",
+        help="write finished points to disk at least every S seconds (default 5)",
+    )
+    p.add_argument("--dry-run", action="store_true", help="validate the spec, count the points")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--json", help="also write a summary here")
+    p.set_defaults(func=_cmd_sweep)

@@ -1,0 +1,120 @@
+"""Where batches of design points run: local worker processes or a Dask cluster.
+
+Both executors take batches and yield ``(batch, rows)`` as batches finish, in completion
+order. A batch whose task itself fails (a worker process killed, a lost Dask worker) yields
+``failed`` rows carrying the exception, so the sweep goes on.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import uuid
+from collections.abc import Iterator
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from typing import Any
+
+from .evaluate import STATUS_FAILED, evaluate_batch
+from .sampling import DesignPoint
+from .spec import SweepSpec
+
+__all__ = ["run_dask", "run_local"]
+
+Batch = list[DesignPoint]
+
+
+def _failed_rows(batch: Batch, exc: BaseException) -> list[dict[str, Any]]:
+    msg = f"{type(exc).__name__}: {exc} (task failed, not the point's simulation)"
+    return [
+        {"point_id": p.point_id, "index": p.index, "status": STATUS_FAILED, "error": msg}
+        | dict(p.values)
+        for p in batch
+    ]
+
+
+def run_local(
+    spec: SweepSpec, batches: list[Batch], workers: int
+) -> Iterator[tuple[Batch, list[dict[str, Any]]]]:
+    """Evaluate ``batches`` in ``workers`` local processes (in this process when 1).
+
+    Worker processes are started with ``spawn`` (no state forked from the parent) and keep
+    at most ``2 · workers`` batches queued, so an interrupted sweep leaves little running.
+
+    Yields
+    ------
+    batch, rows
+        A finished batch and its result rows.
+    """
+    if workers <= 1:
+        for batch in batches:
+            yield batch, evaluate_batch(spec, batch)
+        return
+    ctx = multiprocessing.get_context("spawn")
+    pending: dict[Future, Batch] = {}
+    todo = iter(batches)
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        try:
+            while True:
+                while len(pending) < 2 * workers:
+                    batch = next(todo, None)
+                    if batch is None:
+                        break
+                    pending[pool.submit(evaluate_batch, spec, batch)] = batch
+                if not pending:
+                    return
+                done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    batch = pending.pop(fut)
+                    try:
+                        rows = fut.result()
+                    except Exception as exc:
+                        rows = _failed_rows(batch, exc)
+                    yield batch, rows
+        finally:
+            for fut in pending:
+                fut.cancel()
+
+
+def run_dask(
+    spec: SweepSpec, batches: list[Batch], client: Any
+) -> Iterator[tuple[Batch, list[dict[str, Any]]]]:
+    """Evaluate ``batches`` on a Dask cluster.
+
+    Parameters
+    ----------
+    spec : SweepSpec
+        The spec (scattered to every worker once).
+    batches : list of list of DesignPoint
+        The work.
+    client : distributed.Client
+        Connected to the cluster. The workers need clutchlab installed (same version) and a C
+        compiler for the compiled model (else the model is interpreted: slower, and the last
+        bits of the numbers may differ from a compiled run).
+
+    Yields
+    ------
+    batch, rows
+        A finished batch and its result rows.
+    """
+    from distributed import as_completed
+
+    if not batches:
+        return
+    [spec_f] = client.scatter([spec], broadcast=True)
+    run = uuid.uuid4().hex[:8]
+    futures = {
+        client.submit(evaluate_batch, spec_f, b, key=f"clutchlab-sweep-{run}-{k}"): b
+        for k, b in enumerate(batches)
+    }
+    try:
+        for fut in as_completed(futures):
+            batch = futures[fut]
+            try:
+                rows = fut.result()
+            except Exception as exc:
+                rows = _failed_rows(batch, exc)
+            fut.release()
+            yield batch, rows
+    finally:
+        for fut in futures:
+            if not fut.done():
+                fut.cancel()

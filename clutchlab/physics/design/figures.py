@@ -1,0 +1,150 @@
+"""Figures of a sweep: tornado (sensitivity) chart and metric-vs-variable scatter plots.
+
+matplotlib ``Figure`` objects only (no pyplot state): safe in workers and servers.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
+from matplotlib.ticker import NullFormatter
+
+from .evaluate import STATUS_FAILED, STATUS_OK
+from .metrics import METRIC_UNITS, metric_names
+from .sensitivity import sensitivity_table
+from .spec import SweepSpec
+
+__all__ = ["metric_unit", "plot_metrics_vs_variables", "plot_tornado", "write_figures"]
+
+
+def metric_unit(name: str) -> str:
+    """Unit of metric column ``name``."""
+    return METRIC_UNITS.get(name, "bar" if name.endswith("_bar") else "-")
+
+
+def _metrics(spec: SweepSpec) -> tuple[str, ...]:
+    sc = spec.scenario
+    return metric_names(tuple(r.label for r in sc.ramps), sc.step is not None)
+
+
+def plot_tornado(table: pd.DataFrame, spec: SweepSpec) -> Figure:
+    """Tornado chart: per metric, the change over each variable's range, largest on top.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        Sweep results.
+    spec : SweepSpec
+        The sweep's spec.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One panel per metric; bars are the linear effects of :func:`sensitivity_table`
+        (metric unit, variable low → high), R² of the linear fit in the title.
+    """
+    metrics = _metrics(spec)
+    sens = sensitivity_table(table, spec, metrics)
+    ncols = 3
+    nrows = int(np.ceil(len(metrics) / ncols))
+    height = max(1.2, 0.35 * len(spec.variables) + 0.9)
+    fig = Figure(figsize=(5.2 * ncols, height * nrows), constrained_layout=True)
+    axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
+    for ax, name in zip(axes, metrics, strict=False):
+        s = sens[sens["metric"] == name].copy()
+        s["mag"] = s["effect"].abs().fillna(-1.0)
+        s = s.sort_values("mag")
+        colors = ["tab:red" if e > 0 else "tab:blue" for e in s["effect"].fillna(0.0)]
+        ax.barh(s["variable"], s["effect"].fillna(0.0), color=colors)
+        ax.axvline(0.0, color="0.3", lw=0.8)
+        r2 = s["r2"].iloc[0] if len(s) else np.nan
+        n = int(s["n"].iloc[0]) if len(s) else 0
+        title = f"{name}  (R² {r2:.2f}, n {n})" if np.isfinite(r2) else f"{name}  (n {n})"
+        ax.set_title(title, fontsize=9)
+        if not s["effect"].notna().any():
+            ax.text(0.5, 0.5, "too few finite points", transform=ax.transAxes, ha="center")
+        ax.set_xlabel(f"change low → high ({metric_unit(name)})", fontsize=8)
+        ax.tick_params(labelsize=8)
+        ax.grid(axis="x", alpha=0.3)
+    for ax in axes[len(metrics) :]:
+        ax.set_visible(False)
+    fig.suptitle(f"{spec.name}: sensitivity (linear effect over each variable's range)")
+    return fig
+
+
+def plot_metrics_vs_variables(table: pd.DataFrame, spec: SweepSpec) -> Figure:
+    """Scatter of every metric against every design variable (failed points marked).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Rows: metrics; columns: variables. Failed points are drawn as red crosses at the
+        bottom of each panel.
+    """
+    metrics = _metrics(spec)
+    variables = spec.variables
+    ok = table[table["status"] == STATUS_OK]
+    failed = table[table["status"] == STATUS_FAILED]
+    w, h = 2.6 * max(len(variables), 1) + 1.2, 1.7 * len(metrics) + 0.9
+    fig = Figure(figsize=(w, h))  # fixed margins: constrained layout is slow for big grids
+    axes = fig.subplots(len(metrics), max(len(variables), 1), squeeze=False)
+    fig.subplots_adjust(
+        left=1.2 / w, right=1 - 0.15 / w, bottom=0.55 / h, top=1 - 0.6 / h, wspace=0.3, hspace=0.25
+    )
+    size = 6 if len(ok) < 500 else 2
+    for r, name in enumerate(metrics):
+        y = ok[name].to_numpy(dtype=float)
+        lo = np.nanmin(y) if np.isfinite(y).any() else 0.0
+        for c, v in enumerate(variables):
+            ax = axes[r, c]
+            ax.scatter(ok[v.name], y, s=size, alpha=0.6, lw=0)
+            if len(failed):
+                ax.scatter(failed[v.name], np.full(len(failed), lo), marker="x", c="tab:red", s=12)
+            if v.scale == "log":
+                ax.set_xscale("log")
+                ticks = np.geomspace(v.low, v.high, 4)
+                ax.set_xticks(ticks, [f"{x:.3g}" for x in ticks])
+                ax.xaxis.set_minor_formatter(NullFormatter())
+            if r == len(metrics) - 1:
+                ax.set_xlabel(f"{v.name} ({v.unit})", fontsize=8)
+            else:
+                ax.tick_params(which="both", labelbottom=False)
+            if c == 0:
+                ax.set_ylabel(f"{name}\n({metric_unit(name)})", fontsize=8)
+            ax.tick_params(labelsize=7)
+            ax.grid(alpha=0.3)
+    fig.suptitle(f"{spec.name}: metrics vs design variables ({len(ok)} ok, {len(failed)} failed)")
+    return fig
+
+
+def write_figures(table: pd.DataFrame, spec: SweepSpec, folder: str | Path) -> tuple[Path, ...]:
+    """Write ``tornado.png`` and ``metrics_vs_variables.png`` and ``sensitivity.csv``.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        Sweep results.
+    spec : SweepSpec
+        The sweep's spec.
+    folder : path
+        Output folder (created).
+
+    Returns
+    -------
+    tuple of Path
+        Files written.
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = (
+        folder / "tornado.png",
+        folder / "metrics_vs_variables.png",
+        folder / "sensitivity.csv",
+    )
+    plot_tornado(table, spec).savefig(paths[0], dpi=110)
+    plot_metrics_vs_variables(table, spec).savefig(paths[1], dpi=90)
+    sensitivity_table(table, spec, _metrics(spec)).to_csv(paths[2], index=False)
+    return paths

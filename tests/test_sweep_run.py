@@ -1,0 +1,182 @@
+"""Running sweeps: results and figures, restart after a kill, failed points, Dask = local."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+
+from clutchlab.physics.design import (
+    SweepSpec,
+    design_points,
+    evaluate_batch,
+    read_results,
+    run_sweep,
+)
+
+#: A short ramp (0.6 s ramps, 0.2 s holds) and a short step keep a point at ~0.1 s.
+SHORT = {
+    "scenario": {
+        "ramps": [{"label": "short", "ramp_s": 0.6, "hold_s": 0.2}],
+        "step": {"from_mA": 300.0, "to_mA": 700.0, "hold_s": 0.1, "duration_s": 0.25},
+    },
+    "simulation": {"settle_s": 0.2},
+    "metrics": {"hysteresis_mA": [400.0, 700.0]},  # this fast a ramp latches from ~650 mA
+}
+
+
+def _spec(n=4, seed=0, **extra) -> SweepSpec:
+    doc = dict(SHORT) | {
+        "name": "short",
+        "sampling": {"method": "lhs", "n": n, "seed": seed},
+        "variables": [
+            {"name": "vfs_d_orf", "low": 0.35, "high": 0.6},
+            {"name": "dither_amp_scale", "low": 0.4, "high": 1.0},
+            {"name": "dither_freq_Hz", "low": 40.0, "high": 70.0},
+        ],
+    }
+    return SweepSpec.from_dict(doc | extra)
+
+
+def _write_toml(path: Path, n: int) -> Path:
+    path.write_text(
+        f"""name = "kill"
+[scenario]
+ramps = [{{label = "short", ramp_s = 0.6, hold_s = 0.2}}]
+step = false
+[simulation]
+settle_s = 0.2
+[sampling]
+method = "lhs"
+n = {n}
+seed = 5
+[[variables]]
+name = "vfs_d_orf"
+low = 0.35
+high = 0.6
+[[variables]]
+name = "reg_k"
+low = 10.0
+high = 20.0
+""",
+        encoding="utf-8",
+    )
+    return path
+
+
+def _numbers(df: pd.DataFrame) -> pd.DataFrame:
+    return df.drop(columns=["wall_s", "cpu_s"]).reset_index(drop=True)
+
+
+def test_local_sweep_writes_results_figures_and_skips_finished_points(tmp_path):
+    spec = _spec(n=4)
+    out = tmp_path / "res.parquet"
+    res = run_sweep(spec, out, workers=1, progress=False, flush_s=0.0)
+    assert (res.n_points, res.n_run, res.n_failed) == (4, 4, 0)
+    df = read_results(out)
+    assert list(df["index"]) == [0, 1, 2, 3]
+    assert set(df["status"]) == {"ok"}
+    for name in res.metric_names:  # the short ramp latches during the peak hold, not on it
+        assert np.isfinite(df[name]).all() or name == "latch_on_mA", name
+    for f in res.figures:
+        assert f.stat().st_size > 0
+    assert {f.name for f in res.figures} == {
+        "tornado.png",
+        "metrics_vs_variables.png",
+        "sensitivity.csv",
+    }
+    # The same numbers as evaluating the points directly.
+    direct = pd.DataFrame(evaluate_batch(spec, design_points(spec)))[df.columns]
+    pd.testing.assert_frame_equal(_numbers(df), _numbers(direct))
+    # A second run finds everything done; a bigger design of the same core reuses points.
+    again = run_sweep(spec, out, workers=1, progress=False, figures=False)
+    assert again.n_run == 0 and again.n_skipped == 4
+    pd.testing.assert_frame_equal(_numbers(again.table), _numbers(df))
+    # Another model core in the same place is refused, not mixed in.
+    other = _spec(n=4, simulation={"settle_s": 0.3})
+    with pytest.raises(ValueError, match="holds results of another spec"):
+        run_sweep(other, out, workers=1, progress=False)
+
+
+def test_dask_local_cluster_gives_the_same_numbers_as_the_local_run(tmp_path):
+    from distributed import Client, LocalCluster
+
+    spec = _spec(n=6, seed=2)
+    local = run_sweep(spec, tmp_path / "local.parquet", workers=1, progress=False, figures=False)
+    with (
+        LocalCluster(
+            n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+        ) as cluster,
+        Client(cluster) as client,
+    ):
+        dask = run_sweep(
+            spec, tmp_path / "dask.parquet", scheduler=client, progress=False, figures=False
+        )
+        workers_used = set(client.run(os.getpid).values())
+    assert dask.backend == "dask" and dask.workers == 2 and len(workers_used) == 2
+    assert dask.n_run == 6 and dask.n_failed == 0
+    assert os.getpid() not in workers_used
+    pd.testing.assert_frame_equal(_numbers(dask.table), _numbers(local.table), check_exact=True)
+
+
+def _parts_rows(out: Path) -> int:
+    parts = out.with_name(out.name + ".parts")
+    return sum(pq.read_metadata(f).num_rows for f in parts.glob("part-*.parquet"))
+
+
+def _kill_midway_then_restart(tmp_path: Path, workers: int, n: int) -> None:
+    spec_path = _write_toml(tmp_path / "kill.toml", n)
+    out = tmp_path / "kill.parquet"
+    cmd = [sys.executable, "-m", "clutchlab.cli", "sweep", str(spec_path), "--out", str(out)]
+    cmd += ["--workers", str(workers), "--flush-s", "0", "--quiet", "--no-figures"]
+    proc = subprocess.Popen(
+        cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True
+    )
+    parts = out.with_name(out.name + ".parts")
+    deadline = time.monotonic() + 300
+    try:
+        while len(list(parts.glob("part-*.parquet"))) < 2:
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "no results within 300 s"
+            time.sleep(0.05)
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)  # the CLI and its worker processes
+        proc.wait()
+    assert proc.returncode == -signal.SIGKILL
+    assert not out.exists()  # killed before it could consolidate
+    done_before = _parts_rows(out)
+    assert 0 < done_before < n
+    res = subprocess.run(
+        [*cmd, "--json", str(tmp_path / "summary.json")],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert res.returncode == 0, res.stderr
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["n_skipped"] == done_before and summary["n_run"] == n - done_before
+    df = pd.read_parquet(out)
+    from clutchlab.physics.design import load_spec
+
+    ids = [p.point_id for p in design_points(load_spec(spec_path))]
+    assert list(df["point_id"]) == ids  # every point exactly once, design order
+    assert set(df["status"]) == {"ok"}
+    assert _parts_rows(out) == n  # nothing evaluated twice on disk
+
+
+def test_sweep_killed_midway_and_restarted_has_every_point_once(tmp_path):
+    _kill_midway_then_restart(tmp_path, workers=1, n=40)
+
+
+@pytest.mark.slow
+def test_sweep_with_worker_processes_killed_and_restarted(tmp_path):
+    _kill_midway_then_restart(tmp_path, workers=2, n=60)

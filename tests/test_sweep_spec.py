@@ -1,0 +1,155 @@
+"""Sweep specs: validation with every problem listed, grid / Latin-hypercube designs, point ids."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from clutchlab.errors import ModelError
+from clutchlab.physics.design import SpecError, SweepSpec, design_points, load_spec, point_id
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "sweep_vfs_design.toml"
+
+
+def _spec(**parts) -> SweepSpec:
+    doc = {
+        "scenario": {"ramps": ["fast"]},
+        "sampling": {"method": "lhs", "n": 20, "seed": 3},
+        "variables": [
+            {"name": "vfs_d_orf", "low": 0.3, "high": 0.6},
+            {"name": "vacc_V", "low": 1.0, "high": 4.0, "scale": "log"},
+        ],
+    }
+    doc.update(parts)
+    return SweepSpec.from_dict(doc)
+
+
+def test_example_spec_loads_with_1000_lhs_points():
+    spec = load_spec(EXAMPLE)
+    assert spec.sampling.method == "lhs" and spec.sampling.n == 1000
+    assert "dither_amp_scale" in spec.variable_names and "vfs_d_orf" in spec.variable_names
+    points = design_points(spec)
+    assert len(points) == 1000
+    assert len({p.point_id for p in points}) == 1000
+    assert [p.index for p in points] == list(range(1000))
+
+
+def test_unknown_parameter_lists_known_ones_and_all_problems_at_once():
+    doc = {
+        "sampling": {"n": 10, "mehtod": "lhs"},
+        "variables": [
+            {"name": "vfs_d_orifice", "low": 0.3, "high": 0.6},
+            {"name": "reg_k", "low": 0.5, "high": 20.0},
+            {"name": "vfs_k", "low": 3.0, "high": 2.0},
+        ],
+        "scenario": {"ramps": ["fastest"]},
+    }
+    with pytest.raises(SpecError) as err:
+        SweepSpec.from_dict(doc, "my.toml")
+    msg = str(err.value)
+    assert msg.startswith("my.toml: invalid sweep spec")
+    assert "unknown parameter 'vfs_d_orifice'" in msg
+    assert "vfs_d_orf" in msg and "dither_amp_scale" in msg  # the known names are listed
+    assert "reg_k: 0.5 N/mm outside the bounds [1, 50] N/mm" in msg
+    assert "low (3) must be below high (2)" in msg
+    assert "unknown key 'mehtod'" in msg
+    assert "unknown ramp 'fastest'" in msg
+    assert len(err.value.problems) == 5
+    assert isinstance(err.value, ModelError) and isinstance(err.value, ValueError)
+
+
+@pytest.mark.parametrize(
+    ("parts", "needle"),
+    [
+        ({"model": {"effects": ["sensor_lagg"]}}, "unknown effect 'sensor_lagg'"),
+        ({"model": {"parameters": {"reg_F_c": 99.0}}}, "reg_F_c = 99.0 N outside bounds"),
+        ({"sampling": {"method": "lhs"}}, "n must be a positive integer"),
+        ({"simulation": {"substeps": 0}}, "substeps must be an integer in 1..64"),
+        ({"scenario": {"dither": {"freq_Hz": 400.0}}}, "is not resolved at 1000 Hz"),
+        ({"scenario": {"dither": {"shape": "Z"}}}, "unknown shape 'Z'"),
+        ({"metrics": {"gain_mA": [700, 250]}}, "gain_mA must be [low, high]"),
+        ({"scenario": {"step": {"from_mA": 500, "to_mA": 500}}}, "from_mA ≠ to_mA"),
+        ({"colour": 1}, "unknown top-level key 'colour'"),
+        (
+            {"variables": [{"name": "dither_amp_scale", "low": 0.5, "high": 1.5}]},
+            "high 1.5 × shape B (peak 225 mA) exceeds the 225 mA dither range",
+        ),
+    ],
+)
+def test_invalid_entries_have_clear_messages(parts, needle):
+    with pytest.raises(SpecError, match="invalid sweep spec") as err:
+        _spec(**parts)
+    assert needle in str(err.value)
+
+
+def test_variable_fixed_and_swept_is_refused():
+    with pytest.raises(SpecError, match="also fixed in"):
+        _spec(model={"parameters": {"vfs_d_orf": 0.4}})
+
+
+def test_load_spec_reports_bad_toml_and_missing_file(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[sampling\nn = 3\n")
+    with pytest.raises(SpecError, match="not valid TOML"):
+        load_spec(bad)
+    with pytest.raises(SpecError, match="file not found"):
+        load_spec(tmp_path / "none.toml")
+
+
+def test_latin_hypercube_has_one_point_per_stratum_and_log_spacing():
+    spec = _spec()
+    pts = design_points(spec)
+    x = np.array([p.values["vfs_d_orf"] for p in pts])
+    strata = np.floor((x - 0.3) / 0.3 * 20).astype(int)
+    assert sorted(strata) == list(range(20))
+    v = np.array([p.values["vacc_V"] for p in pts])
+    u = np.log(v / 1.0) / np.log(4.0)
+    assert sorted(np.floor(u * 20).astype(int)) == list(range(20))
+    again = design_points(_spec())
+    assert [p.point_id for p in again] == [p.point_id for p in pts]
+    other_seed = design_points(_spec(sampling={"method": "lhs", "n": 20, "seed": 4}))
+    assert other_seed[0].values != pts[0].values
+
+
+def test_grid_is_the_full_factorial_product():
+    spec = _spec(
+        sampling={"method": "grid"},
+        variables=[
+            {"name": "reg_k", "low": 10.0, "high": 20.0, "levels": 3},
+            {"name": "vacc_V", "low": 1.0, "high": 4.0, "levels": 3, "scale": "log"},
+            {"name": "dither_freq_Hz", "values": [30.0, 70.0]},
+        ],
+    )
+    pts = design_points(spec)
+    assert len(pts) == 18
+    assert sorted({p.values["vacc_V"] for p in pts}) == pytest.approx([1.0, 2.0, 4.0])
+    assert sorted({p.values["reg_k"] for p in pts}) == [10.0, 15.0, 20.0]
+    assert pts[0].values == {"reg_k": 10.0, "vacc_V": 1.0, "dither_freq_Hz": 30.0}
+    assert pts[1].values["dither_freq_Hz"] == 70.0  # last variable fastest
+
+
+def test_point_id_depends_on_the_design_vector_and_the_spec_core_only():
+    a = _spec()
+    b = _spec(sampling={"method": "lhs", "n": 50, "seed": 9})  # sampling is not the core
+    c = _spec(simulation={"substeps": 8})
+    assert a.core_hash == b.core_hash != c.core_hash
+    x = {"vfs_d_orf": 0.4, "vacc_V": 2.0}
+    assert point_id(a.core_hash, x) == point_id(b.core_hash, dict(reversed(x.items())))
+    assert point_id(a.core_hash, x) != point_id(c.core_hash, x)
+    assert point_id(a.core_hash, x) != point_id(a.core_hash, x | {"vacc_V": 2.0000000001})
+
+
+def test_cli_dry_run_and_spec_error(tmp_path, capsys):
+    from clutchlab.cli import main
+
+    assert main(["sweep", str(EXAMPLE), "--out", str(tmp_path / "r.parquet"), "--dry-run"]) == 0
+    assert "vfs_design: 1000 points (lhs)" in capsys.readouterr().out
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[sampling]\nn = 3\n[[variables]]\nname = "vfs_dorf"\nlow = 0.3\nhigh = 0.5\n')
+    assert main(["sweep", str(bad), "--out", str(tmp_path / "r.parquet")]) == 2
+    err = capsys.readouterr().err
+    assert "clutchlab sweep: error:" in err and "unknown parameter 'vfs_dorf'" in err
+    assert "vfs_d_orf" in err
+    assert not (tmp_path / "r.parquet.parts").exists()  # nothing written for a bad spec
