@@ -54,6 +54,10 @@ class Parameter:
     component: str = ""
 
     def __post_init__(self) -> None:
+        # Bounds written as multiples of a default (0.2 * 12 mm) carry binary noise
+        # (2.4000000000000004) that would reject a user's "2.4"; keep 12 digits.
+        for name in ("lower", "upper"):
+            object.__setattr__(self, name, float(f"{getattr(self, name):.12g}"))
         problems = []
         if self.unit not in SI_FACTOR:
             problems.append(f"unit {self.unit!r} is not a known unit")
