@@ -170,6 +170,27 @@ def test_time_limit_keeps_the_best_iterate(small_data):
     assert set(best.free) == set(DEFAULT_FREE)
 
 
+def test_time_out_before_the_refinement_keeps_the_pre_fit(small_data, monkeypatch):
+    """The time limit reached between pre-fit and refinement: a FitError whose result is
+    the pre-fit's optimum, never the start values reported as fitted."""
+    solve = PhysicsFitter._solve_starts
+    calls = []
+
+    def timed_out_refinement(problem, starts, settings, t_start):
+        calls.append(len(problem.experiments))
+        if len(calls) == 1:
+            return solve(problem, starts, settings, t_start)
+        return {"cost": np.inf, "z": None, "stats": None}  # what a spent time limit returns
+
+    monkeypatch.setattr(PhysicsFitter, "_solve_starts", staticmethod(timed_out_refinement))
+    with pytest.raises(FitError, match=r"Maximum_WallTime_Exceeded \(refine\)") as exc:
+        _fit(small_data, prefit_samples=100)
+    assert len(calls) == 2
+    fitted = exc.value.result.params()
+    start = CircuitModel().default_params()
+    assert any(fitted[name] != start[name] for name in DEFAULT_FREE)
+
+
 def test_multiple_shooting_reaches_the_single_shooting_optimum(small_data):
     ss = _fit(small_data).result_
     ms = _fit(small_data, method="multiple_shooting", segment_s=1.0).result_

@@ -178,6 +178,7 @@ class PhysicsFitter:
             bar.set_postfix(cost=f"{cost:.4g}", best=f"{min(history):.4g}")
 
         z_par = None
+        kept = None  # (problem, best) of the last stage that produced an iterate
         statuses: list[str] = []
         stages = self._stages(traces, settings)
         try:
@@ -193,10 +194,17 @@ class PhysicsFitter:
                     best = self._solve_starts(problem, starts, stage_settings, t_start)
                 finally:
                     problem.close()
+                # No start of this stage ran when the time limit was reached before it.
+                statuses.append(
+                    best["stats"]["return_status"]
+                    if best["stats"] is not None
+                    else "Maximum_WallTime_Exceeded"
+                )
                 if best["z"] is not None:
                     z_par = best["z"][: problem.n_par]
-                if best["stats"] is not None:
-                    statuses.append(best["stats"]["return_status"])
+                    kept = (problem, best)
+                elif kept is not None:  # keep the previous stage's iterate, not the start
+                    problem, best = kept
                 if len(stages) > 1 and stage == 0 and statuses and statuses[0] not in _OK:
                     break  # the pre-fit failed: do not polish a failure
         finally:
