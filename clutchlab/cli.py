@@ -220,6 +220,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .cli_sweep import register as register_sweep
 
     register_sweep(sub)
+    from .cli_ml import register as register_ml
+
+    register_ml(sub)
     return parser
 
 

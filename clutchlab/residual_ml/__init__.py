@@ -1,6 +1,93 @@
-"""Residual machine learning: the paper's features, latch classifiers and local GPs.
+"""The paper's pipeline: latch classifiers, SVC-partitioned local GPs, hybrid residual model.
 
-Empty at this stage of the project: the paper pipeline lands in its own issue.
+Reproduces Bagla & Schneider (CTI 2020; DESIGN §1) as estimators with the scikit-learn
+contract that train on traces (:mod:`~clutchlab.residual_ml.base`):
+
+- :class:`GPBaseline` (``gp_base``): one GP on nominal current, dither amplitude, frequency;
+- :class:`GPWithDerivative` (``gp_didt``): + dI/dt (rate and direction of travel);
+- :class:`SVCPartitionedGP` (``paper_svc_gp``): RBF-SVC latch classifier, one rational-
+  quadratic GP per latch state — the paper's final model;
+- :class:`HybridModel` (``hybrid``): physics prediction + partitioned GP on its residual.
+
+The GPs (:class:`LocalGPRegressor`) scale to ~10⁶ samples by binning redundant 1 kHz ramp
+samples, blocked marginal-likelihood hyperparameters and knot-based prediction along traces.
+Models are saved as JSON + NPZ (:func:`save_model`, :func:`load_model`).
 """
 
-__all__: list[str] = []
+from __future__ import annotations
+
+from .base import TraceEstimator, as_traces
+from .binning import Bins, grid_bins
+from .classifiers import (
+    CLASSIFIERS,
+    RBF_FEATURE_WEIGHTS,
+    BinnedClassifier,
+    ColumnWeights,
+    make_classifier,
+)
+from .compare import ClassifierComparison, compare_classifiers
+from .estimators import GPBaseline, GPWithDerivative, SVCPartitionedGP
+from .evaluate import leave_one_experiment_out, score_traces
+from .features import (
+    BASE_FEATURES,
+    DIDT_FEATURES,
+    FEATURES,
+    PHYSICS_FEATURES,
+    FeatureBuilder,
+    direction_of_travel,
+    target_pressure,
+)
+from .hybrid import HYBRID_FEATURES, HybridModel
+from .kernels import KERNELS, KernelSpec, kernel_spec
+from .labels import EVENT, LATCHED, UNLATCHED, LatchLabelRule, latch_labels
+from .local_gp import LocalGPRegressor, log_marginal_likelihood
+from .persist import load_model, save_model
+from .physics import DefaultPhysics, PhysicsPredictor
+from .step import StepPredictor, step_predictor
+from .variants import VARIANTS, make_variant
+
+__all__ = [
+    "BASE_FEATURES",
+    "CLASSIFIERS",
+    "DIDT_FEATURES",
+    "EVENT",
+    "FEATURES",
+    "HYBRID_FEATURES",
+    "KERNELS",
+    "LATCHED",
+    "PHYSICS_FEATURES",
+    "RBF_FEATURE_WEIGHTS",
+    "UNLATCHED",
+    "VARIANTS",
+    "BinnedClassifier",
+    "Bins",
+    "ClassifierComparison",
+    "ColumnWeights",
+    "DefaultPhysics",
+    "FeatureBuilder",
+    "GPBaseline",
+    "GPWithDerivative",
+    "HybridModel",
+    "KernelSpec",
+    "LatchLabelRule",
+    "LocalGPRegressor",
+    "PhysicsPredictor",
+    "SVCPartitionedGP",
+    "StepPredictor",
+    "TraceEstimator",
+    "as_traces",
+    "compare_classifiers",
+    "direction_of_travel",
+    "grid_bins",
+    "kernel_spec",
+    "latch_labels",
+    "leave_one_experiment_out",
+    "load_model",
+    "log_marginal_likelihood",
+    "make_classifier",
+    "make_variant",
+    "save_model",
+    "score_traces",
+    "step_predictor",
+    "target_pressure",
+]

@@ -1,0 +1,164 @@
+"""``clutchlab classifiers`` and ``clutchlab train``: the paper's pipeline from the command line."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+__all__ = ["register"]
+
+
+def _csv(text: str | None) -> tuple[str, ...]:
+    return tuple(s.strip() for s in (text or "").split(",") if s.strip())
+
+
+def _training(dataset, ramps: tuple[str, ...]):
+    from .errors import DataError
+
+    if not ramps:
+        raise DataError("--train needs at least one ramp label")
+    train = dataset.select(ramps=list(ramps))
+    if len(train) == 0:
+        raise DataError(f"no experiments with ramp {', '.join(ramps)}")
+    return train
+
+
+def _cmd_classifiers(args: argparse.Namespace) -> int:
+    from .data import load_dataset
+    from .errors import ModelError
+    from .residual_ml import CLASSIFIERS, compare_classifiers
+
+    dataset = load_dataset(args.dataset)
+    train = _training(dataset, _csv(args.train))
+    names = list(_csv(args.classifiers)) or None
+    unknown = sorted(set(names or []) - set(CLASSIFIERS))
+    if unknown:
+        raise ModelError(f"unknown classifier(s) {unknown}; known: {', '.join(CLASSIFIERS)}")
+    result = compare_classifiers(list(train), names=names, progress=not args.quiet)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    result.to_csv(out / "classifiers.csv")
+    result.figure().savefig(out / "classifiers.png", dpi=120)
+    print(
+        f"latch classifiers, leave-one-experiment-out over {len(train)} training experiments "
+        f"({', '.join(_csv(args.train))}); features: {', '.join(result.feature_names)}"
+    )
+    print(result.table())
+    print(f"table: {out / 'classifiers.csv'}; figure: {out / 'classifiers.png'}")
+    if args.json:
+        Path(args.json).write_text(json.dumps(result.to_dict(), indent=2) + "\n", encoding="utf-8")
+    return 0
+
+
+def _physics(path: str | None):
+    if not path:
+        return None
+    from .errors import ModelError
+    from .residual_ml import PhysicsPredictor
+
+    try:
+        return PhysicsPredictor.load(path)
+    except (ModelError, KeyError, ValueError):
+        from .physics.fit import PhysicsFitter
+
+        return PhysicsPredictor.from_fitter(PhysicsFitter.load(path))
+
+
+def _cmd_train(args: argparse.Namespace) -> int:
+    from tqdm.auto import tqdm
+
+    from .data import load_dataset
+    from .errors import ModelError
+    from .residual_ml import SVCPartitionedGP, make_variant, score_traces
+    from .residual_ml.hybrid import HYBRID_FEATURES
+
+    dataset = load_dataset(args.dataset)
+    train = _training(dataset, _csv(args.train))
+    params = {}
+    if args.variant == "hybrid":
+        params["physics"] = _physics(args.physics)
+        if args.kernel:
+            params["residual"] = SVCPartitionedGP(features=HYBRID_FEATURES, kernel=args.kernel)
+    else:
+        if args.physics:
+            raise ModelError("--physics is only used by the hybrid variant")
+        if args.kernel:
+            params["kernel"] = args.kernel
+    model = make_variant(args.variant, **params)
+    if not args.quiet:
+        print(f"fitting {args.variant} on {len(train)} experiments ({', '.join(train.names)})")
+    t0 = time.perf_counter()
+    model.fit(train)
+    fit_s = time.perf_counter() - t0
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    model.save(out / "model.json")
+    overall = score_traces(model, tqdm(list(train), desc="scoring", disable=args.quiet))
+    per = overall["per_experiment"]
+    head = ("experiment", "RMSE (bar)", "MAE (bar)", "max|e| (bar)", "fit %")
+    print(f"{head[0]:24s} {head[1]:>10s} {head[2]:>10s} {head[3]:>12s} {head[4]:>7s}")
+    for name, m in per.items():
+        print(
+            f"{name:24s} {m['rmse_bar']:10.4f} {m['mae_bar']:10.4f} {m['max_abs_bar']:12.4f} "
+            f"{m['fit_pct']:7.2f}"
+        )
+    o = overall["overall"]
+    print(
+        f"{'all training':24s} {o['rmse_bar']:10.4f} {o['mae_bar']:10.4f} "
+        f"{o['max_abs_bar']:12.4f} {o['fit_pct']:7.2f}"
+    )
+    print(f"fit {fit_s:.1f} s; model written to {out / 'model.json'} (+ model.npz)")
+    if args.json:
+        doc = {
+            "variant": args.variant,
+            "dataset": str(args.dataset),
+            "train": train.names,
+            "fit_s": fit_s,
+            "predict_s": overall["predict_s"],
+            "training": {"overall": o, "per_experiment": per},
+            "model": str(out / "model.json"),
+        }
+        Path(args.json).write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+    return 0
+
+
+def register(sub) -> None:
+    """Add the ``classifiers`` and ``train`` subcommands to the ``clutchlab`` parser."""
+    from .residual_ml import CLASSIFIERS, VARIANTS
+
+    p = sub.add_parser(
+        "classifiers",
+        help="compare the six latch classifiers by leave-one-experiment-out (table + figure)",
+    )
+    p.add_argument("dataset", help="dataset folder (manifest.json + experiments)")
+    p.add_argument("--out", default="classifiers", help="folder for classifiers.csv/.png")
+    p.add_argument(
+        "--classifiers",
+        default="",
+        help="comma-separated subset of: " + ", ".join(CLASSIFIERS) + " (default all six)",
+    )
+    p.add_argument("--train", default="fast,slow", help="training ramp labels (fast,slow)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--json", help="also write the result here")
+    p.set_defaults(func=_cmd_classifiers)
+
+    p = sub.add_parser("train", help="train a paper-pipeline model variant on training ramps")
+    p.add_argument("dataset", help="dataset folder (manifest.json + experiments)")
+    p.add_argument("--variant", required=True, choices=list(VARIANTS), help="model variant")
+    p.add_argument("--out", required=True, help="folder for model.json + model.npz")
+    p.add_argument("--train", default="fast,slow", help="training ramp labels (fast,slow)")
+    p.add_argument(
+        "--kernel",
+        choices=["rq", "rbf"],
+        help="GP kernel (default: the variant's, chosen by leave-one-experiment-out)",
+    )
+    p.add_argument(
+        "--physics",
+        help="hybrid only: physics model JSON (PhysicsPredictor or fit-physics output); "
+        "default: datasheet parameters",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--json", help="also write the training metrics here")
+    p.set_defaults(func=_cmd_train)

@@ -1,0 +1,262 @@
+"""Common machinery of the trace-level estimators: inputs, feature blocks, the sklearn contract.
+
+Every estimator of :mod:`clutchlab.residual_ml` accepts two kinds of input:
+
+- **traces** — a :class:`~clutchlab.data.Trace`, a :class:`~clutchlab.data.Dataset` or a
+  sequence of traces. ``fit(traces)`` builds the features, the target (dither-period-mean
+  clutch pressure, bar) and the latch labels itself; ``predict(trace)`` returns one clutch
+  pressure per sample (bar), evaluated at knots along the trace and interpolated
+  (:mod:`~clutchlab.residual_ml.paths`); ``predict(dataset)`` returns a list of such arrays.
+- **arrays** — ``fit(X, y)`` / ``predict(X)`` with ``X`` the n × d matrix of feature columns
+  (in the order of ``feature_names_`` when trained on traces) and ``y`` the clutch pressure
+  (bar), every row predicted exactly. This is the plain scikit-learn interface used by
+  ``check_estimator``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from sklearn.base import BaseEstimator, RegressorMixin
+from sklearn.exceptions import NotFittedError
+from sklearn.utils.validation import validate_data
+
+from ..data import Dataset, Trace, dither_period_samples
+from ..errors import DataError
+from ._threads import single_thread
+from .features import FeatureBuilder, target_pressure
+from .labels import LatchLabelRule, latch_labels
+
+__all__ = ["Block", "TraceEstimator", "as_traces"]
+
+
+def as_traces(X) -> list[Trace] | None:
+    """The traces in ``X`` (Trace, Dataset or sequence of Traces), or None for array input.
+
+    Raises
+    ------
+    DataError
+        If ``X`` is an empty dataset or a sequence mixing traces and other objects.
+    """
+    if isinstance(X, Trace):
+        return [X]
+    if isinstance(X, Dataset):
+        traces = list(X)
+    elif (
+        isinstance(X, Sequence) and not isinstance(X, str) and any(isinstance(t, Trace) for t in X)
+    ):
+        traces = list(X)
+        bad = [type(t).__name__ for t in traces if not isinstance(t, Trace)]
+        if bad:
+            raise DataError(f"expected only Traces, got also {', '.join(sorted(set(bad)))}")
+    else:
+        return None
+    if not traces:
+        raise DataError("no experiments to use (empty dataset)")
+    return traces
+
+
+@dataclass
+class Block:
+    """Features, target, weights and labels of one experiment (or one array input).
+
+    Attributes
+    ----------
+    name : str
+        Experiment name.
+    X : numpy.ndarray
+        n × d features (units of the feature builder).
+    y : numpy.ndarray
+        n targets (bar).
+    weight : numpy.ndarray
+        n effective-observation weights (1 / samples per dither period for traces, whose
+        period-mean target is correlated over one period).
+    labels : numpy.ndarray
+        n latch labels (1 latched, 0 unlatched, −1 latch event).
+    state : numpy.ndarray
+        n latched (1) / unlatched (0) Schmitt-trigger state, events included.
+    """
+
+    name: str
+    X: np.ndarray
+    y: np.ndarray
+    weight: np.ndarray
+    labels: np.ndarray
+    state: np.ndarray
+
+
+class TraceEstimator(RegressorMixin, BaseEstimator):
+    """Base of the trace-level regressors (not used directly).
+
+    Subclasses define ``_default_features``, ``_fit_blocks(blocks)`` and
+    ``_predict_matrix(X, path, return_std)``.
+    """
+
+    _default_features: tuple[str, ...] = ()
+
+    # -- features ----------------------------------------------------------------------------
+
+    def _builder(self) -> FeatureBuilder:
+        feats = getattr(self, "features", None)
+        return FeatureBuilder(
+            tuple(feats) if feats else self._default_features,
+            float(getattr(self, "didt_periods", 5.0)),
+        )
+
+    def _rule(self) -> LatchLabelRule:
+        rule = getattr(self, "label_rule", None)
+        return rule if rule is not None else LatchLabelRule()
+
+    def _block(self, trace: Trace, physics: dict[str, np.ndarray] | None = None) -> Block:
+        X = self._builder().build(trace, physics)
+        y = target_pressure(trace, getattr(self, "target", "period_mean"))
+        w = np.full(len(trace), 1.0 / dither_period_samples(trace))
+        labels, state = latch_labels(trace, self._rule(), return_state=True)
+        return Block(trace.name, X, y, w, labels, state)
+
+    def _array_block(self, X: np.ndarray, y: np.ndarray) -> Block:
+        """Block of array input: threshold labels (line pressure 17.7 bar, no events)."""
+        rule = self._rule()
+        lab = (17.7 - y <= rule.margin_bar).astype(np.int8)
+        return Block("arrays", X, y, np.ones(y.size), lab, lab.copy())
+
+    # -- sklearn contract --------------------------------------------------------------------
+
+    def fit(self, X, y=None):
+        """Fit on traces (``y`` None) or on a feature matrix and targets.
+
+        Parameters
+        ----------
+        X : Trace, Dataset, sequence of Trace, or array_like
+            Training experiments, or an n × d feature matrix (feature units).
+        y : array_like, optional
+            n clutch pressures (bar); only with a feature matrix.
+
+        Returns
+        -------
+        self
+            The fitted estimator.
+
+        Raises
+        ------
+        DataError
+            If a trace lacks a needed signal, or ``y`` is given with traces.
+        """
+        traces = as_traces(X)
+        if traces is not None:
+            if y is not None:
+                raise DataError("y must be None when fitting on traces (targets come from them)")
+            self.feature_names_ = list(self._builder().names)
+            blocks = self._trace_blocks(traces)
+            self.n_features_in_ = len(self.feature_names_)
+            self.train_experiments_ = [t.name for t in traces]
+        else:
+            Xa, ya = validate_data(self, X, y, y_numeric=True, dtype=np.float64)
+            self.feature_names_ = [f"x{j}" for j in range(Xa.shape[1])]
+            blocks = [self._array_block(Xa, ya)]
+            self.train_experiments_ = []
+        self._fit_blocks(blocks)
+        return self
+
+    def _trace_blocks(self, traces: list[Trace]) -> list[Block]:
+        return [self._block(t) for t in traces]
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "feature_names_"):
+            raise NotFittedError(
+                f"this {type(self).__name__} is not fitted yet; call fit(traces) first"
+            )
+
+    def _trace_matrix(self, trace: Trace) -> np.ndarray:
+        return self._builder().build(trace)
+
+    def predict(self, X, return_std: bool = False):
+        """Clutch pressure (bar) per sample.
+
+        Parameters
+        ----------
+        X : Trace, Dataset, sequence of Trace, or array_like
+            One trace (→ one array), several (→ a list of arrays), or an n × d feature matrix.
+        return_std : bool
+            Also return the predictive standard deviation (bar) of the GP part.
+
+        Returns
+        -------
+        mean : numpy.ndarray or list of numpy.ndarray
+            Predicted clutch pressure, bar.
+        std : numpy.ndarray or list of numpy.ndarray
+            Predictive standard deviation, bar; only if ``return_std``.
+
+        Raises
+        ------
+        NotFittedError
+            If the estimator is not fitted.
+        """
+        self._check_fitted()
+        traces = as_traces(X)
+        with single_thread("blas"):
+            if traces is None:
+                Xa = validate_data(self, X, reset=False, dtype=np.float64)
+                return self._predict_matrix(Xa, path=False, return_std=return_std)
+            outs = [self._predict_trace(t, return_std) for t in traces]
+        if isinstance(X, Trace):
+            return outs[0]
+        if return_std:
+            return [o[0] for o in outs], [o[1] for o in outs]
+        return outs
+
+    def _predict_trace(self, trace: Trace, return_std: bool):
+        return self._predict_matrix(self._trace_matrix(trace), path=True, return_std=return_std)
+
+    def score(self, X, y=None, sample_weight=None) -> float:
+        """R² of the prediction: on traces against the dither-period-mean pressure."""
+        from sklearn.metrics import r2_score
+
+        traces = as_traces(X)
+        if traces is None:
+            return super().score(X, y, sample_weight=sample_weight)
+        pred = self.predict(traces)
+        y_true = np.concatenate([target_pressure(t) for t in traces])
+        return float(r2_score(y_true, np.concatenate(pred)))
+
+    # -- persistence -------------------------------------------------------------------------
+
+    def save(self, path) -> None:
+        """Write the fitted model as JSON (``path``) + NPZ (same name, ``.npz``); no pickle."""
+        from .persist import save_model
+
+        save_model(self, path)
+
+    @classmethod
+    def load(cls, path):
+        """Read a model written by :meth:`save`.
+
+        Raises
+        ------
+        ModelError
+            If the file holds another kind of model or is not a clutchlab model.
+        """
+        from ..errors import ModelError
+        from .persist import load_model
+
+        model = load_model(path)
+        if not isinstance(model, cls):
+            raise ModelError(f"{path} holds a {type(model).__name__}, not a {cls.__name__}")
+        return model
+
+    # -- helpers for subclasses --------------------------------------------------------------
+
+    @staticmethod
+    def _stack(blocks: list[Block]) -> Block:
+        if len(blocks) == 1:
+            return blocks[0]
+        return Block(
+            "+".join(b.name for b in blocks),
+            np.concatenate([b.X for b in blocks]),
+            np.concatenate([b.y for b in blocks]),
+            np.concatenate([b.weight for b in blocks]),
+            np.concatenate([b.labels for b in blocks]),
+            np.concatenate([b.state for b in blocks]),
+        )

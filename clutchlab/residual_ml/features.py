@@ -1,0 +1,245 @@
+"""The paper's input features, built from a trace (DESIGN §1), and the regression target.
+
+Features, each a per-sample signal with a unit:
+
+========================  =====  ==========================================================
+name                      unit   meaning
+========================  =====  ==========================================================
+``current_mA``            mA     nominal VFS current (``current_cmd_mA``, else demodulated)
+``dither_amp_mA``         mA     dither amplitude (logged, else demodulated)
+``dither_freq_Hz``        Hz     dither frequency (logged, else demodulated)
+``didt_mA_s``             mA/s   filtered dI/dt of the nominal current (rate of travel)
+``direction``             1      last direction of travel: +1 after the current last rose,
+                                 −1 after it last fell (|dI/dt| above a dead band), 0 before
+                                 the first move; held through holds (hysteresis memory)
+``physics_bar``           bar    physics-model clutch pressure, dither-period mean (hybrid)
+``physics_pilot_bar``     bar    physics-model pilot (VFS accumulator) pressure, dither-period
+                                 mean (hybrid): what the latch valve responds to
+========================  =====  ==========================================================
+
+The paper's stage 1 uses the first three, stage 2 adds the current derivative "to indicate the
+direction of the current ramp": here both its value (``didt_mA_s``, the rate, which sets the
+lag-induced part of the hysteresis) and the direction it implies (``direction``, which sets
+the friction part and, unlike the sign of dI/dt, is remembered while the current holds).
+Building features is the estimators' job (:class:`FeatureBuilder` is one of their
+parameters), not the caller's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from types import MappingProxyType
+
+import numpy as np
+
+from ..data import (
+    Trace,
+    demodulate_trace,
+    didt,
+    dither_period_mean,
+    dither_period_samples,
+)
+from ..errors import DataError
+
+__all__ = [
+    "BASE_FEATURES",
+    "DIDT_FEATURES",
+    "FEATURES",
+    "PHYSICS_FEATURES",
+    "FeatureBuilder",
+    "direction_of_travel",
+    "target_pressure",
+]
+
+#: Feature name → (unit, description).
+FEATURES: MappingProxyType[str, tuple[str, str]] = MappingProxyType(
+    {
+        "current_mA": ("mA", "nominal VFS current"),
+        "dither_amp_mA": ("mA", "dither amplitude"),
+        "dither_freq_Hz": ("Hz", "dither frequency"),
+        "didt_mA_s": ("mA/s", "filtered dI/dt of the nominal current"),
+        "direction": ("1", "last direction of travel of the nominal current (+1 / -1 / 0)"),
+        "physics_bar": ("bar", "physics-model clutch pressure (dither-period mean)"),
+        "physics_pilot_bar": ("bar", "physics-model pilot pressure (dither-period mean)"),
+    }
+)
+
+#: The paper's stage-1 inputs.
+BASE_FEATURES: tuple[str, ...] = ("current_mA", "dither_amp_mA", "dither_freq_Hz")
+#: Features taken from the physics model's outputs (feature → model output).
+PHYSICS_FEATURES: MappingProxyType[str, str] = MappingProxyType(
+    {"physics_bar": "clutch_pressure_bar", "physics_pilot_bar": "pilot_pressure_bar"}
+)
+#: The paper's stage-2 inputs (stage 1 + dI/dt).
+DIDT_FEATURES: tuple[str, ...] = (*BASE_FEATURES, "didt_mA_s", "direction")
+
+
+@dataclass(frozen=True)
+class FeatureBuilder:
+    """Builds the feature matrix of a trace.
+
+    Parameters
+    ----------
+    features : tuple of str
+        Feature names (:data:`FEATURES`), in column order.
+    didt_periods : float
+        Savitzky–Golay window of dI/dt, in dither periods (default 5; see
+        :func:`clutchlab.data.nominal_didt`).
+    deadband_mA_s : float
+        |dI/dt| below which the direction of travel is held, mA/s (default 10: above the
+        ~6 mA/s noise of dI/dt from a demodulated current, below the slowest stand ramp,
+        27.5 mA/s).
+    """
+
+    features: tuple[str, ...] = DIDT_FEATURES
+    didt_periods: float = 5.0
+    deadband_mA_s: float = 10.0
+
+    def __post_init__(self) -> None:
+        unknown = [f for f in self.features if f not in FEATURES]
+        if unknown or not self.features:
+            raise DataError(f"unknown or no feature(s) {unknown}; known: {', '.join(FEATURES)}")
+        if len(set(self.features)) != len(self.features):
+            raise DataError(f"repeated feature in {self.features}")
+        if not (np.isfinite(self.didt_periods) and self.didt_periods > 0):
+            raise DataError(f"didt_periods must be > 0, got {self.didt_periods!r}")
+        if not (np.isfinite(self.deadband_mA_s) and self.deadband_mA_s >= 0):
+            raise DataError(f"deadband_mA_s must be >= 0, got {self.deadband_mA_s!r}")
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Feature names, in column order."""
+        return tuple(self.features)
+
+    @property
+    def units(self) -> tuple[str, ...]:
+        """Unit of each feature column."""
+        return tuple(FEATURES[f][0] for f in self.features)
+
+    @property
+    def needs_physics(self) -> bool:
+        """Whether a physics-model output is one of the features."""
+        return any(f in PHYSICS_FEATURES for f in self.features)
+
+    def build(self, trace: Trace, physics: dict[str, np.ndarray] | None = None) -> np.ndarray:
+        """Feature matrix of ``trace``.
+
+        Parameters
+        ----------
+        trace : Trace
+            Experiment with ``current_cmd_mA`` or ``current_mA`` (dither amplitude and
+            frequency are demodulated from ``current_mA`` when not logged).
+        physics : dict of str to numpy.ndarray, optional
+            Physics-model outputs per sample (``clutch_pressure_bar``,
+            ``pilot_pressure_bar``, bar, dither-period means); required for the physics
+            features (:data:`PHYSICS_FEATURES`).
+
+        Returns
+        -------
+        numpy.ndarray
+            n × len(features) float64 matrix, columns in the units of :attr:`units`.
+
+        Raises
+        ------
+        DataError
+            If a needed signal cannot be obtained, or ``physics_bar`` is missing or of the
+            wrong length.
+        """
+        if not isinstance(trace, Trace):
+            raise DataError(f"expected a Trace, got {type(trace).__name__}")
+        estimate = None
+
+        def est():
+            nonlocal estimate
+            if estimate is None:
+                estimate = demodulate_trace(trace)
+            return estimate
+
+        cols: dict[str, np.ndarray] = {}
+        need = set(self.features)
+        if need & {"current_mA", "didt_mA_s", "direction"}:
+            if trace.has("current_cmd_mA"):
+                cols["current_mA"] = np.asarray(trace.get("current_cmd_mA"), dtype=float)
+            else:
+                cols["current_mA"] = est().nominal_mA
+        if "dither_amp_mA" in need:
+            cols["dither_amp_mA"] = (
+                np.asarray(trace.get("dither_amp_mA"), dtype=float)
+                if trace.has("dither_amp_mA")
+                else est().amplitude_mA
+            )
+        if need & {"dither_freq_Hz", "didt_mA_s", "direction"}:
+            cols["dither_freq_Hz"] = (
+                np.asarray(trace.get("dither_freq_Hz"), dtype=float)
+                if trace.has("dither_freq_Hz")
+                else est().frequency_Hz
+            )
+        if need & {"didt_mA_s", "direction"}:
+            f = cols["dither_freq_Hz"]
+            fpos = f[f > 0]
+            fs = trace.sample_rate_Hz
+            period = fs / float(np.median(fpos)) if fpos.size else dither_period_samples(trace)
+            cols["didt_mA_s"] = didt(cols["current_mA"], fs, self.didt_periods * period)
+            cols["direction"] = direction_of_travel(cols["didt_mA_s"], self.deadband_mA_s)
+        for feat, output in PHYSICS_FEATURES.items():
+            if feat not in need:
+                continue
+            if physics is None or output not in physics:
+                raise DataError(
+                    f"trace {trace.name!r}: feature {feat!r} needs the physics output {output!r}"
+                )
+            p = np.asarray(physics[output], dtype=float)
+            if p.shape != (len(trace),):
+                raise DataError(
+                    f"trace {trace.name!r}: physics output {output!r} has shape {p.shape}, "
+                    f"expected ({len(trace)},)"
+                )
+            cols[feat] = p
+        return np.column_stack([cols[f] for f in self.features])
+
+
+def direction_of_travel(didt_mA_s: np.ndarray, deadband_mA_s: float = 10.0) -> np.ndarray:
+    """Last direction of travel: sign of dI/dt where |dI/dt| > dead band, held in between.
+
+    Parameters
+    ----------
+    didt_mA_s : numpy.ndarray
+        dI/dt per sample, mA/s.
+    deadband_mA_s : float
+        Dead band, mA/s.
+
+    Returns
+    -------
+    numpy.ndarray
+        +1.0 / −1.0 per sample, 0.0 before the first sample outside the dead band.
+    """
+    d = np.asarray(didt_mA_s, dtype=float)
+    sig = np.where(d > deadband_mA_s, 1.0, np.where(d < -deadband_mA_s, -1.0, 0.0))
+    idx = np.where(sig != 0, np.arange(d.size), -1)
+    last = np.maximum.accumulate(idx) if d.size else idx
+    return np.where(last >= 0, sig[np.maximum(last, 0)], 0.0)
+
+
+def target_pressure(trace: Trace, smoothing: str = "period_mean") -> np.ndarray:
+    """Regression target of a trace: its clutch pressure, bar.
+
+    Parameters
+    ----------
+    trace : Trace
+        Experiment with ``clutch_pressure_bar``.
+    smoothing : {"period_mean", "raw"}
+        ``period_mean`` (default): averaged over one dither period
+        (:func:`clutchlab.data.dither_period_mean`), the primary scored signal; the features
+        carry no dither phase, so the ripple is noise to the regression. ``raw``: as logged.
+
+    Returns
+    -------
+    numpy.ndarray
+        Clutch pressure per sample, bar.
+    """
+    p = np.asarray(trace.get("clutch_pressure_bar"), dtype=float)
+    if smoothing == "raw":
+        return p
+    if smoothing != "period_mean":
+        raise DataError(f"smoothing must be 'period_mean' or 'raw', got {smoothing!r}")
+    return dither_period_mean(p, dither_period_samples(trace))

@@ -1,0 +1,187 @@
+"""Hybrid model: physics prediction plus a partitioned GP on its residual.
+
+``HybridModel(physics, residual)`` predicts ``p = p_physics + r̂`` where ``p_physics`` is the
+physics model's clutch pressure on the trace (bar, dither resolved) and ``r̂`` the residual
+model's prediction of ``p̄_measured − p̄_physics`` (dither-period means). The residual model
+sees, besides the paper's features, the physics clutch pressure and the physics *pilot*
+pressure (dither-period means): the latch valve switches on the pilot pressure, and the
+physics model's pilot pressure at the measured latch switches is nearly the same at every
+ramp rate (default stand data: 9.04–9.06 bar at latch-on for fast, medium and slow ramps),
+so a classifier on it separates the latch regimes far better between the training ramp
+rates than one on current and dI/dt.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from sklearn.base import clone
+from sklearn.utils.validation import validate_data
+
+from ..data import Trace, dither_period_mean, dither_period_samples
+from ..errors import DataError, ModelError
+from .base import TraceEstimator
+from .estimators import SVCPartitionedGP
+from .features import DIDT_FEATURES, PHYSICS_FEATURES
+from .physics import DefaultPhysics, PhysicsPredictor
+
+__all__ = ["HYBRID_CLASSIFIER_FEATURES", "HYBRID_FEATURES", "HybridModel"]
+
+#: Features of the default residual model: the paper's + the physics outputs.
+HYBRID_FEATURES: tuple[str, ...] = (*DIDT_FEATURES, "physics_bar", "physics_pilot_bar")
+#: Features of the default residual model's latch classifier (chosen by
+#: leave-one-experiment-out on the training experiments, see ``HybridModel``).
+HYBRID_CLASSIFIER_FEATURES: tuple[str, ...] | None = None
+
+
+def default_residual() -> SVCPartitionedGP:
+    """The default residual model: SVC-partitioned RQ GP on :data:`HYBRID_FEATURES`."""
+    return SVCPartitionedGP(
+        features=HYBRID_FEATURES, classifier_features=HYBRID_CLASSIFIER_FEATURES
+    )
+
+
+class HybridModel(TraceEstimator):
+    """Physics model plus a residual model trained on its residual.
+
+    Parameters
+    ----------
+    physics : object, optional
+        Anything with ``predict(trace) -> ndarray`` (clutch pressure, bar), e.g. a fitted
+        :class:`~clutchlab.physics.fit.PhysicsFitter` or a
+        :class:`~clutchlab.residual_ml.physics.PhysicsPredictor`; if it also has
+        ``predict_outputs(trace) -> dict`` the pilot pressure is available as a feature.
+        Default: :func:`~clutchlab.residual_ml.physics.DefaultPhysics` (datasheet values).
+    residual : TraceEstimator, optional
+        Residual model (cloned); default :class:`SVCPartitionedGP` on
+        :data:`HYBRID_FEATURES` with the classifier on :data:`HYBRID_CLASSIFIER_FEATURES`.
+
+    Attributes
+    ----------
+    physics_ : object
+        The physics model used.
+    residual_ : TraceEstimator
+        The fitted residual model.
+    feature_names_ : list of str
+        Features of the residual model.
+
+    Notes
+    -----
+    On arrays (``fit(X, y)``), the last column of ``X`` is the physics prediction (bar); the
+    residual model is fitted to ``y − X[:, -1]`` on all columns.
+    """
+
+    def __init__(self, physics=None, residual=None) -> None:
+        self.physics = physics
+        self.residual = residual
+
+    def _physics(self):
+        phys = self.physics if self.physics is not None else DefaultPhysics()
+        if not hasattr(phys, "predict_outputs") and hasattr(phys, "params_"):
+            phys = PhysicsPredictor.from_fitter(phys)  # a fitted PhysicsFitter: all outputs
+        if not hasattr(phys, "predict"):
+            raise ModelError(f"physics {type(phys).__name__} has no predict(trace) method")
+        return phys
+
+    def _residual(self) -> TraceEstimator:
+        return clone(self.residual) if self.residual is not None else default_residual()
+
+    def _outputs(
+        self, phys, trace: Trace, needed: tuple[str, ...] = ()
+    ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Raw physics clutch pressure and the dither-period means of the physics outputs."""
+        if hasattr(phys, "predict_outputs"):
+            outs = phys.predict_outputs(trace)
+        else:
+            outs = {"clutch_pressure_bar": np.asarray(phys.predict(trace), dtype=float)}
+        raw = np.asarray(outs["clutch_pressure_bar"], dtype=float)
+        if raw.shape != (len(trace),):
+            raise DataError(
+                f"trace {trace.name!r}: physics prediction has shape {raw.shape}, "
+                f"expected ({len(trace)},)"
+            )
+        n = dither_period_samples(trace)
+        wanted = set(PHYSICS_FEATURES.values())
+        missing = [out for f, out in PHYSICS_FEATURES.items() if f in needed and out not in outs]
+        if missing:
+            raise ModelError(
+                f"the residual model needs the physics output(s) {missing}, which "
+                f"{type(phys).__name__} does not provide (it has no predict_outputs); use a "
+                "PhysicsPredictor, or a residual model without the physics_pilot_bar feature"
+            )
+        smooth = {k: dither_period_mean(v, n) for k, v in outs.items() if k in wanted}
+        return raw, smooth
+
+    def fit(self, X, y=None) -> HybridModel:
+        """Fit the residual model on the physics residual of the training traces.
+
+        Parameters
+        ----------
+        X : Trace, Dataset, sequence of Trace, or array_like
+            Training experiments, or a feature matrix whose last column is the physics
+            prediction (bar).
+        y : array_like, optional
+            Clutch pressure (bar); only with a feature matrix.
+
+        Returns
+        -------
+        HybridModel
+            self, fitted.
+        """
+        from .base import as_traces
+
+        res = self._residual()
+        traces = as_traces(X)
+        if traces is None:
+            Xa, ya = validate_data(self, X, y, y_numeric=True, dtype=np.float64)
+            res.feature_names_ = [f"x{j}" for j in range(Xa.shape[1])]
+            b = res._array_block(Xa, ya)
+            b.y = ya - Xa[:, -1]
+            res.n_features_in_ = Xa.shape[1]
+            res.train_experiments_ = []
+            res._fit_blocks([b])
+            self.physics_ = None
+        else:
+            if y is not None:
+                raise DataError("y must be None when fitting on traces (targets come from them)")
+            phys = self._physics()
+            res.feature_names_ = list(res._builder().names)
+            blocks = []
+            for t in traces:
+                raw, smooth = self._outputs(phys, t, tuple(res.feature_names_))
+                b = res._block(t, smooth)
+                ref = smooth["clutch_pressure_bar"] if res.target == "period_mean" else raw
+                b.y = b.y - ref
+                blocks.append(b)
+            res.n_features_in_ = len(res.feature_names_)
+            res.train_experiments_ = [t.name for t in traces]
+            res._fit_blocks(blocks)
+            self.physics_ = phys
+            self.n_features_in_ = len(res.feature_names_)
+        self.residual_ = res
+        self.feature_names_ = list(res.feature_names_)
+        self.train_experiments_ = list(res.train_experiments_)
+        return self
+
+    def _predict_matrix(self, X: np.ndarray, path: bool, return_std: bool):
+        out = self.residual_._predict_matrix(X, path=path, return_std=return_std)
+        if return_std:
+            return X[:, -1] + out[0], out[1]
+        return X[:, -1] + out
+
+    def _predict_trace(self, trace: Trace, return_std: bool):
+        if self.physics_ is None:
+            raise ModelError("this HybridModel was fitted on arrays; predict on arrays too")
+        raw, smooth = self._outputs(self.physics_, trace, tuple(self.feature_names_))
+        F = self.residual_._builder().build(trace, smooth)
+        out = self.residual_._predict_matrix(F, path=True, return_std=return_std)
+        if return_std:
+            return raw + out[0], out[1]
+        return raw + out
+
+    def predict_components(self, trace: Trace) -> dict[str, np.ndarray]:
+        """Physics prediction and residual per sample of ``trace`` (bar), and their sum."""
+        self._check_fitted()
+        raw, smooth = self._outputs(self.physics_, trace, tuple(self.feature_names_))
+        F = self.residual_._builder().build(trace, smooth)
+        r = self.residual_._predict_matrix(F, path=True, return_std=False)
+        return {"physics_bar": raw, "residual_bar": r, "pressure_bar": raw + r}

@@ -1,0 +1,136 @@
+"""Physics predictors for the hybrid model: the circuit model simulated on a trace.
+
+:class:`PhysicsPredictor` holds a model structure (effects) and parameter values and predicts
+clutch pressure (bar) on a trace by simulation; it also exposes the model's other outputs
+(pilot pressure, latch state, ...) that the hybrid model may use as features. With no
+arguments it is the datasheet-default model — the paper's "physics with default lumped
+parameters" (:func:`DefaultPhysics`); :meth:`PhysicsPredictor.from_fitter` wraps a fitted
+:class:`~clutchlab.physics.fit.PhysicsFitter`. Saved as JSON (effects + parameter values).
+
+Any object with ``predict(trace) -> ndarray`` (bar) can serve as the hybrid's physics; one
+with ``predict_outputs(trace) -> dict`` also supplies the extra outputs.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from ..data import Trace
+from ..errors import ModelError
+from ..physics import CircuitModel, SimulationSettings, simulate
+
+__all__ = ["DefaultPhysics", "PhysicsPredictor"]
+
+
+class PhysicsPredictor:
+    """Clutch pressure of the lumped-parameter circuit model, simulated on a trace.
+
+    Parameters
+    ----------
+    effects : tuple of str
+        Effects switched on (names of :data:`clutchlab.physics.EFFECTS`; default none).
+    params : mapping of str to float, optional
+        Parameter values differing from the datasheet defaults, engineering units.
+    substeps : int
+        ROS2 steps per sample (default 4).
+
+    Raises
+    ------
+    ModelError
+        If an effect or parameter name is unknown.
+    """
+
+    def __init__(
+        self,
+        effects: tuple[str, ...] = (),
+        params: Mapping[str, float] | None = None,
+        substeps: int = 4,
+    ) -> None:
+        self.effects = tuple(effects)
+        self.params = dict(params or {})
+        self.substeps = int(substeps)
+        self._model = CircuitModel().with_effects(*self.effects)
+        self._params = self._model.params(**self.params)
+
+    def __repr__(self) -> str:
+        return (
+            f"PhysicsPredictor(effects={self.effects!r}, params={self.params!r}, "
+            f"substeps={self.substeps})"
+        )
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, PhysicsPredictor) and self.to_dict() == other.to_dict()
+
+    def __hash__(self) -> int:
+        return hash(json.dumps(self.to_dict(), sort_keys=True))
+
+    def __getstate__(self) -> dict:
+        return self.to_dict()
+
+    def __setstate__(self, state: dict) -> None:
+        self.__init__(tuple(state["effects"]), state["params"], state["substeps"])
+
+    @classmethod
+    def from_fitter(cls, fitter, substeps: int = 4) -> PhysicsPredictor:
+        """The fitted model of a :class:`~clutchlab.physics.fit.PhysicsFitter`.
+
+        Raises
+        ------
+        sklearn.exceptions.NotFittedError
+            If the fitter is not fitted.
+        """
+        fitter._check_fitted()
+        model, params = fitter.model_, fitter.params_
+        return cls(tuple(model.effect_names), params.changed(), substeps)
+
+    def predict_outputs(self, trace: Trace) -> dict[str, np.ndarray]:
+        """All model outputs on ``trace`` (name → per-sample array, units of
+        :data:`clutchlab.physics.OUTPUTS`: pressures in bar, latch state 0–1, ...)."""
+        if not isinstance(trace, Trace):
+            raise ModelError(f"expected a Trace, got {type(trace).__name__}")
+        res = simulate(self._model, self._params, trace, SimulationSettings(substeps=self.substeps))
+        return {k: np.asarray(v, dtype=float) for k, v in res.outputs.items()}
+
+    def predict(self, trace: Trace) -> np.ndarray:
+        """Clutch pressure as the sensor reads it, bar, per sample of ``trace``."""
+        return self.predict_outputs(trace)["clutch_pressure_bar"]
+
+    def to_dict(self) -> dict:
+        """JSON-ready description."""
+        return {
+            "kind": "PhysicsPredictor",
+            "effects": list(self.effects),
+            "params": {k: float(v) for k, v in self.params.items()},
+            "substeps": self.substeps,
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> PhysicsPredictor:
+        """Inverse of :meth:`to_dict`."""
+        if d.get("kind") != "PhysicsPredictor":
+            raise ModelError(f"not a PhysicsPredictor description: kind={d.get('kind')!r}")
+        return cls(tuple(d["effects"]), dict(d["params"]), int(d["substeps"]))
+
+    def save(self, path: str | Path) -> None:
+        """Write :meth:`to_dict` as JSON to ``path``."""
+        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
+
+    @classmethod
+    def load(cls, path: str | Path) -> PhysicsPredictor:
+        """Read a JSON written by :meth:`save`."""
+        return cls.from_dict(json.loads(Path(path).read_text(encoding="utf-8")))
+
+
+def DefaultPhysics(substeps: int = 4) -> PhysicsPredictor:
+    """The datasheet-default circuit model, no effects — the paper's default-parameter physics.
+
+    Parameters
+    ----------
+    substeps : int
+        ROS2 steps per sample (default 4).
+    """
+    return PhysicsPredictor((), None, substeps)

@@ -1,0 +1,171 @@
+"""Single-sample prediction for co-simulation: one feature vector in, one pressure out.
+
+:func:`step_predictor` freezes a fitted model into a :class:`StepPredictor` that holds its
+arrays pre-scaled (GP bins divided by the length scales, SVM support vectors standardized)
+and evaluates one sample with a handful of NumPy calls. The caller supplies the features in
+the model's order (``feature_names_``), e.g. the nominal current, dither amplitude and
+frequency, the filtered dI/dt and the direction of travel it keeps track of itself. For a
+:class:`~clutchlab.residual_ml.hybrid.HybridModel` the step returns the residual plus the
+``physics_bar`` feature: the physics model's own step (simulation or FMU) is not included.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import ModelError
+from .classifiers import KernelDecision, LinearDecision
+from .estimators import GPBaseline, SVCPartitionedGP
+from .hybrid import HybridModel
+from .local_gp import LocalGPRegressor
+
+__all__ = ["StepPredictor", "step_predictor"]
+
+
+class _GPStep:
+    def __init__(self, gp: LocalGPRegressor) -> None:
+        s2, ell, alpha = gp.kernel_.unpack(gp.theta_[:-1])
+        self.shift = gp.x_mean_
+        self.scale = gp.x_scale_ * ell
+        self.zb = np.ascontiguousarray(gp.X_bins_ / ell)
+        self.bb = np.einsum("ij,ij->i", self.zb, self.zb)
+        self.coef = gp.dual_coef_ * (s2 * gp.y_scale_)
+        self.y0 = gp.y_mean_
+        self.rq = gp.kernel_.name == "rq"
+        self.c = 0.5 / alpha if self.rq else -0.5
+        self.alpha = alpha
+
+    def __call__(self, x: np.ndarray) -> float:
+        z = (x - self.shift) / self.scale
+        d2 = self.zb @ z
+        d2 *= -2.0
+        d2 += self.bb
+        d2 += z @ z
+        d2 *= self.c
+        if self.rq:
+            np.log1p(d2, out=d2)
+            d2 *= -self.alpha
+        np.exp(d2, out=d2)
+        return float(d2 @ self.coef) + self.y0
+
+
+class _RBFStep:
+    def __init__(self, dec: KernelDecision, cols: list[int]) -> None:
+        self.cols = np.asarray(cols)
+        self.mean, self.scale = dec.mean, dec.scale
+        self.sv = np.ascontiguousarray(dec.support)
+        self.ss = np.einsum("ij,ij->i", self.sv, self.sv)
+        self.coef, self.b, self.g = dec.coef, dec.intercept, dec.gamma
+
+    def __call__(self, x: np.ndarray) -> float:
+        z = (x[self.cols] - self.mean) / self.scale
+        d2 = self.sv @ z
+        d2 *= 2.0
+        d2 -= self.ss
+        d2 -= z @ z
+        d2 *= self.g
+        np.exp(d2, out=d2)
+        return float(d2 @ self.coef) + self.b
+
+
+class _LinearStep:
+    def __init__(self, dec: LinearDecision, cols: list[int]) -> None:
+        self.cols = np.asarray(cols)
+        self.w = dec.weights / dec.scale
+        self.b = dec.intercept - float(dec.mean @ self.w)
+
+    def __call__(self, x: np.ndarray) -> float:
+        return float(x[self.cols] @ self.w) + self.b
+
+
+class StepPredictor:
+    """Clutch pressure (bar) of one feature vector.
+
+    Attributes
+    ----------
+    feature_names : list of str
+        Expected feature order (units as in :data:`~clutchlab.residual_ml.features.FEATURES`).
+    """
+
+    def __init__(
+        self,
+        gps: dict,
+        decide,
+        single: int | None,
+        physics_col: int | None,
+        feature_names: list[str],
+    ) -> None:
+        self._gps = gps
+        self._decide = decide
+        self._single = single
+        self._phys = physics_col
+        self.feature_names = feature_names
+
+    def __call__(self, x) -> float:
+        """Prediction at one sample.
+
+        Parameters
+        ----------
+        x : array_like
+            One value per feature, in :attr:`feature_names` order and their units.
+
+        Returns
+        -------
+        float
+            Clutch pressure, bar.
+        """
+        x = np.asarray(x, dtype=np.float64)
+        if self._decide is None:
+            g = self._single
+        else:
+            g = 1 if self._decide(x) > 0 else 0
+        out = self._gps[g](x)
+        if self._phys is not None:
+            out += x[self._phys]
+        return out
+
+
+def step_predictor(model) -> StepPredictor:
+    """Freeze a fitted model into a :class:`StepPredictor`.
+
+    Parameters
+    ----------
+    model : GPBaseline, GPWithDerivative, SVCPartitionedGP or HybridModel
+        Fitted model (a hybrid's residual model must be one of the first three).
+
+    Raises
+    ------
+    ModelError
+        If the model kind is not supported.
+    """
+    model._check_fitted()
+    phys = None
+    names = list(model.feature_names_)
+    if isinstance(model, HybridModel):
+        if "physics_bar" not in names and model.physics_ is not None:
+            raise ModelError("a hybrid step needs 'physics_bar' among the residual features")
+        phys = names.index("physics_bar") if "physics_bar" in names else len(names) - 1
+        model = model.residual_
+    if isinstance(model, GPBaseline):
+        g = _GPStep(model.gp_)
+        return StepPredictor({0: g, 1: g}, None, 0, phys, names)
+    if isinstance(model, SVCPartitionedGP):
+        gps = {g: _GPStep(gp) for g, gp in model.gps_.items()}
+        for g in (0, 1):
+            gps.setdefault(g, gps[1 - g])
+        dec = model.decision_
+        cols = list(model.classifier_columns_)
+        if dec is None:
+            decide = None
+        elif isinstance(dec, KernelDecision):
+            decide = _RBFStep(dec, cols)
+        elif isinstance(dec, LinearDecision):
+            decide = _LinearStep(dec, cols)
+        else:
+            est = dec
+
+            def decide(x):
+                return float(est(x[cols][None, :])[0])
+
+        return StepPredictor(gps, decide, model.single_state_, phys, names)
+    raise ModelError(f"no step predictor for a {type(model).__name__}")

@@ -1,0 +1,92 @@
+"""``clutchlab classifiers`` and ``clutchlab train`` through the console entry point."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+
+from clutchlab.data import save_dataset
+from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
+from clutchlab.residual_ml import load_model
+
+
+def _run(*args, check=True):
+    return subprocess.run(
+        [sys.executable, "-m", "clutchlab.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=check,
+    )
+
+
+def test_classifiers_and_train_cli(tmp_path):
+    config = StandConfig(
+        settings=(DitherSetting(50.0, "A"), DitherSetting(70.0, "C")),
+        ramps=(RampProfile("fast", 0.8, 0.2), RampProfile("slow", 2.0, 0.2)),
+        substeps=2,
+        seed=2,
+    )
+    data = tmp_path / "stand"
+    save_dataset(run_stand(config, progress=False).dataset, data)
+
+    out, js = tmp_path / "clf", tmp_path / "clf.json"
+    res = _run(
+        "classifiers",
+        str(data),
+        "--out",
+        str(out),
+        "--json",
+        str(js),
+        "--classifiers",
+        "linear_svc,rbf_svc",
+        "--quiet",
+    )
+    assert "Nonlinear (RBF) SVC" in res.stdout and "LOEO accuracy" in res.stdout
+    assert (out / "classifiers.csv").exists() and (out / "classifiers.png").stat().st_size > 0
+    doc = json.loads(js.read_text())
+    assert list(doc["classifiers"]) == ["linear_svc", "rbf_svc"]
+    assert all(0 <= c["accuracy"] <= 1 for c in doc["classifiers"].values())
+
+    model_dir, mj = tmp_path / "model", tmp_path / "train.json"
+    res = _run(
+        "train",
+        str(data),
+        "--variant",
+        "gp_base",
+        "--kernel",
+        "rbf",
+        "--out",
+        str(model_dir),
+        "--json",
+        str(mj),
+        "--quiet",
+    )
+    assert "all training" in res.stdout and "model written to" in res.stdout
+    doc = json.loads(mj.read_text())
+    assert doc["variant"] == "gp_base" and set(doc["training"]["per_experiment"]) == {
+        "fast_50Hz_A",
+        "fast_70Hz_C",
+        "slow_50Hz_A",
+        "slow_70Hz_C",
+    }
+    assert doc["training"]["overall"]["fit_pct"] > 50  # explains most of the pressure
+    model = load_model(model_dir / "model.json")
+    assert model.feature_names_ == ["current_mA", "dither_amp_mA", "dither_freq_Hz"]
+    assert np.isfinite(doc["fit_s"])
+
+    bad = _run(
+        "train",
+        str(data),
+        "--variant",
+        "gp_base",
+        "--out",
+        str(model_dir),
+        "--train",
+        "medium",
+        check=False,
+    )
+    assert bad.returncode == 2 and "unknown ramp label" in bad.stderr

@@ -1,0 +1,278 @@
+"""Paper pipeline on a tiny stand dataset: features, labels, estimators, persistence, steps."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from sklearn.base import clone
+from sklearn.exceptions import NotFittedError
+
+from clutchlab.data import Trace, dither_period_mean, dither_period_samples
+from clutchlab.errors import DataError, ModelError
+from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
+from clutchlab.residual_ml import (
+    EVENT,
+    LATCHED,
+    UNLATCHED,
+    VARIANTS,
+    FeatureBuilder,
+    GPBaseline,
+    GPWithDerivative,
+    HybridModel,
+    LatchLabelRule,
+    PhysicsPredictor,
+    SVCPartitionedGP,
+    compare_classifiers,
+    direction_of_travel,
+    latch_labels,
+    load_model,
+    make_variant,
+    score_traces,
+    step_predictor,
+)
+from clutchlab.residual_ml.hybrid import HYBRID_FEATURES
+
+#: Small GPs: the fast tests check behaviour, not accuracy.
+SMALL = {"n_hyper": 300, "max_points": 300}
+
+
+@pytest.fixture(scope="module")
+def tiny():
+    """Six short stand experiments: fast / medium / slow × (30 Hz A, 70 Hz B)."""
+    config = StandConfig(
+        settings=(DitherSetting(30.0, "A"), DitherSetting(70.0, "B")),
+        ramps=(
+            RampProfile("fast", 1.0, 0.3),
+            RampProfile("medium", 2.0, 0.3),
+            RampProfile("slow", 4.0, 0.3),
+        ),
+        substeps=2,
+        seed=1,
+    )
+    return run_stand(config, progress=False).dataset
+
+
+@pytest.fixture(scope="module")
+def train(tiny):
+    return tiny.select(ramps=["fast", "slow"])
+
+
+@pytest.fixture(scope="module")
+def fitted(train):
+    return {
+        "gp_base": GPBaseline(**SMALL).fit(train),
+        "gp_didt": GPWithDerivative(**SMALL).fit(train),
+        "paper_svc_gp": SVCPartitionedGP(**SMALL).fit(train),
+        "hybrid": HybridModel(
+            physics=PhysicsPredictor(substeps=2),
+            residual=SVCPartitionedGP(features=HYBRID_FEATURES, **SMALL),
+        ).fit(train),
+    }
+
+
+# -- features and labels ----------------------------------------------------------------------
+
+
+def test_features_have_units_and_follow_the_trace(tiny):
+    tr = tiny["fast_30Hz_A"]
+    fb = FeatureBuilder()
+    F = fb.build(tr)
+    assert F.shape == (len(tr), 5) and fb.units == ("mA", "mA", "Hz", "mA/s", "1")
+    np.testing.assert_array_equal(F[:, 0], tr.get("current_cmd_mA"))
+    up = (tr.time_s > 0.5) & (tr.time_s < 1.1)
+    assert np.allclose(F[up, 3], 1100.0 / 1.0, rtol=0.02)  # 1100 mA in 1 s
+    assert (F[up, 4] == 1).all() and F[-1, 4] == -1  # held through the final hold
+    with pytest.raises(DataError, match="physics"):
+        FeatureBuilder(HYBRID_FEATURES).build(tr)
+    with pytest.raises(DataError, match="unknown"):
+        FeatureBuilder(("current_mA", "nope"))
+
+
+def test_features_from_measured_current_only(tiny):
+    tr = tiny["slow_30Hz_A"]
+    bare = Trace(
+        "bare",
+        {
+            k: v
+            for k, v in tr.signals.items()
+            if k not in ("current_cmd_mA", "dither_amp_mA", "dither_freq_Hz")
+        },
+        meta=tr.meta,
+    )
+    F, G = FeatureBuilder().build(tr), FeatureBuilder().build(bare)
+    mid = slice(len(tr) // 10, -len(tr) // 10)
+    assert np.median(np.abs(F[mid, 0] - G[mid, 0])) < 5.0  # demodulated current, mA
+    assert np.median(np.abs(F[mid, 2] - G[mid, 2])) < 1.0  # frequency, Hz
+    assert np.mean(F[mid, 4] == G[mid, 4]) > 0.95  # direction of travel
+
+
+def test_direction_of_travel_holds_through_dead_band():
+    d = np.array([0, 0, 50, 50, 2, 0, -3, -40, 0, 0.0])
+    np.testing.assert_array_equal(direction_of_travel(d, 10.0), [0, 0, 1, 1, 1, 1, 1, -1, -1, -1])
+
+
+def test_latch_labels_rule(tiny):
+    tr = tiny["fast_70Hz_B"]
+    lab, state = latch_labels(tr, return_state=True)
+    p, line = tr.get("clutch_pressure_bar"), tr.get("line_pressure_bar")
+    assert set(np.unique(lab)) == {EVENT, UNLATCHED, LATCHED}
+    assert np.all(line[lab == LATCHED] - p[lab == LATCHED] < 1.5)
+    assert np.all(line[lab == UNLATCHED] - p[lab == UNLATCHED] > 0.5)
+    switches = np.flatnonzero(np.diff(state) != 0)
+    assert switches.size == 2  # latch on, latch off: no flicker
+    for k in switches:
+        assert lab[k] == EVENT or lab[k + 1] == EVENT  # every switch sits in a latch event
+    assert (lab == EVENT).sum() < 0.05 * len(tr)
+    none = latch_labels(tr, LatchLabelRule(event_band_bar=(1.0, 1.0)))
+    assert EVENT not in none
+    with pytest.raises(DataError, match="margin"):
+        LatchLabelRule(margin_bar=3.0, event_band_bar=(0.3, 2.0))
+
+
+# -- estimators: the scikit-learn contract ---------------------------------------------------
+
+
+@pytest.mark.parametrize("name", list(VARIANTS))
+def test_estimator_contract(name, train, tiny):
+    est = make_variant(name)
+    with pytest.raises(NotFittedError):
+        est.predict(tiny[0])
+    c = clone(est)
+    assert c.get_params().keys() == est.get_params().keys()
+    assert not [k for k in vars(c) if k.endswith("_")]  # __init__ stores arguments only
+    with pytest.raises(DataError):
+        est.fit(train, y=np.zeros(3))
+
+
+@pytest.mark.parametrize("name", list(VARIANTS))
+def test_fitted_models_predict_every_sample(name, fitted, tiny):
+    model = fitted[name]
+    assert model.train_experiments_ == ["fast_30Hz_A", "fast_70Hz_B", "slow_30Hz_A", "slow_70Hz_B"]
+    tr = tiny["medium_30Hz_A"]
+    mean, std = model.predict(tr, return_std=True)
+    assert mean.shape == std.shape == (len(tr),) and np.isfinite(mean).all()
+    assert (std >= 0).all()
+    many = model.predict(tiny.select(ramps=["medium"]))
+    assert isinstance(many, list) and len(many) == 2
+    np.testing.assert_array_equal(many[0], mean)
+
+
+def test_fit_returns_self_and_ablation_on_training_data(train, fitted):
+    est = GPBaseline(n_hyper=50, max_points=50)
+    assert est.fit(train[:1]) is est
+    base = score_traces(fitted["gp_base"], train)["overall"]["rmse_bar"]
+    didt = score_traces(fitted["gp_didt"], train)["overall"]["rmse_bar"]
+    assert didt < base  # dI/dt explains the hysteresis the baseline cannot
+
+
+def test_path_prediction_matches_exact_evaluation(fitted, tiny):
+    model = fitted["paper_svc_gp"]
+    tr = tiny["medium_70Hz_B"]
+    F = model._trace_matrix(tr)
+    exact = model._predict_matrix(F, path=False, return_std=False)
+    fast = model.predict(tr)
+    n = dither_period_samples(tr)  # knots: interpolation error of the scored signal, bar
+    diff = np.abs(dither_period_mean(fast, n) - dither_period_mean(exact, n))
+    assert diff.max() < 0.05 and np.mean(diff < 0.01) > 0.98
+    every = clone(model).set_params(knot_tol=0.0)
+    every.__dict__.update({k: v for k, v in vars(model).items() if k.endswith("_")})
+    np.testing.assert_allclose(every.predict(tr), exact, atol=1e-12)  # tol 0: every sample
+
+
+def test_partitioned_model_classifies_latch(fitted, tiny):
+    model = fitted["paper_svc_gp"]
+    assert set(model.gps_) == {0, 1}
+    assert model.classifier_train_accuracy_ > 0.98
+    tr = tiny["fast_30Hz_A"]
+    lab = latch_labels(tr)
+    pred = model.predict_latch(tr)
+    assert np.mean(pred[lab >= 0] == lab[lab >= 0]) > 0.98
+
+
+def test_hybrid_adds_physics_and_residual(fitted, tiny):
+    model = fitted["hybrid"]
+    parts = model.predict_components(tiny["medium_30Hz_A"])
+    np.testing.assert_allclose(parts["pressure_bar"], parts["physics_bar"] + parts["residual_bar"])
+    rm = score_traces(model, tiny.select(ramps=["medium"]))["overall"]["rmse_bar"]
+    phys = PhysicsPredictor(substeps=2)
+    from clutchlab.data import pressure_metrics
+
+    ys, ps = [], []
+    for tr in tiny.select(ramps=["medium"]):
+        n = dither_period_samples(tr)
+        ys.append(dither_period_mean(tr.get("clutch_pressure_bar"), n))
+        ps.append(dither_period_mean(phys.predict(tr), n))
+    physics_rmse = pressure_metrics(np.concatenate(ys), np.concatenate(ps))["rmse_bar"]
+    assert rm < physics_rmse  # the residual model improves on the physics alone
+
+
+def test_hybrid_needs_physics_outputs_it_cannot_get(train):
+    class PressureOnly:
+        def predict(self, trace):
+            return np.full(len(trace), 5.0)
+
+    with pytest.raises(ModelError, match="pilot"):
+        HybridModel(physics=PressureOnly()).fit(train)
+    ok = HybridModel(
+        physics=PressureOnly(),
+        residual=SVCPartitionedGP(features=("current_mA", "physics_bar"), **SMALL),
+    ).fit(train)
+    assert ok.feature_names_ == ["current_mA", "physics_bar"]
+
+
+# -- persistence and single steps ------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", list(VARIANTS))
+def test_save_load_round_trip_gives_identical_predictions(name, fitted, tiny, tmp_path):
+    model = fitted[name]
+    path = tmp_path / "m.json"
+    model.save(path)
+    assert (tmp_path / "m.npz").exists()
+    doc = json.loads(path.read_text())
+    assert doc["class"] == type(model).__name__ and doc["format"] == "clutchlab.residual_ml"
+    loaded = type(model).load(path)
+    tr = tiny["medium_70Hz_B"]
+    np.testing.assert_array_equal(loaded.predict(tr), model.predict(tr))
+    _, s1 = model.predict(tr, return_std=True)
+    _, s2 = loaded.predict(tr, return_std=True)
+    np.testing.assert_allclose(s2, s1, rtol=1e-9, atol=1e-12)
+    assert loaded.get_params(deep=False).keys() == model.get_params(deep=False).keys()
+    with np.load(tmp_path / "m.npz", allow_pickle=False) as arrays:
+        assert arrays.files  # readable without pickle
+
+
+def test_load_rejects_other_files(tmp_path, fitted):
+    bad = tmp_path / "x.json"
+    bad.write_text('{"format": "something else"}')
+    with pytest.raises(ModelError, match="not a clutchlab"):
+        load_model(bad)
+    fitted["gp_base"].save(tmp_path / "g.json")
+    with pytest.raises(ModelError, match="not a SVCPartitionedGP"):
+        SVCPartitionedGP.load(tmp_path / "g.json")
+
+
+def test_step_predictor_matches_batch(fitted, tiny):
+    tr = tiny["medium_30Hz_A"]
+    for name in ("gp_didt", "paper_svc_gp"):
+        model = fitted[name]
+        step = step_predictor(model)
+        F = model._trace_matrix(tr)[::97]
+        exact = model._predict_matrix(F, path=False, return_std=False)
+        got = np.array([step(x) for x in F])
+        np.testing.assert_allclose(got, exact, atol=1e-9)
+
+
+def test_classifier_comparison_table_and_figure(train, tmp_path):
+    res = compare_classifiers(list(train), names=["logistic_regression", "rbf_svc"])
+    assert [r["name"] for r in res.rows] == ["logistic_regression", "rbf_svc"]
+    for r in res.rows:
+        assert 0.5 < r["accuracy"] <= 1.0 and r["min_accuracy"] <= r["accuracy"]
+    res.to_csv(tmp_path / "c.csv")
+    assert (tmp_path / "c.csv").read_text().splitlines()[0].startswith("name,label,accuracy")
+    fig = res.figure(max_points=500)
+    assert len(fig.axes) == 2 and "0." in fig.axes[0].texts[0].get_text()
+    with pytest.raises(DataError, match="at least 2"):
+        compare_classifiers([train[0]])

@@ -1,0 +1,111 @@
+"""Must-shows of the paper pipeline on the full default stand dataset (slow).
+
+Training: the 18 fast + slow experiments; test: the 9 medium-ramp experiments, scored by
+the RMSE of the dither-period-mean clutch pressure. Measured values: BENCHMARKS.md
+("Local GP / paper pipeline"); regenerate with ``python -m pytest -m slow
+tests/test_ml_slow.py -s``.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from clutchlab.physics.fit import FitSettings, PhysicsFitter
+from clutchlab.physics.stand import StandConfig, run_stand
+from clutchlab.residual_ml import (
+    PhysicsPredictor,
+    SVCPartitionedGP,
+    compare_classifiers,
+    make_variant,
+    score_traces,
+)
+from clutchlab.residual_ml.hybrid import HYBRID_FEATURES
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def stand():
+    return run_stand(StandConfig(), progress=False).dataset
+
+
+@pytest.fixture(scope="module")
+def split(stand):
+    return list(stand.select(ramps=["fast", "slow"])), list(stand.select(ramps=["medium"]))
+
+
+def _medium_rmse(split, name, **params) -> float:
+    train, test = split
+    model = make_variant(name, **params).fit(train)
+    rmse = score_traces(model, test)["overall"]["rmse_bar"]
+    print(f"{name} {params or ''}: medium RMSE {rmse:.4f} bar")
+    return rmse
+
+
+@pytest.fixture(scope="module")
+def medium(split):
+    """Medium-ramp RMSE (bar) of every variant with its default settings."""
+    return {n: _medium_rmse(split, n) for n in ("gp_base", "gp_didt", "paper_svc_gp", "hybrid")}
+
+
+def test_must_show_1_classifier_table(split):
+    res = compare_classifiers(split[0])
+    print("\n" + res.table())
+    acc = {r["name"]: r["accuracy"] for r in res.rows}
+    assert len(acc) == 6
+    assert acc["rbf_svc"] >= 0.99
+    assert acc["gradient_boosting"] >= 0.99
+
+
+def test_must_show_2_partitioned_gp_beats_both_single_gps(medium):
+    assert medium["paper_svc_gp"] < medium["gp_didt"]
+    assert medium["paper_svc_gp"] < medium["gp_base"]
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="with the kernels chosen by leave-one-experiment-out (gp_base RBF, gp_didt RQ), "
+    "gp_didt is worse than gp_base on the medium ramp (measured 0.87-1.07 vs 0.70 bar): its "
+    "GP blends the latch steps of the slow and fast ramps instead of moving them",
+)
+def test_must_show_2_derivative_beats_baseline_with_default_kernels(medium):
+    assert medium["gp_didt"] < medium["gp_base"]
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="not robust: gp_didt with RBF GPs measured 0.495 bar on the CSV-loaded stand "
+    "dataset (order holds) but 0.810 bar on the same data generated in-process (order "
+    "broken; gp_base 0.697) - its hyperparameter optimum moves with tiny data differences",
+)
+def test_must_show_2_full_order_with_rbf_local_gps(split):
+    rmse = {n: _medium_rmse(split, n, kernel="rbf") for n in ("gp_base", "gp_didt", "paper_svc_gp")}
+    assert rmse["gp_base"] > rmse["gp_didt"] > rmse["paper_svc_gp"]
+
+
+def test_must_show_2_rq_partitioned_gp(split, medium):
+    rq = _medium_rmse(split, "paper_svc_gp", kernel="rq")
+    assert rq < medium["gp_base"]  # the paper's kernel choice also beats the stage-1 GP
+
+
+def test_must_show_3_hybrid_beats_paper_model(medium, split):
+    assert medium["hybrid"] <= medium["paper_svc_gp"]
+    rq = _medium_rmse(
+        split, "hybrid", residual=SVCPartitionedGP(features=HYBRID_FEATURES, kernel="rq")
+    )
+    assert rq <= medium["paper_svc_gp"]  # with the paper's RQ kernel too
+
+
+@pytest.fixture(scope="module")
+def fitted_physics(split):
+    """The physics model fitted on the training experiments only (issue 4's fitter)."""
+    fitter = PhysicsFitter(settings=FitSettings(progress=False)).fit(split[0])
+    return PhysicsPredictor.from_fitter(fitter)
+
+
+def test_must_show_3_hybrid_on_fitted_physics(split, medium, fitted_physics):
+    """The hybrid of issue 5 is the *fitted* physics plus a partitioned GP on its residual.
+    (With the datasheet physics it measured 0.0958-0.1153 bar, at the 0.10 bound.)"""
+    rmse = _medium_rmse(split, "hybrid", physics=fitted_physics)
+    assert rmse <= medium["paper_svc_gp"]
+    assert rmse <= 0.10
