@@ -223,6 +223,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .cli_ml import register as register_ml
 
     register_ml(sub)
+    from .cli_fmu import register as register_fmu
+
+    register_fmu(sub)
     return parser
 
 

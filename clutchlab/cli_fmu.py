@@ -1,0 +1,104 @@
+"""``clutchlab export-fmu``: a fitted model as an FMI 2.0 co-simulation FMU."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+__all__ = ["register"]
+
+
+def _is_ml_model(path: str) -> bool:
+    """Whether ``path`` is a model saved by ``clutchlab.residual_ml.save_model``."""
+    try:
+        doc = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(doc, dict) and "format" in doc and "class" in doc
+
+
+def _export(args: argparse.Namespace) -> Path:
+    from .physics.fmu import build_fmu, export_physics_fmu
+
+    if _is_ml_model(args.model):
+        from .physics.fmu.adapters import ml_program_from
+        from .residual_ml import load_model
+
+        program = ml_program_from(
+            load_model(args.model),
+            with_std=not args.no_std,
+            causal_didt=args.causal_didt,
+            name=args.name,
+        )
+        return build_fmu(program, args.out)
+    return export_physics_fmu(
+        args.model,
+        args.out,
+        drive=args.drive,
+        substeps=args.substeps,
+        name=args.name,
+        step_s=args.step,
+        stop_time_s=args.stop_time,
+    )
+
+
+def _cmd_export_fmu(args: argparse.Namespace) -> int:
+    import fmpy
+    from fmpy.validation import validate_fmu
+
+    out = _export(args)
+    md = fmpy.read_model_description(str(out))
+    problems = validate_fmu(str(out))
+    inputs = [v for v in md.modelVariables if v.causality == "input"]
+    outputs = [v for v in md.modelVariables if v.causality == "output"]
+    n_par = sum(v.causality == "parameter" for v in md.modelVariables)
+    print(f"wrote {out} (FMI {md.fmiVersion} co-simulation, {md.coSimulation.modelIdentifier})")
+    print("  inputs:  " + ", ".join(f"{v.name} [{v.unit or '-'}]" for v in inputs))
+    print("  outputs: " + ", ".join(f"{v.name} [{v.unit or '-'}]" for v in outputs))
+    print(f"  {n_par} parameters; default experiment step {md.defaultExperiment.stepSize} s")
+    print("  fmpy.validation: " + ("no problems" if not problems else "; ".join(problems)))
+    if args.json:
+        doc = {
+            "fmu": str(out),
+            "model_identifier": md.coSimulation.modelIdentifier,
+            "guid": md.guid,
+            "drive": None if _is_ml_model(args.model) else args.drive,
+            "inputs": [v.name for v in inputs],
+            "outputs": [v.name for v in outputs],
+            "parameters": n_par,
+            "validation_problems": problems,
+        }
+        Path(args.json).write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+    return 0 if not problems else 1
+
+
+def register(sub) -> None:
+    """Add the ``export-fmu`` subcommand to the ``clutchlab`` parser."""
+    p = sub.add_parser("export-fmu", help="export a fitted model as an FMI 2.0 co-simulation FMU")
+    p.add_argument(
+        "model",
+        help="fitted physics model JSON (clutchlab fit-physics --out) or a residual_ml "
+        "model JSON (gp_base; gp_didt / paper_svc_gp with --causal-didt)",
+    )
+    p.add_argument("--out", required=True, help="FMU file to write (.fmu)")
+    p.add_argument(
+        "--drive",
+        default="command",
+        choices=["command", "measured"],
+        help="inputs: nominal current + dither (command, default) or measured current",
+    )
+    p.add_argument("--substeps", type=int, default=None, help="ROS2 steps per step (default 4)")
+    p.add_argument("--name", default=None, help="model identifier (default clutch_circuit_DRIVE)")
+    p.add_argument("--step", type=float, default=1e-3, help="communication step, s (1e-3)")
+    p.add_argument("--stop-time", type=float, default=23.0, help="default experiment stop, s")
+    p.add_argument(
+        "--no-std", action="store_true", help="ML models: no predictive-std output (faster)"
+    )
+    p.add_argument(
+        "--causal-didt",
+        action="store_true",
+        help="ML models: compute dI/dt causally (lags the offline feature at ramp reversals)",
+    )
+    p.add_argument("--json", help="write a summary as JSON here")
+    p.set_defaults(func=_cmd_export_fmu)

@@ -1,0 +1,101 @@
+"""Export a fitted physics model as an FMU."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ...errors import FitError
+from ..model import CircuitModel
+from ..parameters import ParameterSet
+from ..settings import SimulationSettings
+from .build import build_fmu
+from .errors import FmuError
+from .physics import physics_program
+
+__all__ = ["export_physics_fmu", "physics_source"]
+
+
+def physics_source(source) -> tuple[CircuitModel, ParameterSet]:
+    """The model and parameter values of a fitted physics model.
+
+    Parameters
+    ----------
+    source : path-like, FitResult, PhysicsFitter or (CircuitModel, ParameterSet)
+        A fit JSON written by ``clutchlab fit-physics`` / ``PhysicsFitter.save``, a fit
+        result, a fitted fitter, or a model with its parameters.
+
+    Raises
+    ------
+    FmuError
+        When ``source`` is none of these (a JSON that is not a fit result is named).
+    """
+    from ..fit import FitResult, PhysicsFitter
+
+    if isinstance(source, tuple) and len(source) == 2:
+        model, params = source
+        if isinstance(model, CircuitModel) and isinstance(params, ParameterSet):
+            return model, params
+    if isinstance(source, PhysicsFitter):
+        if not hasattr(source, "result_"):
+            raise FmuError("the PhysicsFitter is not fitted; fit it or load a fit JSON first")
+        return source.model_, source.params_
+    if isinstance(source, FitResult):
+        return source.model(), source.params()
+    if isinstance(source, str | Path):
+        try:
+            result = FitResult.from_json(Path(source))
+        except FitError as exc:
+            raise FmuError(f"{source}: not a fitted physics model ({exc})") from exc
+        try:
+            return result.model(), result.params()
+        except Exception as exc:  # unknown effect or parameter in a hand-edited file
+            raise FmuError(f"{source}: the fitted model cannot be rebuilt: {exc}") from exc
+    raise FmuError(
+        f"cannot export {type(source).__name__}: expected a fit JSON path, FitResult, "
+        "fitted PhysicsFitter or (CircuitModel, ParameterSet)"
+    )
+
+
+def export_physics_fmu(
+    source,
+    path: str | Path,
+    drive: str = "command",
+    substeps: int | None = None,
+    name: str | None = None,
+    step_s: float = 1e-3,
+    stop_time_s: float = 23.0,
+    settings: SimulationSettings | None = None,
+) -> Path:
+    """Write an FMI 2.0 co-simulation FMU of a fitted physics model.
+
+    Parameters
+    ----------
+    source : path-like, FitResult, PhysicsFitter or (CircuitModel, ParameterSet)
+        The fitted model (see :func:`physics_source`).
+    path : path-like
+        ``.fmu`` file to write.
+    drive : {"command", "measured"}
+        Inputs: nominal current + dither (``command``, co-simulation with a controller)
+        or the measured coil current (``measured``, replaying logs); see
+        :func:`~clutchlab.physics.fmu.physics.physics_program`.
+    substeps : int, optional
+        ROS2 steps per ``step_s`` (default: the simulator's, 4).
+    name : str, optional
+        Model identifier (default ``clutch_circuit_<drive>``).
+    step_s : float
+        Nominal communication step (s), 1 ms for a 1 kHz loop.
+    stop_time_s : float
+        Default experiment stop time (s).
+    settings : SimulationSettings, optional
+        Settling time and default dither waveform.
+
+    Returns
+    -------
+    Path
+        The FMU written.
+    """
+    model, params = physics_source(source)
+    program = physics_program(
+        model, params, drive, substeps, settings, name, step_s=step_s, stop_time_s=stop_time_s
+    )
+    return build_fmu(program, path)

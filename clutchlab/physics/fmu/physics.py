@@ -1,0 +1,212 @@
+"""The FMU program of a physics model: the simulator's sample step with the inputs mapped.
+
+The FMU's step is exactly what :func:`clutchlab.physics.simulate` does per sample: the ROS2
+sample step (:func:`~clutchlab.physics.integrator.sample_step_function`, ``substeps`` ROS2
+steps per sample), inputs linear between the step's ends. The FMU keeps the dither phase
+as a state and advances it with the trapezoidal integral of the dither frequency input, as
+the simulator does on a trace. Initialization repeats the simulator's settling run.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from ...errors import ModelError
+from ..assembly import MODEL_INPUTS
+from ..integrator import sample_step_function
+from ..model import CircuitModel
+from ..parameters import ParameterSet
+from ..settings import SimulationSettings
+from .program import FmuProgram, FmuVariable
+
+__all__ = ["DRIVES", "FMU_INPUTS", "physics_program"]
+
+DRIVES = ("command", "measured")
+
+#: FMU inputs per drive: canonical signal name, unit, description, start value.
+FMU_INPUTS: dict[str, tuple[tuple[str, str, str, float], ...]] = {
+    "command": (
+        ("current_cmd_mA", "mA", "nominal (commanded) VFS current, no dither", 0.0),
+        ("dither_amp_mA", "mA", "dither amplitude (the FMU adds the dither)", 0.0),
+        ("dither_freq_Hz", "Hz", "dither frequency; the FMU integrates it to the phase", 50.0),
+    ),
+    "measured": (
+        ("current_mA", "mA", "measured VFS coil current, dither included", 0.0),
+        ("dither_amp_mA", "mA", "dither amplitude (dither-dependent effects)", 0.0),
+        ("dither_freq_Hz", "Hz", "dither frequency", 50.0),
+    ),
+}
+_COMMON_INPUTS = (
+    ("line_pressure_bar", "bar", "line (supply) pressure, gauge", 17.7),
+    ("prime_pressure_bar", "bar", "prime / exhaust backfill pressure, gauge", 0.5),
+    ("oil_temp_C", "°C", "oil temperature", 40.0),
+)
+_WAVES = ("sine", "triangle", "square")
+_U = {s.name: k for k, s in enumerate(MODEL_INPUTS)}
+
+
+def _model_inputs(drive: str, v: ca.SX, dv: ca.SX, phase: ca.SX, waves: ca.SX) -> ca.SX:
+    """The model input vector (:data:`MODEL_INPUTS` order) from FMU inputs ``v``."""
+    u = [ca.SX(0)] * len(MODEL_INPUTS)
+    if drive == "command":
+        u[_U["current_nom_mA"]] = v[0]
+    else:
+        u[_U["current_meas_mA"]] = v[0]
+        u[_U["current_meas_rate_mA_s"]] = dv[0]  # slope over the step, as on a trace
+    u[_U["dither_amp_mA"]] = v[1]
+    u[_U["dither_freq_Hz"]] = v[2]
+    u[_U["dither_phase"]] = phase
+    for k, w in enumerate(_WAVES):
+        u[_U[f"wave_{w}"]] = waves[k]
+    u[_U["line_pressure_bar"]] = v[3]
+    u[_U["prime_pressure_bar"]] = v[4]
+    u[_U["oil_temp_C"]] = v[5]
+    return ca.vertcat(*u)
+
+
+def physics_program(
+    model: CircuitModel,
+    params: ParameterSet,
+    drive: str = "command",
+    substeps: int | None = None,
+    settings: SimulationSettings | None = None,
+    name: str | None = None,
+    step_s: float = 1e-3,
+    stop_time_s: float = 23.0,
+) -> FmuProgram:
+    """The FMU program of ``model`` with parameter values ``params``.
+
+    Parameters
+    ----------
+    model : CircuitModel
+        Frozen model structure (base circuit + effects).
+    params : ParameterSet
+        Parameter values (engineering units), e.g. a fit result's; they become the FMU's
+        parameter start values.
+    drive : {"command", "measured"}
+        ``command``: inputs are the nominal current (mA), dither amplitude (mA) and
+        frequency (Hz); the FMU builds the dithered command and runs the current loop — the
+        co-simulation case (a TCU model commands the current). ``measured``: the input is
+        the measured coil current (mA, dither included) — replaying stand logs; its slope
+        over a step comes from the input derivative (set it, or the current is held).
+    substeps : int, optional
+        ROS2 steps per communication step of ``step_s``; default ``settings.substeps``.
+    settings : SimulationSettings, optional
+        Settling time and waveform defaults (the simulator's defaults otherwise).
+    name : str, optional
+        Model identifier; default ``<model.name>_<drive>``.
+    step_s : float
+        Nominal communication step (s); longer steps are split into pieces of at most this.
+    stop_time_s : float
+        Default experiment stop time (s).
+
+    Returns
+    -------
+    FmuProgram
+    """
+    if drive not in DRIVES:
+        raise ModelError(f"drive must be one of {DRIVES}, not {drive!r}")
+    settings = settings or SimulationSettings()
+    substeps = substeps or settings.substeps
+    fns = model.functions(drive)
+    nx_m, npar_m = fns.nx, len(fns.parameters)
+    spec = FMU_INPUTS[drive] + _COMMON_INPUTS
+    inputs = tuple(FmuVariable(n, u, d, s) for n, u, d, s in spec)
+    outputs = tuple(FmuVariable(o.name, o.unit, o.description) for o in fns.outputs)
+    model_pars = tuple(
+        FmuVariable(
+            p.name,
+            p.unit,
+            f"{p.description} (model parameter, component {p.component})",
+            float(params[p.name]),
+            *((p.lower, p.upper) if p.lower <= params[p.name] <= p.upper else (None, None)),
+        )
+        for p in fns.parameters
+    )
+    wave_default = settings.dither_waveform
+    extra = (
+        *(
+            FmuVariable(
+                f"dither_wave_{w}",
+                "-",
+                f"weight of the {w} dither waveform (sum 1 for a pure waveform)",
+                1.0 if w == wave_default else 0.0,
+            )
+            for w in _WAVES
+        ),
+        FmuVariable(
+            "settle_s", "s", "settling run at the initial inputs before t = 0", settings.settle_s
+        ),
+        FmuVariable("settle_step_s", "s", "step of the settling run", step_s),
+        FmuVariable(
+            "max_step_s",
+            "s",
+            f"longest internal step ({substeps} ROS2 substeps each); longer communication "
+            "steps are split",
+            step_s,
+        ),
+    )
+    parameters = model_pars + extra
+    nv, npar = len(inputs), len(parameters)
+    sample = sample_step_function(fns, substeps)
+
+    x = ca.SX.sym("x", 1 + nx_m)  # [dither phase (cycles); model states]
+    v, dv, h, p = ca.SX.sym("v", nv), ca.SX.sym("dv", nv), ca.SX.sym("h"), ca.SX.sym("p", npar)
+    pm, waves = p[:npar_m], p[npar_m : npar_m + 3]
+    phase0, xm = x[0], x[1:]
+
+    # Communication step: inputs linear over [t, t + h]; trapezoidal phase (as input_matrix).
+    v1 = v + h * dv
+    phase1 = phase0 + 0.5 * (v[2] + v1[2]) * h
+    u0 = _model_inputs(drive, v, dv, phase0, waves)
+    u1 = _model_inputs(drive, v1, dv, phase1, waves)
+    xm1, y1 = sample(xm, u0, u1, h, pm)
+    step = ca.Function(
+        "step",
+        [x, v, dv, h, p],
+        [ca.vertcat(phase1, xm1), y1],
+        ["x", "v", "dv", "h", "p"],
+        ["x1", "y1"],
+    )
+
+    # Settling step: inputs frozen at their initial values, the dither phase running.
+    phase_s = phase0 + v[2] * h
+    xs1, _ = sample(xm, u0, _model_inputs(drive, v, dv, phase_s, waves), h, pm)
+    settle = ca.Function("settle", [x, v, dv, h, p], [ca.vertcat(phase_s, xs1)])
+
+    # Start: declared initial values, the coil current at its command (simulate.initial_state).
+    t_pre = ca.SX.sym("t_pre")
+    x0 = [ca.SX(s.initial) for s in fns.states]
+    if drive == "command":
+        x0[fns.state_index("i")] = ca.fmax(v[0], 0.0)
+    start = ca.Function("start", [v, dv, p, t_pre], [ca.vertcat(-v[2] * t_pre, *x0)])
+
+    output = ca.Function("output", [x, v, p], [fns.out(xm, u0, pm)])
+    ident = name or f"{model.name}_{drive}"
+    effects = ", ".join(model.effect_names) or "none"
+    return FmuProgram(
+        name=ident,
+        description=(
+            f"clutchlab physics model of the clutch control circuit ({drive} drive; "
+            f"effects: {effects}); ROS2, {substeps} substeps per {step_s * 1e3:g} ms step"
+        ),
+        kind="physics",
+        inputs=inputs,
+        outputs=outputs,
+        parameters=parameters,
+        nx=1 + nx_m,
+        start=start,
+        settle=settle,
+        step=step,
+        output=output,
+        step_s=step_s,
+        stop_time_s=stop_time_s,
+        annotations={
+            "kind": "physics",
+            "drive": drive,
+            "substeps": str(substeps),
+            "effects": ",".join(model.effect_names),
+            "model_key": model.key,
+            "states": ",".join(["dither_phase", *(s.name for s in fns.states)]),
+        },
+    )
