@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import shlex
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -93,14 +92,9 @@ def _cmd_params(args: argparse.Namespace) -> int:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from .validation import run_demo
+    from .cli_eval import run_demo_command
 
-    command = "clutchlab " + " ".join(shlex.quote(a) for a in sys.argv[1:])
-    report = run_demo(args.out, progress=not args.quiet, command=command)
-    if args.json:
-        Path(args.json).write_text((Path(args.out) / "metrics.json").read_text())
-    print(f"report: {report}")
-    return 0
+    return run_demo_command(args)
 
 
 def _read_options(args: argparse.Namespace) -> ReadOptions:
@@ -185,8 +179,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", help="write the table as JSON here")
     p.set_defaults(func=_cmd_params)
 
-    p = sub.add_parser("demo", help="stand data → physics → report, end to end")
+    p = sub.add_parser("demo", help="stand data → physics fit → ML variants → report, end to end")
     p.add_argument("--out", default="clutchlab-demo", help="output folder (default clutchlab-demo)")
+    p.add_argument("--variants", default="", help="comma separated (default: every available)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--json", help="also write metrics.json here")
     p.set_defaults(func=_cmd_demo)
@@ -214,18 +209,10 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--overwrite", action="store_true", help="replace an existing destination")
     _add_read_options(q)
     q.set_defaults(func=_cmd_data_convert)
-    from .cli_fit import register as register_fit
+    from . import cli_eval, cli_fit, cli_fmu, cli_ml, cli_sweep
 
-    register_fit(sub)
-    from .cli_sweep import register as register_sweep
-
-    register_sweep(sub)
-    from .cli_ml import register as register_ml
-
-    register_ml(sub)
-    from .cli_fmu import register as register_fmu
-
-    register_fmu(sub)
+    for module in (cli_fit, cli_ml, cli_eval, cli_fmu, cli_sweep):
+        module.register(sub)
     return parser
 
 

@@ -1,6 +1,148 @@
-"""Validation: split protocol, metrics, figures and reports (DESIGN §5)."""
+"""Validation: split protocol, metrics, figures and reports (DESIGN §5).
 
-from .demo import run_demo
-from .metrics import pressure_metrics
+- :class:`Protocol` owns the train / test split and scores fitted models only;
+- :mod:`~clutchlab.validation.variants` names the compared models, whichever layer they come
+  from (:func:`register_variant` adds new ones);
+- :func:`evaluate` fits and scores every variant; :func:`write_report` writes
+  ``report.html``, ``report.md``, ``metrics.json`` and ``metrics.csv`` from one dictionary;
+- :func:`run_demo` is ``clutchlab demo``: the embedded stand end to end.
+"""
 
-__all__ = ["pressure_metrics", "run_demo"]
+from .demo import DEMO_FIT_TIME_LIMIT_S, DemoResult, run_demo, stand_data
+from .evaluate import SCHEMA, Evaluation, evaluate, resolve_variants, versions
+from .figures import (
+    VARIANT_COLORS,
+    FigureSpec,
+    plot_classifier_comparison,
+    plot_hysteresis_bands,
+    plot_prediction_vs_time,
+    plot_pressure_vs_current,
+    plot_residuals,
+    plot_uncertainty,
+    report_figures,
+)
+from .hysteresis import (
+    FALLING,
+    RISING,
+    HysteresisCurve,
+    branch_direction,
+    current_bins,
+    hysteresis_curve,
+    hysteresis_width_error,
+)
+from .latch import LatchCurrents, latch_currents, latch_error
+from .metrics import (
+    ACCURACY_KEYS,
+    METRIC_KEYS,
+    SIGNAL_KINDS,
+    TIMING_KEYS,
+    ExperimentComparison,
+    compare_experiment,
+    pool_comparisons,
+    pressure_metrics,
+)
+from .protocol import (
+    EvaluationError,
+    ExperimentReference,
+    LeakageError,
+    Prediction,
+    Protocol,
+    VariantScore,
+    inputs_only,
+    is_fitted,
+)
+from .report import (
+    METRIC_LABELS,
+    ReportFiles,
+    fmt,
+    jsonable,
+    metrics_csv,
+    render_html,
+    render_markdown,
+    write_json,
+    write_report,
+)
+from .settings import AnalysisSettings
+from .variants import (
+    DESIGN_VARIANTS,
+    DefaultPhysics,
+    FittedPhysics,
+    VariantContext,
+    VariantSpec,
+    available_variants,
+    get_variant,
+    predict_with_std,
+    register_variant,
+    supports_std,
+    unavailable_variants,
+    variant_names,
+)
+
+__all__ = [
+    "ACCURACY_KEYS",
+    "DEMO_FIT_TIME_LIMIT_S",
+    "DESIGN_VARIANTS",
+    "FALLING",
+    "METRIC_KEYS",
+    "METRIC_LABELS",
+    "RISING",
+    "SCHEMA",
+    "SIGNAL_KINDS",
+    "TIMING_KEYS",
+    "VARIANT_COLORS",
+    "AnalysisSettings",
+    "DefaultPhysics",
+    "DemoResult",
+    "Evaluation",
+    "EvaluationError",
+    "ExperimentComparison",
+    "ExperimentReference",
+    "FigureSpec",
+    "FittedPhysics",
+    "HysteresisCurve",
+    "LatchCurrents",
+    "LeakageError",
+    "Prediction",
+    "Protocol",
+    "ReportFiles",
+    "VariantContext",
+    "VariantScore",
+    "VariantSpec",
+    "available_variants",
+    "branch_direction",
+    "compare_experiment",
+    "current_bins",
+    "evaluate",
+    "fmt",
+    "get_variant",
+    "hysteresis_curve",
+    "hysteresis_width_error",
+    "inputs_only",
+    "is_fitted",
+    "jsonable",
+    "latch_currents",
+    "latch_error",
+    "metrics_csv",
+    "plot_classifier_comparison",
+    "plot_hysteresis_bands",
+    "plot_prediction_vs_time",
+    "plot_pressure_vs_current",
+    "plot_residuals",
+    "plot_uncertainty",
+    "pool_comparisons",
+    "predict_with_std",
+    "pressure_metrics",
+    "register_variant",
+    "render_html",
+    "render_markdown",
+    "report_figures",
+    "resolve_variants",
+    "run_demo",
+    "stand_data",
+    "supports_std",
+    "unavailable_variants",
+    "variant_names",
+    "versions",
+    "write_json",
+    "write_report",
+]

@@ -1,9 +1,194 @@
 """Error metrics of the validation protocol (DESIGN §5 names).
 
-The pressure metrics live in the data layer so that the physics fit reports the same
-numbers; they are re-exported here, where the protocol uses them.
+Per variant, on the test experiments pooled (every metric is computed twice: on the clutch
+pressure averaged over one dither period — primary — and on the raw pressure — secondary):
+
+==============================  ====  =========================================================
+key                             unit  definition
+==============================  ====  =========================================================
+``rmse_bar``                    bar   √mean(e²), e = predicted − measured, all test samples
+``mae_bar``                     bar   mean |e|
+``max_abs_bar``                 bar   max |e|
+``fit_pct``                     %     100·(1 − ‖e‖/‖y − ȳ‖)
+``hysteresis_width_err_bar``    bar   RMS over experiments × 25 mA current bins of predicted
+                                      minus measured hysteresis width (rising minus falling
+                                      pressure at the bin centre), regulated bins only (see
+                                      :func:`~clutchlab.validation.hysteresis.hysteresis_width_error`)
+``latch_on_err_mA``             mA    mean over experiments of |predicted − measured| latch-on
+                                      current (:func:`~clutchlab.validation.latch.latch_currents`;
+                                      a missing snap counts at the peak current)
+``latch_off_err_mA``            mA    the same for the latch-off current
+``fit_s``                       s     wall time of ``fit`` on the training experiments (for a
+                                      model built on another variant, including that one's)
+``predict_s``                   s     wall time of ``predict`` on all test experiments
+==============================  ====  =========================================================
+
+The pressure metrics themselves live in the data layer (the physics fit reports the same
+numbers) and are re-exported here.
 """
 
-from ..data.metrics import pressure_metrics
+from __future__ import annotations
 
-__all__ = ["pressure_metrics"]
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..data.metrics import pressure_metrics
+from .hysteresis import current_bins, hysteresis_curve, hysteresis_width_error
+from .latch import LatchCurrents, latch_currents, latch_error
+from .settings import AnalysisSettings
+
+__all__ = [
+    "ACCURACY_KEYS",
+    "METRIC_KEYS",
+    "SIGNAL_KINDS",
+    "TIMING_KEYS",
+    "ExperimentComparison",
+    "compare_experiment",
+    "pool_comparisons",
+    "pressure_metrics",
+]
+
+#: Error metrics, computed on each signal kind.
+ACCURACY_KEYS: tuple[str, ...] = (
+    "rmse_bar",
+    "mae_bar",
+    "max_abs_bar",
+    "fit_pct",
+    "hysteresis_width_err_bar",
+    "latch_on_err_mA",
+    "latch_off_err_mA",
+)
+#: Timings of a variant, s.
+TIMING_KEYS: tuple[str, ...] = ("fit_s", "predict_s")
+#: Every key of a variant's row in ``metrics.json`` (DESIGN §5).
+METRIC_KEYS: tuple[str, ...] = (*ACCURACY_KEYS, *TIMING_KEYS)
+#: Scored signals: the dither-period mean (primary) and the raw pressure (secondary).
+SIGNAL_KINDS: tuple[str, ...] = ("period_mean", "raw")
+
+
+@dataclass(frozen=True)
+class ExperimentComparison:
+    """Measured against predicted clutch pressure on one test experiment, one signal kind.
+
+    Attributes
+    ----------
+    name : str
+        Experiment name.
+    measured_bar, predicted_bar : numpy.ndarray
+        The compared signals, bar.
+    width_err_bar : numpy.ndarray
+        Predicted minus measured hysteresis width in each counted current bin, bar.
+    latch_measured, latch_predicted : LatchCurrents
+        Latch currents of the two signals, mA.
+    """
+
+    name: str
+    measured_bar: np.ndarray
+    predicted_bar: np.ndarray
+    width_err_bar: np.ndarray
+    latch_measured: LatchCurrents
+    latch_predicted: LatchCurrents
+
+    def latch_errors(self) -> dict[str, tuple[float, bool]]:
+        """``{"on": (error_mA, censored), "off": (...)}``, see :func:`latch_error`."""
+        peak = self.latch_measured.peak_mA
+        return {
+            "on": latch_error(self.latch_measured.on_mA, self.latch_predicted.on_mA, peak),
+            "off": latch_error(self.latch_measured.off_mA, self.latch_predicted.off_mA, peak),
+        }
+
+    def summary(self) -> dict[str, float]:
+        """Per-experiment numbers for the report (bar, mA; NaN where undefined)."""
+        errs = self.latch_errors()
+        w = self.width_err_bar
+        return {
+            **pressure_metrics(self.measured_bar, self.predicted_bar),
+            "hysteresis_width_err_bar": float(np.sqrt(np.mean(w * w))) if w.size else np.nan,
+            "hysteresis_bins": int(w.size),
+            "latch_on_measured_mA": self.latch_measured.on_mA,
+            "latch_on_predicted_mA": self.latch_predicted.on_mA,
+            "latch_on_err_mA": errs["on"][0],
+            "latch_off_measured_mA": self.latch_measured.off_mA,
+            "latch_off_predicted_mA": self.latch_predicted.off_mA,
+            "latch_off_err_mA": errs["off"][0],
+        }
+
+
+def compare_experiment(
+    name: str,
+    current_mA: np.ndarray,
+    direction: np.ndarray,
+    line_bar: np.ndarray | float,
+    measured_bar: np.ndarray,
+    predicted_bar: np.ndarray,
+    settings: AnalysisSettings | None = None,
+) -> ExperimentComparison:
+    """Compare one experiment's predicted clutch pressure with the measured one.
+
+    Parameters
+    ----------
+    name : str
+        Experiment name.
+    current_mA : numpy.ndarray
+        Nominal current per sample, mA.
+    direction : numpy.ndarray
+        Branch per sample (:func:`~clutchlab.validation.hysteresis.branch_direction`).
+    line_bar : numpy.ndarray or float
+        Measured line pressure, bar.
+    measured_bar, predicted_bar : numpy.ndarray
+        Clutch pressure, bar, same signal kind (both period means, or both raw).
+    settings : AnalysisSettings, optional
+        Bins and latch margin.
+
+    Returns
+    -------
+    ExperimentComparison
+    """
+    s = settings or AnalysisSettings()
+    bins = current_bins(current_mA, s.bin_mA)
+    curve_m = hysteresis_curve(current_mA, measured_bar, direction, line_bar, s, bins=bins)
+    curve_p = hysteresis_curve(current_mA, predicted_bar, direction, line_bar, s, bins=bins)
+    werr, _ = hysteresis_width_error(curve_m, curve_p)
+    return ExperimentComparison(
+        name=name,
+        measured_bar=np.asarray(measured_bar, dtype=float),
+        predicted_bar=np.asarray(predicted_bar, dtype=float),
+        width_err_bar=werr,
+        latch_measured=latch_currents(current_mA, measured_bar, direction, line_bar, s),
+        latch_predicted=latch_currents(current_mA, predicted_bar, direction, line_bar, s),
+    )
+
+
+def pool_comparisons(comparisons: list[ExperimentComparison]) -> dict[str, float]:
+    """The accuracy metrics (:data:`ACCURACY_KEYS`) over several test experiments.
+
+    Parameters
+    ----------
+    comparisons : list of ExperimentComparison
+        One per test experiment, one signal kind.
+
+    Returns
+    -------
+    dict
+        :data:`ACCURACY_KEYS` → value (bar, %, mA; NaN when undefined, e.g. no experiment
+        latches in either signal), plus ``hysteresis_bins`` (bins counted),
+        ``latch_on_bias_mA`` / ``latch_off_bias_mA`` (mean signed error) and
+        ``latch_censored`` (experiments where one signal never snapped).
+    """
+    if not comparisons:
+        raise ValueError("no experiments to pool")
+    out = pressure_metrics(
+        np.concatenate([c.measured_bar for c in comparisons]),
+        np.concatenate([c.predicted_bar for c in comparisons]),
+    )
+    w = np.concatenate([c.width_err_bar for c in comparisons])
+    out["hysteresis_width_err_bar"] = float(np.sqrt(np.mean(w * w))) if w.size else np.nan
+    extra: dict[str, float] = {"hysteresis_bins": int(w.size), "latch_censored": 0}
+    for which in ("on", "off"):
+        errs = [c.latch_errors()[which] for c in comparisons]
+        vals = np.array([e for e, _ in errs if np.isfinite(e)])
+        out[f"latch_{which}_err_mA"] = float(np.mean(np.abs(vals))) if vals.size else np.nan
+        extra[f"latch_{which}_bias_mA"] = float(np.mean(vals)) if vals.size else np.nan
+        extra["latch_censored"] += sum(c for _, c in errs)
+    return {k: out[k] for k in ACCURACY_KEYS} | extra

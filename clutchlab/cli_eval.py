@@ -1,0 +1,107 @@
+"""``clutchlab evaluate`` and ``clutchlab demo``: the physics-vs-ML comparison report."""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+
+__all__ = ["command_line", "register", "run_demo_command"]
+
+
+def _csv(text: str | None) -> tuple[str, ...]:
+    return tuple(s.strip() for s in (text or "").split(",") if s.strip())
+
+
+def command_line() -> str:
+    """The command line of this process, as recorded in reports."""
+    return "clutchlab " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+
+
+def _finish(files, failed: dict[str, str], json_path: str | None) -> int:
+    from .validation import write_json
+
+    if json_path:
+        write_json(files.doc, json_path)
+    for name, why in failed.items():
+        print(f"variant {name} failed: {why}", file=sys.stderr)
+    print(f"report: {files.html}")
+    return 1 if failed else 0
+
+
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    from .data import load_dataset
+    from .physics import CircuitModel
+    from .physics.fit import FitSettings
+    from .validation import evaluate, write_report
+
+    dataset = load_dataset(args.dataset, channel_map=args.map)
+    kw = {"progress": not args.quiet, "time_limit_s": args.fit_time_limit}
+    if args.fit_max_iter is not None:
+        kw["max_iter"] = args.fit_max_iter
+    ev = evaluate(
+        dataset,
+        _csv(args.variants) or None,
+        train=_csv(args.train),
+        test=_csv(args.test),
+        physics_model=CircuitModel().with_effects(*_csv(args.effects)),
+        physics_settings=FitSettings(**kw),
+        on_error="report",
+        progress=not args.quiet,
+        classifiers=False if args.no_classifiers else None,
+        command=command_line(),
+    )
+    files = write_report(ev, Path(args.out))
+    return _finish(files, ev.failed, args.json)
+
+
+def run_demo_command(args: argparse.Namespace) -> int:
+    """The ``clutchlab demo`` subcommand (registered in :mod:`clutchlab.cli`)."""
+    from .validation import run_demo
+
+    result = run_demo(
+        args.out,
+        progress=not args.quiet,
+        command=command_line(),
+        variants=_csv(getattr(args, "variants", "")) or None,
+    )
+    return _finish(result.files, result.failed, args.json)
+
+
+def register(sub) -> None:
+    """Add the ``evaluate`` subcommand to the ``clutchlab`` parser."""
+    p = sub.add_parser(
+        "evaluate",
+        help="fit every variant on the training ramps, score it on the test ramp, write a report",
+        description=(
+            "Fit each variant on the training experiments (ramps --train), score it on the "
+            "test experiments (ramps --test, never used for fitting), and write report.html, "
+            "report.md, metrics.json, metrics.csv and figures/ into --out. Exit status 1 if "
+            "a variant failed (the report lists it)."
+        ),
+    )
+    p.add_argument("dataset", help="dataset folder (manifest.json + experiments)")
+    p.add_argument("--out", required=True, help="report folder to write")
+    p.add_argument(
+        "--variants",
+        default="",
+        help="comma separated, e.g. physics_default,physics_fitted,paper_svc_gp "
+        "(default: every available variant)",
+    )
+    p.add_argument("--train", default="fast,slow", help="training ramp labels (fast,slow)")
+    p.add_argument("--test", default="medium", help="test ramp labels (medium)")
+    p.add_argument("--map", help="channel map (TOML) for logs with other channel names / units")
+    p.add_argument("--effects", default="", help="effects of the fitted physics model")
+    p.add_argument(
+        "--fit-time-limit", type=float, default=600.0, help="physics fit wall limit, s (600)"
+    )
+    p.add_argument("--fit-max-iter", type=int, default=None, help="physics fit iteration limit")
+    p.add_argument(
+        "--no-classifiers",
+        action="store_true",
+        help="skip the latch-classifier comparison (run by default with an ML variant)",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--json", help="also write metrics.json here")
+    p.set_defaults(func=_cmd_evaluate)

@@ -1,0 +1,639 @@
+"""The comparison report: one self-contained HTML file, a Markdown summary, JSON and CSV.
+
+Every number in ``report.html``, ``report.md`` and ``metrics.csv`` is rendered from the one
+dictionary written as ``metrics.json`` (:meth:`Evaluation.to_dict`, made JSON-safe by
+:func:`jsonable`), through one formatting function (:func:`fmt`). The HTML table cells also
+carry the exact value (``data-value``), so a reader — or a test — can check them against
+``metrics.json``.
+
+Files are first written to a temporary folder beside the destination and then moved into
+place (a new folder is renamed in one step; into an existing one each file is replaced
+atomically, ``metrics.json`` last), so a failed run leaves no half-written report.
+"""
+
+from __future__ import annotations
+
+import base64
+import csv
+import html
+import io
+import json
+import math
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .figures import FigureSpec, report_figures
+from .metrics import ACCURACY_KEYS, METRIC_KEYS
+
+if TYPE_CHECKING:
+    from .evaluate import Evaluation
+
+__all__ = [
+    "METRIC_LABELS",
+    "ReportFiles",
+    "fmt",
+    "jsonable",
+    "metrics_csv",
+    "render_html",
+    "render_markdown",
+    "write_json",
+    "write_report",
+]
+
+#: Column heading and unit of each metric key.
+METRIC_LABELS: dict[str, tuple[str, str]] = {
+    "rmse_bar": ("RMSE", "bar"),
+    "mae_bar": ("MAE", "bar"),
+    "max_abs_bar": ("max |e|", "bar"),
+    "fit_pct": ("fit", "%"),
+    "hysteresis_width_err_bar": ("hysteresis width err", "bar"),
+    "latch_on_err_mA": ("latch-on err", "mA"),
+    "latch_off_err_mA": ("latch-off err", "mA"),
+    "fit_s": ("fit time", "s"),
+    "predict_s": ("predict time", "s"),
+}
+
+_DEFINITIONS = (
+    "Errors e = predicted − measured clutch pressure on every test sample, pooled over the "
+    "test experiments. Primary: both signals averaged over one dither period; secondary "
+    "('raw'): unaveraged. RMSE, MAE, max |e| in bar; fit = 100·(1 − ‖e‖/‖y − ȳ‖) %. "
+    "Hysteresis width = rising minus falling pressure at the centre of each 25 mA "
+    "nominal-current bin (least-squares line per branch and bin); its error is the RMS over "
+    "experiments × bins of predicted minus measured width, in the regulated bins (both "
+    "branches covered; no latched sample in the bin or its neighbours). Latch-on / latch-off "
+    "current = nominal current where the pressure snaps to / drops from line pressure on the "
+    "rising / falling branch (midpoint between regulated and line pressure); error = mean "
+    "over experiments of |predicted − measured| (mA); a missing snap counts at the peak "
+    "current. Fit time includes the fit of a variant it builds on (hybrid: physics_fitted)."
+)
+
+
+def jsonable(obj: Any) -> Any:
+    """``obj`` with NaN / inf as None, numpy scalars and arrays as Python numbers and lists.
+
+    Parameters
+    ----------
+    obj : object
+        Nested dicts, lists, tuples, numbers, strings.
+
+    Returns
+    -------
+    object
+        Strict-JSON-serializable equivalent.
+    """
+    if isinstance(obj, dict):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return [jsonable(v) for v in obj.tolist()]
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        v = float(obj)
+        return v if math.isfinite(v) else None
+    return obj
+
+
+def fmt(value: Any) -> str:
+    """A number as the report shows it: 4 significant digits; ``n/a`` for None / NaN."""
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "n/a"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    return str(value)
+
+
+def _head(key: str) -> str:
+    label, unit = METRIC_LABELS.get(key, (key, ""))
+    return f"{label} ({unit})" if unit else label
+
+
+def _best(rows: dict[str, dict[str, Any]], key: str) -> str | None:
+    vals = {n: r.get(key) for n, r in rows.items() if isinstance(r.get(key), (int, float))}
+    if len(vals) < 2 or key not in ACCURACY_KEYS:
+        return None
+    pick = max if key == "fit_pct" else min
+    return pick(vals, key=vals.get)
+
+
+# ---- Markdown ---------------------------------------------------------------------------------
+
+
+def _md_cell(text: str) -> str:
+    return str(text).replace("|", "\\|")
+
+
+def _md_table(header: list[str], rows: list[list[str]]) -> str:
+    lines = ["| " + " | ".join(map(_md_cell, header)) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(map(_md_cell, r)) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def _md_metrics(rows: dict[str, dict[str, Any]], keys: tuple[str, ...]) -> str:
+    best = {k: _best(rows, k) for k in keys}
+    body = []
+    for name, r in rows.items():
+        cells = [f"**{fmt(r.get(k))}**" if best[k] == name else fmt(r.get(k)) for k in keys]
+        body.append([f"`{name}`", *cells])
+    return _md_table(["variant", *(_head(k) for k in keys)], body)
+
+
+def render_markdown(doc: dict[str, Any], figure_files: list[tuple[str, str, str]]) -> str:
+    """The Markdown summary of a report document.
+
+    Parameters
+    ----------
+    doc : dict
+        The ``metrics.json`` document (JSON-safe).
+    figure_files : list of (title, relative path, caption)
+        Figures written beside the report.
+
+    Returns
+    -------
+    str
+    """
+    split, data = doc["split"], doc["dataset"]
+    out = [
+        "# clutchlab validation report",
+        "",
+        f"Command: `{doc['command']}`  ",
+        f"Created {doc['created_utc']} · clutchlab {doc['versions']['clutchlab']} · "
+        f"total {fmt(doc['timings'].get('total_s', doc['timings'].get('evaluate_s')))} s",
+        "",
+        f"Dataset: {data['experiments']} experiments ({data['root'] or 'in memory'}); "
+        f"train = {', '.join(split['train_ramps'])} ({len(split['train'])} experiments), "
+        f"test = {', '.join(split['test_ramps'])} ({len(split['test'])} experiments, never "
+        "used for fitting or model selection).",
+        "",
+    ]
+    if doc["failed"] or doc["unavailable"]:
+        out.append("**Not in this report:**")
+        out += [f"- `{n}` failed: {why}" for n, why in doc["failed"].items()]
+        out += [f"- `{n}` not available: {why}" for n, why in doc["unavailable"].items()]
+        out.append("")
+    out += [
+        "## Variants on the test ramp (dither-period mean)",
+        "",
+        _md_metrics(doc["variants"], METRIC_KEYS),
+        "",
+        "## Raw signal (secondary)",
+        "",
+        _md_metrics(doc["raw"], ACCURACY_KEYS),
+        "",
+        *(_describe(n, d, html_=False) for n, d in doc["details"].items()),
+        "",
+    ]
+    fit = doc.get("physics_fit")
+    if fit:
+        out += [
+            "## Fitted physics parameters",
+            "",
+            f"Status: {fit['status']} ("
+            + ("converged" if fit["converged"] else "NOT converged — best iterate used")
+            + f"), {fit['iterations']} iterations, {fmt(fit['wall_s'])} s.",
+            "",
+            _md_table(
+                ["parameter", "default", "fitted", "± std err", "unit", "identifiable"],
+                [
+                    [
+                        f"`{n}`",
+                        fmt(p["default"]),
+                        fmt(p["value"]),
+                        fmt(p["std_error"]),
+                        p["unit"],
+                        fmt(p["identifiable"]),
+                    ]
+                    for n, p in fit["parameters"].items()
+                ],
+            ),
+            "",
+        ]
+    clf = doc.get("classifier_comparison")
+    if clf:
+        out += [
+            "## Latch classifiers (leave-one-experiment-out on the training experiments)",
+            "",
+            _md_table(
+                ["classifier", "accuracy", "worst experiment", "fit (s)"],
+                [
+                    [c["label"], fmt(c["accuracy"]), fmt(c["min_accuracy"]), fmt(c["fit_s"])]
+                    for c in clf["classifiers"].values()
+                ],
+            ),
+            "",
+        ]
+    out += ["## Figures", ""]
+    for title, rel, caption in figure_files:
+        out += [f"### {title}", "", f"![{title}]({rel})", "", caption, ""]
+    for key, why in doc.get("figures", {}).get("missing", {}).items():
+        out += [f"- figure `{key}` not drawn: {why}"]
+    out += [
+        "",
+        "## Timings (s)",
+        "",
+        _md_table(["stage", "wall (s)"], [[k, fmt(v)] for k, v in doc["timings"].items()]),
+        "",
+        "## Versions",
+        "",
+        _md_table(["component", "version"], [[k, v] for k, v in doc["versions"].items()]),
+        "",
+        "## Metric definitions",
+        "",
+        _DEFINITIONS,
+        "",
+    ]
+    return "\n".join(out)
+
+
+# ---- HTML -------------------------------------------------------------------------------------
+
+_CSS = """
+body{font-family:system-ui,sans-serif;max-width:1100px;margin:1.5em auto;padding:0 1em;
+color:#222}
+table{border-collapse:collapse;margin:.6em 0;font-size:.9em}
+th,td{border:1px solid #ccc;padding:.25em .55em;text-align:right}
+th{background:#f2f2f2} td.name,th.name{text-align:left}
+td.best{font-weight:bold;background:#e8f5e9}
+code{background:#f4f4f4;padding:0 .2em}
+.warn{background:#fff3e0;border-left:4px solid #fb8c00;padding:.5em 1em}
+figure{margin:1.2em 0} figure img{max-width:100%;border:1px solid #ddd}
+figcaption{font-size:.9em;color:#555}
+"""
+
+# After load, record on <body> how many figures there are and how many are decoded and laid
+# out with a non-zero size (read by clutchlab.validation.render in headless Chromium).
+_MARKER = (
+    "<script>window.addEventListener('load',function(){"
+    "var im=Array.prototype.slice.call(document.images);"
+    "var ok=im.filter(function(i){return i.complete&&i.naturalWidth>0&&"
+    "i.getBoundingClientRect().width>0;});var b=document.body;"
+    "b.setAttribute('data-figures',String(im.length));"
+    "b.setAttribute('data-figures-visible',String(ok.length));"
+    "b.setAttribute('data-page-height',String(document.documentElement.scrollHeight));});"
+    "</script>"
+)
+
+
+def _e(x: Any) -> str:
+    return html.escape(str(x))
+
+
+def _html_metrics(rows: dict[str, dict[str, Any]], keys: tuple[str, ...], table: str) -> str:
+    best = {k: _best(rows, k) for k in keys}
+    head = "".join(f"<th>{_e(_head(k))}</th>" for k in keys)
+    body = []
+    for name, r in rows.items():
+        cells = []
+        for k in keys:
+            v = r.get(k)
+            cls = ' class="best"' if best[k] == name else ""
+            cells.append(
+                f'<td{cls} data-table="{table}" data-variant="{_e(name)}" data-metric="{k}" '
+                f'data-value="{_e(json.dumps(v))}">{_e(fmt(v))}</td>'
+            )
+        body.append(f'<tr><td class="name"><code>{_e(name)}</code></td>{"".join(cells)}</tr>')
+    return (
+        f'<table id="{table}"><tr><th class="name">variant</th>{head}</tr>'
+        + "".join(body)
+        + "</table>"
+    )
+
+
+def _describe(name: str, d: dict[str, Any], html_: bool) -> str:
+    text = d["description"]
+    if d.get("classifier_accuracy") is not None:
+        text += f"; latch-classifier accuracy on the test ramp {fmt(d['classifier_accuracy'])}"
+    if html_:
+        return f"<code>{_e(name)}</code>: {_e(text)}<br>"
+    return f"- `{name}`: {text}"
+
+
+def _html_rows(header: list[str], rows: list[list[Any]]) -> str:
+    head = "".join(f"<th>{_e(h)}</th>" for h in header)
+    body = "".join(
+        "<tr>"
+        + "".join(
+            f'<td class="name">{_e(c)}</td>' if j == 0 else f"<td>{_e(c)}</td>"
+            for j, c in enumerate(r)
+        )
+        + "</tr>"
+        for r in rows
+    )
+    return f"<table><tr>{head}</tr>{body}</table>"
+
+
+def _per_experiment_html(doc: dict[str, Any]) -> str:
+    keys = (
+        "rmse_bar",
+        "hysteresis_width_err_bar",
+        "latch_on_measured_mA",
+        "latch_on_predicted_mA",
+        "latch_off_measured_mA",
+        "latch_off_predicted_mA",
+    )
+    parts = []
+    for name, per in doc["per_experiment"].items():
+        rows = [[exp, *(fmt(v["period_mean"].get(k)) for k in keys)] for exp, v in per.items()]
+        parts.append(
+            f"<h4><code>{_e(name)}</code></h4>"
+            + _html_rows(
+                [
+                    "experiment",
+                    "RMSE (bar)",
+                    "hysteresis width err (bar)",
+                    "latch-on measured (mA)",
+                    "latch-on predicted (mA)",
+                    "latch-off measured (mA)",
+                    "latch-off predicted (mA)",
+                ],
+                rows,
+            )
+        )
+    return "".join(parts)
+
+
+def render_html(doc: dict[str, Any], figures: list[tuple[FigureSpec, bytes]]) -> str:
+    """The self-contained HTML report (figures embedded as base64 PNG).
+
+    Parameters
+    ----------
+    doc : dict
+        The ``metrics.json`` document (JSON-safe).
+    figures : list of (FigureSpec, bytes)
+        Each figure with its PNG bytes.
+
+    Returns
+    -------
+    str
+    """
+    split, data, t = doc["split"], doc["dataset"], doc["timings"]
+    total = t.get("total_s", t.get("evaluate_s"))
+    s = [
+        "<!doctype html><html lang='en'><head><meta charset='utf-8'>",
+        "<title>clutchlab validation report</title>",
+        f"<style>{_CSS}</style></head><body>",
+        "<h1>clutchlab validation report</h1>",
+        f"<p>Command: <code id='command'>{_e(doc['command'])}</code><br>",
+        f"Created {_e(doc['created_utc'])} · clutchlab {_e(doc['versions']['clutchlab'])} · "
+        f"total {_e(fmt(total))} s</p>",
+        f"<p>Dataset: {data['experiments']} experiments "
+        f"(<code>{_e(data['root'] or 'in memory')}</code>), {data['samples']} samples, "
+        f"{_e(fmt(data['duration_s']))} s. Train ramps: <b>{_e(', '.join(split['train_ramps']))}"
+        f"</b> ({len(split['train'])} experiments); test ramps: "
+        f"<b>{_e(', '.join(split['test_ramps']))}</b> ({len(split['test'])} experiments) — "
+        "never used for fitting or model selection; models see only their inputs.</p>",
+    ]
+    if doc["failed"] or doc["unavailable"]:
+        items = [f"<li><code>{_e(n)}</code> failed: {_e(w)}</li>" for n, w in doc["failed"].items()]
+        items += [
+            f"<li><code>{_e(n)}</code> not available: {_e(w)}</li>"
+            for n, w in doc["unavailable"].items()
+        ]
+        s.append(f"<div class='warn'><b>Not in this report</b><ul>{''.join(items)}</ul></div>")
+    s += [
+        "<h2>Variants on the test ramp — dither-period mean (primary)</h2>",
+        _html_metrics(doc["variants"], METRIC_KEYS, "variants"),
+        "<h3>Raw signal (secondary)</h3>",
+        _html_metrics(doc["raw"], ACCURACY_KEYS, "raw"),
+        "<p>" + "".join(_describe(n, d, html_=True) for n, d in doc["details"].items()) + "</p>",
+    ]
+    fit = doc.get("physics_fit")
+    if fit:
+        state = "converged" if fit["converged"] else "NOT converged — best iterate used"
+        s += [
+            "<h2>Fitted physics parameters</h2>",
+            f"<p>Status: {_e(fit['status'])} ({state}); {fit['iterations']} iterations; "
+            f"{_e(fmt(fit['wall_s']))} s; effects: {_e(', '.join(fit['effects']) or 'none')}."
+            "</p>",
+            _html_rows(
+                ["parameter", "default", "fitted", "± std err", "unit", "identifiable"],
+                [
+                    [
+                        n,
+                        fmt(p["default"]),
+                        fmt(p["value"]),
+                        fmt(p["std_error"]),
+                        p["unit"],
+                        fmt(p["identifiable"]),
+                    ]
+                    for n, p in fit["parameters"].items()
+                ],
+            ),
+        ]
+    clf = doc.get("classifier_comparison")
+    if clf:
+        s += [
+            "<h2>Latch classifiers</h2>",
+            "<p>Leave-one-experiment-out accuracy on the training experiments (latch-event "
+            f"samples excluded); inputs: {_e(', '.join(clf['features']))}.</p>",
+            _html_rows(
+                ["classifier", "accuracy", "worst experiment", "fit (s)"],
+                [
+                    [c["label"], fmt(c["accuracy"]), fmt(c["min_accuracy"]), fmt(c["fit_s"])]
+                    for c in clf["classifiers"].values()
+                ],
+            ),
+        ]
+    s.append("<h2>Figures</h2>")
+    for spec, png in figures:
+        b64 = base64.b64encode(png).decode("ascii")
+        s.append(
+            f"<figure id='fig-{spec.key}'><h3>{_e(spec.title)}</h3>"
+            f"<img alt='{_e(spec.title)}' src='data:image/png;base64,{b64}'>"
+            f"<figcaption>{_e(spec.caption)}</figcaption></figure>"
+        )
+    for key, why in doc.get("figures", {}).get("missing", {}).items():
+        s.append(f"<p>Figure <code>{_e(key)}</code> not drawn: {_e(why)}.</p>")
+    s += [
+        "<h2>Per test experiment (dither-period mean)</h2>",
+        "<details><summary>show</summary>",
+        _per_experiment_html(doc),
+        "</details>",
+        "<h2>Dataset</h2>",
+        f"<p>Signals: {_e(', '.join(data['signals']))}; sample rate(s) "
+        f"{_e(', '.join(fmt(r) for r in data['sample_rate_Hz']))} Hz.</p>",
+        "<details><summary>experiments</summary>",
+        _html_rows(
+            ["experiment", "ramp", "samples", "duration (s)", "metadata"],
+            [
+                [
+                    r["name"],
+                    r["ramp"],
+                    r["samples"],
+                    fmt(r["duration_s"]),
+                    ", ".join(
+                        f"{k}={v}"
+                        for k, v in r.items()
+                        if k not in ("name", "ramp", "samples", "duration_s")
+                    ),
+                ]
+                for r in data["table"]
+            ],
+        ),
+        "</details>",
+        "<h2>Timings</h2>",
+        _html_rows(["stage", "wall (s)"], [[k, fmt(v)] for k, v in t.items()]),
+        "<h2>Versions</h2>",
+        _html_rows(["component", "version"], [[k, v] for k, v in doc["versions"].items()]),
+        "<h2>Metric definitions</h2>",
+        f"<p>{_e(_DEFINITIONS)}</p>",
+        _MARKER,
+        "</body></html>",
+    ]
+    return "\n".join(s)
+
+
+# ---- CSV / JSON -------------------------------------------------------------------------------
+
+
+def metrics_csv(doc: dict[str, Any]) -> str:
+    """One row per variant and signal kind; columns the metric keys (units in the names)."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["variant", "signal", *METRIC_KEYS])
+    for name, row in doc["variants"].items():
+        w.writerow([name, "period_mean", *(_csv_value(row.get(k)) for k in METRIC_KEYS)])
+        raw = doc["raw"].get(name, {})
+        w.writerow([name, "raw", *(_csv_value(raw.get(k)) for k in METRIC_KEYS)])
+    return buf.getvalue()
+
+
+def _csv_value(v: Any) -> str:
+    return "" if v is None else repr(v) if isinstance(v, float) else str(v)
+
+
+def _json_text(doc: dict[str, Any]) -> str:
+    return json.dumps(doc, indent=2, ensure_ascii=False, allow_nan=False) + "\n"
+
+
+def _atomic_write(path: Path, data: bytes) -> None:
+    tmp = path.with_name(f".{path.name}.part")
+    tmp.write_bytes(data)
+    os.replace(tmp, path)
+
+
+def write_json(doc: dict[str, Any], path: str | Path) -> Path:
+    """Write a report document as strict JSON, atomically.
+
+    Parameters
+    ----------
+    doc : dict
+        JSON-safe document (:func:`jsonable`).
+    path : path
+        Destination file.
+
+    Returns
+    -------
+    Path
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    _atomic_write(path, _json_text(doc).encode("utf-8"))
+    return path
+
+
+# ---- writing ----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ReportFiles:
+    """Where a report was written.
+
+    Attributes
+    ----------
+    folder, html, markdown, json, csv : Path
+        The report folder, ``report.html``, ``report.md``, ``metrics.json``, ``metrics.csv``.
+    figures : tuple of Path
+        ``figures/<key>.png``.
+    doc : dict
+        The document written as ``metrics.json``.
+    """
+
+    folder: Path
+    html: Path
+    markdown: Path
+    json: Path
+    csv: Path
+    figures: tuple[Path, ...]
+    doc: dict
+
+
+def _png(fig: Any) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100)
+    return buf.getvalue()
+
+
+def write_report(ev: Evaluation, out: str | Path) -> ReportFiles:
+    """Render and write the report of an evaluation into the folder ``out``.
+
+    Parameters
+    ----------
+    ev : Evaluation
+        The scored variants.
+    out : path
+        Report folder (created; existing report files in it are replaced, other files such
+        as cached stand data are left alone).
+
+    Returns
+    -------
+    ReportFiles
+    """
+    out = Path(out)
+    figures, missing = report_figures(ev)
+    doc = ev.to_dict()
+    doc["figures"] = {"drawn": [f.key for f in figures], "missing": missing}
+    doc = jsonable(doc)
+    json.loads(_json_text(doc))  # strict JSON before anything is written
+    pngs = [(spec, _png(spec.figure)) for spec in figures]
+    rel = [(spec.title, f"figures/{spec.key}.png", spec.caption) for spec, _ in pngs]
+    files: dict[str, bytes] = {f"figures/{spec.key}.png": png for spec, png in pngs}
+    files["metrics.csv"] = metrics_csv(doc).encode("utf-8")
+    files["report.md"] = render_markdown(doc, rel).encode("utf-8")
+    files["report.html"] = render_html(doc, pngs).encode("utf-8")
+    files["metrics.json"] = _json_text(doc).encode("utf-8")  # last: its presence = complete
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent))
+    try:
+        (tmp / "figures").mkdir()
+        for name, data in files.items():
+            (tmp / name).write_bytes(data)
+        mode = 0o777 & ~_umask()
+        if not out.exists():
+            os.chmod(tmp, mode)
+            os.chmod(tmp / "figures", mode)
+            os.replace(tmp, out)
+        else:
+            (out / "figures").mkdir(exist_ok=True)
+            for name in files:
+                os.replace(tmp / name, out / name)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return ReportFiles(
+        folder=out,
+        html=out / "report.html",
+        markdown=out / "report.md",
+        json=out / "metrics.json",
+        csv=out / "metrics.csv",
+        figures=tuple(out / name for name in files if name.startswith("figures/")),
+        doc=doc,
+    )
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
