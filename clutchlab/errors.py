@@ -6,14 +6,40 @@ clutchlab error or the generic Python one.
 
 from __future__ import annotations
 
-__all__ = ["ClutchlabError", "DataError", "FitError", "ModelError", "SimulationError"]
+__all__ = [
+    "ClutchlabError",
+    "DataError",
+    "FitError",
+    "ModelError",
+    "ProblemListError",
+    "SimulationError",
+]
 
 
 class ClutchlabError(Exception):
     """Base class of every clutchlab exception."""
 
 
-class DataError(ClutchlabError, ValueError):
+class ProblemListError(ClutchlabError):
+    """A clutchlab error that lists every problem found, one per line after the summary.
+
+    Parameters
+    ----------
+    message : str
+        Summary line.
+    problems : list of str, optional
+        Every problem found.
+    """
+
+    def __init__(self, message: str, problems: list[str] | None = None) -> None:
+        self.problems = list(problems or [])
+        text = message
+        if self.problems:
+            text += "\n" + "\n".join(f"  - {p}" for p in self.problems)
+        super().__init__(text)
+
+
+class DataError(ProblemListError, ValueError):
     """Bad input data: a file, column or row that breaks the data contract.
 
     Parameters
@@ -23,13 +49,6 @@ class DataError(ClutchlabError, ValueError):
     problems : list of str, optional
         Every problem found, each naming file, column and row where known.
     """
-
-    def __init__(self, message: str, problems: list[str] | None = None) -> None:
-        self.problems = list(problems or [])
-        text = message
-        if self.problems:
-            text += "\n" + "\n".join(f"  - {p}" for p in self.problems)
-        super().__init__(text)
 
 
 class ModelError(ClutchlabError, ValueError):

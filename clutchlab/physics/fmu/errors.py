@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from ...errors import ClutchlabError, SimulationError
+from ...errors import ProblemListError, SimulationError
 
 __all__ = ["FmuError", "FmuTimeoutError"]
 
 
-class FmuError(ClutchlabError, ValueError):
+class FmuError(ProblemListError, ValueError):
     """An FMU that cannot be used or built: not an FMU, wrong FMI version or type, an
     interface that does not fit the data, a failed compilation.
 
@@ -18,13 +18,6 @@ class FmuError(ClutchlabError, ValueError):
     problems : list of str, optional
         Every problem found, one per line.
     """
-
-    def __init__(self, message: str, problems: list[str] | None = None) -> None:
-        self.problems = list(problems or [])
-        text = message
-        if self.problems:
-            text += "\n" + "\n".join(f"  - {p}" for p in self.problems)
-        super().__init__(text)
 
 
 class FmuTimeoutError(SimulationError, TimeoutError):
