@@ -1,0 +1,101 @@
+"""Benchmark: effect discovery on stand data with one undeclared effect (issue 7, must-show 1).
+
+For each case of ``MUST_SHOW_CASES`` (``clutchlab.validation.discover.scenarios``): run the
+short discovery stand with that effect switched on, discover with the base model (at most
+one effect), and print the effect named first, the score statistic and explained share of
+the winner and the runner-up, the RMSE of the dither-period-mean pressure before and after
+on the training ramps and on the unseen medium ramp, and the wall time. The same cases
+are asserted by ``tests/test_discover_effects.py`` (``pytest -m slow``).
+
+Usage: ``python benchmarks/bench_discover.py [--effects a,b] [--default-strength] [--json OUT]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+
+from clutchlab.physics.fit import FitSettings
+from clutchlab.physics.stand import run_stand
+from clutchlab.validation.discover import DiscoverySettings, discover
+from clutchlab.validation.discover.scenarios import MUST_SHOW_CASES, discovery_stand
+
+
+def run_case(effect: str, n_settings: int, overrides: dict, max_iter: int) -> dict:
+    t0 = time.perf_counter()
+    config = discovery_stand((effect,), n_settings=n_settings, overrides=overrides)
+    dataset = run_stand(config, progress=False).dataset
+    settings = DiscoverySettings(
+        fit=FitSettings(progress=False, max_iter=max_iter), max_effects=1, progress=False
+    )
+    res = discover(dataset, settings=settings)
+    it = res.iterations[0]
+    cands = it.candidates
+    row = {
+        "effect": effect,
+        "overrides": overrides,
+        "n_settings": n_settings,
+        "named_first": it.effect,
+        "winner": [cands[0].effect, cands[0].statistic, cands[0].share] if cands else None,
+        "runner_up": [cands[1].effect, cands[1].statistic, cands[1].share]
+        if len(cands) > 1
+        else None,
+        "delta_bic": it.delta_bic,
+        "train_rmse_bar": [it.before.train["rmse_bar"], it.after.train["rmse_bar"]],
+        "test_rmse_bar": [it.before.test["rmse_bar"], it.after.test["rmse_bar"]],
+        "wall_s": time.perf_counter() - t0,
+    }
+    before, after = row["test_rmse_bar"]
+    row["test_drop_pct"] = 100.0 * (1.0 - after / before)
+    return row
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--effects", default="", help="comma-separated subset of the cases")
+    ap.add_argument(
+        "--default-strength",
+        action="store_true",
+        help="the stand's default effect strengths instead of the cases' overrides",
+    )
+    ap.add_argument("--max-iter", type=int, default=30, help="solver iterations per fit")
+    ap.add_argument("--json", help="write the rows here")
+    args = ap.parse_args()
+    wanted = [e for e in args.effects.split(",") if e] or list(MUST_SHOW_CASES)
+    print(
+        f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
+    )
+    print(
+        "| effect | truth | named first | winner (statistic / share) | runner-up "
+        "(statistic / share) | train RMSE before → after (bar) | medium RMSE before → after "
+        "(bar) | medium drop | wall (s) |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|")
+    rows = []
+    for effect in wanted:
+        n_settings, overrides = MUST_SHOW_CASES[effect]
+        if args.default_strength:
+            overrides = {}
+        row = run_case(effect, n_settings, overrides, args.max_iter)
+        rows.append(row)
+        truth = ", ".join(f"{k} = {v:g}" for k, v in overrides.items()) or "default"
+        w, r = row["winner"], row["runner_up"]
+        print(
+            f"| {effect} | {truth} | {row['named_first'] or '—'} | "
+            f"{w[0]} {w[1]:.1f} / {w[2]:.2f} | "
+            + (f"{r[0]} {r[1]:.1f} / {r[2]:.2f}" if r else "—")
+            + f" | {row['train_rmse_bar'][0]:.4f} → {row['train_rmse_bar'][1]:.4f} | "
+            f"{row['test_rmse_bar'][0]:.4f} → {row['test_rmse_bar'][1]:.4f} | "
+            f"{row['test_drop_pct']:.0f} % | {row['wall_s']:.0f} |",
+            flush=True,
+        )
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as f:
+            json.dump(rows, f, indent=2)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,81 @@
+"""``clutchlab discover``: close the loop — residual → named missing effect → refit → report."""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+
+__all__ = ["register"]
+
+
+def _csv(text: str | None) -> tuple[str, ...]:
+    return tuple(s.strip() for s in (text or "").split(",") if s.strip())
+
+
+def _cmd_discover(args: argparse.Namespace) -> int:
+    from .data import load_dataset
+    from .physics import CircuitModel
+    from .physics.fit import FitSettings
+    from .validation.discover import DiscoverySettings, discover, write_report
+
+    dataset = load_dataset(args.dataset)
+    model = CircuitModel().with_effects(*_csv(args.effects))
+    fit = FitSettings(
+        free=_csv(args.free) or None,
+        train_ramps=_csv(args.train) or ("fast", "slow"),
+        progress=False,
+        time_limit_s=args.time_limit,
+        max_iter=args.max_iter,
+    )
+    settings = DiscoverySettings(
+        fit=fit,
+        test_ramps=_csv(args.test) or ("medium",),
+        candidates=_csv(args.candidates) or None,
+        max_effects=args.max_effects,
+        alpha=args.alpha,
+        progress=not args.quiet,
+    )
+    result = discover(dataset, model, settings)
+    command = "clutchlab " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    report = write_report(result, args.out, command=command)
+    print(result.table())
+    print()
+    print(result.summary)
+    print(f"report: {report}")
+    if args.json:
+        result.to_json(args.json)
+    return 0
+
+
+def register(sub) -> None:
+    """Add the ``discover`` subcommand to the ``clutchlab`` parser."""
+    p = sub.add_parser(
+        "discover",
+        help="find the effects the physics model lacks from its residual, add them, report",
+    )
+    p.add_argument("dataset", help="dataset folder (manifest.json + experiments)")
+    p.add_argument("--out", required=True, help="report folder (report.html, figures, JSON)")
+    p.add_argument("--json", help="also write the discovery result (JSON) here")
+    p.add_argument("--max-effects", type=int, default=3, help="add at most N effects (3)")
+    p.add_argument(
+        "--effects", default="", help="effects already declared in the model, comma separated"
+    )
+    p.add_argument(
+        "--free",
+        default="",
+        help="free parameters of the baseline fit (default: the standard set plus the "
+        "declared effects' fit parameters); each added effect frees its own",
+    )
+    p.add_argument(
+        "--candidates", default="", help="candidate effects (default: the whole library)"
+    )
+    p.add_argument("--train", default="fast,slow", help="training ramp labels (fast,slow)")
+    p.add_argument("--test", default="medium", help="test ramp labels, only scored (medium)")
+    p.add_argument(
+        "--alpha", type=float, default=0.01, help="family-wise significance level (0.01)"
+    )
+    p.add_argument("--max-iter", type=int, default=50, help="solver iterations per fit (50)")
+    p.add_argument("--time-limit", type=float, default=900.0, help="wall limit per fit (s)")
+    p.add_argument("--quiet", action="store_true", help="no progress display")
+    p.set_defaults(func=_cmd_discover)

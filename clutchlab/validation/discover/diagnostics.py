@@ -1,0 +1,306 @@
+"""Residual diagnostics: against each signal, lagged cross-correlation, spectrum, whiteness.
+
+All on the kept (snap-free) training residuals of :class:`~.residuals.ResidualSet`
+unless stated otherwise. The *signature* of a residual is the list of signals whose
+binned conditional mean explains a sizeable part of it (correlation ratio η²).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+from scipy.signal import welch
+from scipy.stats import chi2
+
+from .residuals import SIGNALS, ResidualSet, integrated_time
+
+__all__ = ["Diagnostics", "diagnose", "signal_association"]
+
+#: Quantile bins of a continuous signal for the correlation ratio.
+N_BINS = 12
+#: A signal enters the signature when its bias-corrected η² reaches this.
+SIGNATURE_ETA2 = 0.1
+#: Signals whose lagged cross-correlation with the residual is reported.
+LAGGED = ("didt_mA_s", "dpdt_bar_s")
+
+
+def _eta2(r: np.ndarray, x: np.ndarray, n_eff: float) -> tuple[float, list[dict]]:
+    """Bias-corrected correlation ratio of ``r`` on ``x`` and the binned means."""
+    values = np.unique(x)
+    if values.size <= 1:
+        return 0.0, []
+    if values.size <= N_BINS:
+        labels = np.searchsorted(values, x)
+        edges = [(float(v), float(v)) for v in values]
+    else:
+        q = np.unique(np.quantile(x, np.linspace(0, 1, N_BINS + 1)))
+        labels = np.clip(np.searchsorted(q, x, side="right") - 1, 0, len(q) - 2)
+        edges = [(float(q[k]), float(q[k + 1])) for k in range(len(q) - 1)]
+    total = float(np.sum((r - r.mean()) ** 2))
+    if total <= 0:
+        return 0.0, []
+    between, bins = 0.0, []
+    for k, (lo, hi) in enumerate(edges):
+        sel = labels == k
+        if not np.any(sel):
+            continue
+        m = float(r[sel].mean())
+        between += sel.sum() * (m - r.mean()) ** 2
+        bins.append({"lo": lo, "hi": hi, "mean_bar": m, "n": int(sel.sum())})
+    eta2 = between / total
+    b = len(bins)
+    adj = eta2 - (b - 1) / max(n_eff - b, 1.0) * (1.0 - eta2)
+    return float(max(adj, 0.0)), bins
+
+
+def signal_association(res: ResidualSet, n_eff: float | None = None) -> list[dict]:
+    """Residual against each signal: Pearson correlation and bias-corrected η².
+
+    Parameters
+    ----------
+    res : ResidualSet
+        Residuals and signals.
+    n_eff : float, optional
+        Effective number of independent residuals (for the η² bias correction).
+
+    Returns
+    -------
+    list of dict
+        ``signal``, ``unit``, ``description``, ``corr``, ``eta2``, ``bins``; largest η² first.
+    """
+    r = res.r[res.keep]
+    if n_eff is None:
+        n_eff = res.effective()[0]
+    out = []
+    for name, (unit, desc) in SIGNALS.items():
+        x = res.signals[name][res.keep]
+        if x.size < 3 or np.ptp(x) <= 1e-9 * (1.0 + abs(float(np.mean(x)))):
+            corr, eta2, bins = 0.0, 0.0, []
+        else:
+            corr = float(np.corrcoef(r, x)[0, 1]) if np.std(r) > 0 else 0.0
+            eta2, bins = _eta2(r, x, n_eff)
+        out.append(
+            {
+                "signal": name,
+                "unit": unit,
+                "description": desc,
+                "corr": corr,
+                "eta2": eta2,
+                "bins": bins,
+            }
+        )
+    out.sort(key=lambda d: -d["eta2"])
+    return out
+
+
+def _lagged(res: ResidualSet, name: str, max_lag: int) -> tuple[np.ndarray, np.ndarray]:
+    """Pooled normalized cross-correlation ``corr(r(t), x(t − lag))`` for lags ±max_lag."""
+    lags = np.arange(-max_lag, max_lag + 1)
+    num = np.zeros(len(lags))
+    rr = xx = 0.0
+    for a, b in res.slices:
+        r = res.r[a:b] - res.r[a:b].mean()
+        x = res.signals[name][a:b] - res.signals[name][a:b].mean()
+        rr += float(r @ r)
+        xx += float(x @ x)
+        for k, lag in enumerate(lags):
+            if abs(lag) >= len(r):
+                continue
+            num[k] += float(r[lag:] @ x[: len(x) - lag]) if lag >= 0 else float(r[:lag] @ x[-lag:])
+    den = np.sqrt(rr * xx)
+    return lags, (num / den if den > 0 else num)
+
+
+def _ljung_box(res: ResidualSet, n_lags: int = 20) -> tuple[float, int, float, int]:
+    """Pooled Ljung–Box test on residuals one averaging window apart (no overlap).
+
+    The period mean makes neighbouring residuals correlated even for white sensor
+    noise; taking every ``ceil(window / decimation)``-th residual removes that.
+    Returns the statistic, degrees of freedom, p-value and the stride used.
+    """
+    stride = max(int(np.ceil(res.n_period)), 1)
+    q, dof = 0.0, 0
+    for a, b in res.kept_slices:
+        x = res.r[res.keep][a:b][::stride]
+        n = len(x)
+        h = min(n_lags, n // 5)
+        if h < 1:
+            continue
+        x = x - x.mean()
+        den = float(x @ x)
+        if den <= 0:
+            continue
+        rho = np.array([float(x[k:] @ x[:-k]) / den for k in range(1, h + 1)])
+        q += n * (n + 2) * float(np.sum(rho**2 / (n - np.arange(1, h + 1))))
+        dof += h
+    p = float(chi2.sf(q, dof)) if dof else 1.0
+    return q, dof, p, stride
+
+
+@dataclass
+class Diagnostics:
+    """What the residual follows.
+
+    Attributes
+    ----------
+    rms_bar : float
+        RMS of the kept residuals (bar).
+    n, n_eff : int, float
+        Kept residuals; effective number of independent ones.
+    tau_samples : float
+        Mean integrated autocorrelation time (residual samples).
+    associations : list of dict
+        :func:`signal_association`.
+    cross_correlation : dict
+        Per lagged signal: ``lag_s`` and ``corr`` at the peak |corr|, and the curves.
+    spectrum : dict
+        Welch power spectral density of the residual (``freq_Hz``, ``psd_bar2_Hz``)
+        averaged over experiments, and the fraction of power below 1 Hz.
+    whiteness : dict
+        Ljung–Box ``statistic``, ``dof``, ``p_value``, ``stride`` and ``white`` (p ≥ 0.01).
+    signature : list of str
+        Signals with η² ≥ :data:`SIGNATURE_ETA2`, strongest first; a signal that moves
+        with one already listed (|corr| > 0.98 on these data) is left out.
+    aliases : dict
+        Signals indistinguishable on these data: name -> the signal standing for it.
+    """
+
+    rms_bar: float
+    n: int
+    n_eff: float
+    tau_samples: float
+    associations: list[dict] = field(default_factory=list)
+    cross_correlation: dict = field(default_factory=dict)
+    spectrum: dict = field(default_factory=dict)
+    whiteness: dict = field(default_factory=dict)
+    signature: list[str] = field(default_factory=list)
+    aliases: dict[str, str] = field(default_factory=dict)
+
+    def summary(self) -> str:
+        """One line: what the residual follows."""
+        if not self.signature:
+            follows = f"no single signal (η² < {SIGNATURE_ETA2:.2f} for all)"
+        else:
+            eta = {a["signal"]: a for a in self.associations}
+            follows = ", ".join(
+                f"{s} (η² {eta[s]['eta2']:.2f}, r {eta[s]['corr']:+.2f})" for s in self.signature
+            )
+        xc = "; ".join(
+            f"peak corr with {k} {v['corr']:+.2f} at lag {v['lag_s'] * 1e3:+.0f} ms"
+            for k, v in self.cross_correlation.items()
+        )
+        if self.aliases:
+            same = ", ".join(f"{a} ≡ {b}" for a, b in self.aliases.items())
+            follows += f" (aliased on these data: {same})"
+        white = "white" if self.whiteness.get("white") else "not white"
+        p = self.whiteness.get("p_value", 1.0)
+        return (
+            f"RMS {self.rms_bar:.4f} bar, {white} (Ljung–Box p {p:.2g}, "
+            f"τ {self.tau_samples:.1f}); follows {follows}; {xc}"
+        )
+
+    def to_dict(self, curves: bool = False) -> dict:
+        """JSON-ready dict (without the spectrum and correlation curves unless ``curves``)."""
+        d = asdict(self)
+        if not curves:
+            d["spectrum"] = {k: v for k, v in d["spectrum"].items() if not isinstance(v, list)}
+            d["cross_correlation"] = {
+                k: {kk: vv for kk, vv in v.items() if not isinstance(vv, list)}
+                for k, v in d["cross_correlation"].items()
+            }
+        return d
+
+
+def diagnose(res: ResidualSet, max_lag_s: float = 0.1) -> Diagnostics:
+    """Residual diagnostics of ``res``.
+
+    Parameters
+    ----------
+    res : ResidualSet
+        Residuals (bar) and the signals at the same samples.
+    max_lag_s : float
+        Largest lag of the cross-correlations (s).
+
+    Returns
+    -------
+    Diagnostics
+    """
+    n_eff, tau = res.effective()
+    assoc = signal_association(res, n_eff)
+    max_lag = max(round(max_lag_s / res.row_dt_s), 1) if res.row_dt_s > 0 else 1
+    xcorr = {}
+    for name in LAGGED:
+        lags, c = _lagged(res, name, max_lag)
+        k = int(np.argmax(np.abs(c)))
+        xcorr[name] = {
+            "lag_s": float(lags[k] * res.row_dt_s),
+            "corr": float(c[k]),
+            "lags_s": (lags * res.row_dt_s).tolist(),
+            "values": c.tolist(),
+        }
+    spectrum: dict = {}
+    if res.row_dt_s > 0:
+        fs = 1.0 / res.row_dt_s
+        psds, freq = [], None
+        for a, b in res.slices:
+            x = res.r[a:b]
+            if len(x) < 16:
+                continue
+            freq, p = welch(x - x.mean(), fs=fs, nperseg=min(256, len(x)))
+            psds.append(p)
+        if psds:
+            n_f = min(len(p) for p in psds)
+            psd = np.mean([p[:n_f] for p in psds], axis=0)
+            freq = freq[:n_f]
+            total = float(np.sum(psd))
+            spectrum = {
+                "freq_Hz": freq.tolist(),
+                "psd_bar2_Hz": psd.tolist(),
+                "below_1Hz_fraction": float(np.sum(psd[freq < 1.0]) / total) if total else 0.0,
+                "peak_Hz": float(freq[int(np.argmax(psd))]),
+            }
+    q, dof, p, stride = _ljung_box(res)
+    rk = res.r[res.keep]
+    aliases = _aliases(res)
+    return Diagnostics(
+        rms_bar=float(np.sqrt(np.mean(rk**2))) if rk.size else 0.0,
+        n=int(rk.size),
+        n_eff=float(n_eff),
+        tau_samples=float(tau),
+        associations=assoc,
+        cross_correlation=xcorr,
+        spectrum=spectrum,
+        whiteness={
+            "statistic": q,
+            "dof": dof,
+            "p_value": p,
+            "stride": stride,
+            "white": bool(p >= 0.01),
+            "tau_per_experiment": [
+                integrated_time(res.r[res.keep][a:b]) for a, b in res.kept_slices
+            ],
+        },
+        signature=[
+            a["signal"] for a in assoc if a["eta2"] >= SIGNATURE_ETA2 and a["signal"] not in aliases
+        ],
+        aliases=aliases,
+    )
+
+
+def _aliases(res: ResidualSet, limit: float = 0.98) -> dict[str, str]:
+    """Signals that move with an earlier one (|corr| > ``limit`` on the kept samples)."""
+    kept: dict[str, np.ndarray] = {}
+    out = {}
+    for name in SIGNALS:
+        x = res.signals[name][res.keep]
+        sd = float(np.std(x))
+        if not x.size or sd <= 1e-9 * (1.0 + abs(float(np.mean(x)))):
+            continue
+        z = (x - x.mean()) / sd
+        twin = next((n for n, c in kept.items() if abs(float(np.mean(z * c))) > limit), None)
+        if twin is None:
+            kept[name] = z
+        else:
+            out[name] = twin
+    return out

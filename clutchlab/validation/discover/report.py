@@ -1,0 +1,256 @@
+"""Figures and the HTML / Markdown summary of a discovery."""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import math
+from pathlib import Path
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from .result import DiscoveryResult, IterationRecord, ModelState
+
+__all__ = ["plot_diagnostics", "plot_evidence", "plot_residuals", "write_report"]
+
+
+def _train_curves(state: ModelState):
+    res = state.residual
+    for name, (a, b) in zip(res.experiments, res.slices, strict=True):
+        yield name, res.signals["current_mA"][a:b], res.r[a:b], res.keep[a:b]
+
+
+def plot_residuals(it: IterationRecord) -> Figure:
+    """Residual (model − measured, dither-period mean, bar) vs nominal current (mA),
+    before and after the iteration, on the training and the test experiments."""
+    fig = Figure(figsize=(10, 6.5), layout="constrained")  # no pyplot: no global backend
+    axes = fig.subplots(2, 2, sharex=True, sharey="row")
+    label_after = it.effect or "unchanged"
+    for col, (state, title) in enumerate(
+        ((it.before, "before"), (it.after, f"after (+ {label_after})"))
+    ):
+        ax = axes[0, col]
+        for _name, cur, r, keep in _train_curves(state):
+            ax.plot(cur[keep], r[keep], ".", ms=1.5, alpha=0.6)
+        ax.set_title(f"training, {title}: RMSE {state.train['rmse_bar']:.4f} bar")
+        ax = axes[1, col]
+        for name, (cur, r) in state.test_residual.items():
+            ax.plot(cur, r, lw=0.7, label=name)
+        ax.set_title(f"unseen test ramp, {title}: RMSE {state.test['rmse_bar']:.4f} bar")
+        ax.set_xlabel("nominal VFS current (mA)")
+    for ax in axes.ravel():
+        ax.axhline(0.0, color="black", lw=0.6)
+        ax.grid(alpha=0.3)
+    axes[0, 0].set_ylabel("residual, training (bar)")
+    axes[1, 0].set_ylabel("residual, test (bar)")
+    if it.after.test_residual:
+        axes[1, 1].legend(loc="best", fontsize=7)
+    fig.suptitle(f"Iteration {it.index}: residual before / after")
+    return fig
+
+
+def plot_evidence(it: IterationRecord) -> Figure:
+    """Score statistic of every candidate (log scale) against the significance threshold."""
+    from scipy.stats import chi2
+
+    fig = Figure(figsize=(8, 0.35 * max(len(it.candidates), 4) + 1.5), layout="constrained")
+    ax = fig.subplots()
+    cands = it.candidates[::-1]
+    stats = [max(c.statistic, 1e-2) for c in cands]
+    colors = [
+        "tab:green" if c.effect == it.effect else ("tab:orange" if c.significant else "tab:gray")
+        for c in cands
+    ]
+    ax.barh([c.effect for c in cands], stats, color=colors)
+    for y, c in enumerate(cands):
+        ax.text(max(c.statistic, 1e-2), y, f" share {c.share:.2f}", va="center", fontsize=7)
+    for k in sorted({c.k for c in cands}):
+        ax.axvline(chi2.isf(it.threshold_p, k), ls="--", lw=0.8, color="black")
+    ax.set_xscale("log")
+    ax.set_xlabel("score statistic n_eff·ln(RSS₀/RSS₁) (dashed: significance threshold)")
+    ax.set_title(f"Iteration {it.index}: evidence per candidate effect")
+    ax.grid(alpha=0.3, axis="x")
+    return fig
+
+
+def plot_diagnostics(it: IterationRecord) -> Figure:
+    """Residual diagnostics of the iteration's starting model: η² per signal,
+    lagged cross-correlations, spectrum."""
+    d = it.diagnostics
+    fig = Figure(figsize=(12, 3.8), layout="constrained")
+    ax1, ax2, ax3 = fig.subplots(1, 3)
+    names = [a["signal"] for a in d.associations][::-1]
+    ax1.barh(names, [a["eta2"] for a in d.associations][::-1], color="tab:blue")
+    ax1.set_xlabel("η² (residual variance explained by the signal's binned mean)")
+    for name, xc in d.cross_correlation.items():
+        ax2.plot(np.array(xc["lags_s"]) * 1e3, xc["values"], label=name)
+    ax2.set(xlabel="lag (ms)", ylabel="cross-correlation with the residual")
+    ax2.legend(fontsize=7)
+    if d.spectrum.get("freq_Hz"):
+        ax3.semilogy(d.spectrum["freq_Hz"][1:], d.spectrum["psd_bar2_Hz"][1:])
+    ax3.set(xlabel="frequency (Hz)", ylabel="residual PSD (bar²/Hz)")
+    for ax in (ax1, ax2, ax3):
+        ax.grid(alpha=0.3)
+    fig.suptitle(f"Iteration {it.index}: residual diagnostics — {d.summary()[:110]}", fontsize=9)
+    return fig
+
+
+def _png(fig: Figure, path: Path) -> str:
+    """Write ``fig`` to ``path`` (PNG) and return the same image base64-encoded."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100)
+    path.write_bytes(buf.getvalue())
+    return base64.b64encode(buf.getvalue()).decode()
+
+
+def _fmt(x, spec=".4f") -> str:
+    return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, spec)
+
+
+def _candidate_rows(it: IterationRecord) -> list[list[str]]:
+    rows = []
+    for c in it.candidates:
+        refit = c.refit
+        rows.append(
+            [
+                c.effect + (" ✔" if c.effect == it.effect else ""),
+                _fmt(c.statistic, ".1f"),
+                _fmt(c.p_value, ".2g"),
+                _fmt(c.share, ".3f"),
+                _fmt(c.novelty, ".2f"),
+                "yes" if c.significant else "no",
+                _fmt(refit.get("delta_bic"), ".1f") if refit else "",
+                c.status,
+            ]
+        )
+    return rows
+
+
+_CAND_HEAD = ["effect", "statistic", "p", "share", "novelty", "significant", "ΔBIC", "status"]
+
+
+def _md_table(head: list[str], rows: list[list[str]]) -> str:
+    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    out += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(out)
+
+
+def _html_table(head: list[str], rows: list[list[str]]) -> str:
+    h = "".join(f"<th>{html.escape(x)}</th>" for x in head)
+    b = "".join("<tr>" + "".join(f"<td>{html.escape(x)}</td>" for x in r) + "</tr>" for r in rows)
+    return f"<table border='1' cellpadding='3' style='border-collapse:collapse'>{h}{b}</table>"
+
+
+def write_report(result: DiscoveryResult, out: str | Path, command: str = "") -> Path:
+    """Write ``discovery.json``, the figures, ``report.md`` and ``report.html`` into ``out``.
+
+    Parameters
+    ----------
+    result : DiscoveryResult
+        What :func:`~clutchlab.validation.discover.discover` returned.
+    out : path
+        Folder (created).
+    command : str
+        Command line recorded in the report.
+
+    Returns
+    -------
+    Path of ``report.html``.
+    """
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    result.to_json(out / "discovery.json")
+    md = [
+        "# clutchlab discover — closing the loop",
+        "",
+        f"Command: `{command}`  " if command else "",
+        f"Training: {len(result.train)} experiments; test (only scored): "
+        f"{len(result.test)} experiments; {result.wall_s:.1f} s.",
+        "",
+        f"**Result:** {result.summary}",
+        "",
+    ]
+    parts_html = [
+        "<h1>clutchlab discover — closing the loop</h1>",
+        f"<p>Command: <code>{html.escape(command)}</code></p>" if command else "",
+        f"<p><b>Result:</b> {html.escape(result.summary)}</p>",
+    ]
+    for it in result.iterations:
+        title = f"Iteration {it.index}: " + (it.effect or f"no effect added ({it.decision})")
+        errs = [
+            [
+                "training",
+                _fmt(it.before.train["rmse_bar"]),
+                _fmt(it.after.train["rmse_bar"]),
+                _fmt(it.before.train["fit_pct"], ".1f"),
+                _fmt(it.after.train["fit_pct"], ".1f"),
+            ],
+            [
+                "test",
+                _fmt(it.before.test["rmse_bar"]),
+                _fmt(it.after.test["rmse_bar"]),
+                _fmt(it.before.test["fit_pct"], ".1f"),
+                _fmt(it.after.test["fit_pct"], ".1f"),
+            ],
+        ]
+        err_head = ["data", "RMSE before (bar)", "RMSE after (bar)", "fit % before", "fit % after"]
+        params = [
+            [p["name"], _fmt(p["value"], ".5g"), _fmt(p["std_error"], ".3g"), p["unit"]]
+            for p in it.to_dict()["parameters_after"]
+        ]
+        figs = {
+            "residuals": plot_residuals(it),
+            "evidence": plot_evidence(it),
+            "diagnostics": plot_diagnostics(it),
+        }
+        pngs = {k: _png(f, out / f"iteration{it.index}_{k}.png") for k, f in figs.items()}
+        md += [
+            f"## {title}",
+            "",
+            f"Residual before: {it.diagnostics.summary()}",
+            "",
+            f"Sparse regression (pysindy STLSQ, R² {it.sparse.r2:.2f}): `{it.sparse.equation()}`",
+            "",
+            f"Significance level per candidate: p < {it.threshold_p:.2g}.",
+            "",
+            _md_table(_CAND_HEAD, _candidate_rows(it)),
+            "",
+            _md_table(err_head, errs),
+            "",
+            "Parameters after (± standard error):",
+            "",
+            _md_table(["parameter", "value", "± SE", "unit"], params),
+            "",
+            f"![evidence](iteration{it.index}_evidence.png)",
+            f"![residuals](iteration{it.index}_residuals.png)",
+            f"![diagnostics](iteration{it.index}_diagnostics.png)",
+            "",
+        ]
+        parts_html += [
+            f"<h2>{html.escape(title)}</h2>",
+            f"<p>Residual before: {html.escape(it.diagnostics.summary())}</p>",
+            f"<p>Sparse regression (pysindy STLSQ, R² {it.sparse.r2:.2f}): "
+            f"<code>{html.escape(it.sparse.equation())}</code></p>",
+            f"<p>Significance level per candidate: p &lt; {it.threshold_p:.2g}.</p>",
+            _html_table(_CAND_HEAD, _candidate_rows(it)),
+            "<br>",
+            _html_table(err_head, errs),
+            "<p>Parameters after (± standard error):</p>",
+            _html_table(["parameter", "value", "± SE", "unit"], params),
+            *(
+                f"<img src='data:image/png;base64,{p}' style='max-width:100%'>"
+                for p in pngs.values()
+            ),
+        ]
+    (out / "report.md").write_text("\n".join(md) + "\n", encoding="utf-8")
+    page = (
+        "<!doctype html><html><head><meta charset='utf-8'><title>clutchlab discover</title>"
+        "</head><body style='font-family:sans-serif;max-width:1000px'>"
+        + "".join(parts_html)
+        + "</body></html>"
+    )
+    report = out / "report.html"
+    report.write_text(page, encoding="utf-8")
+    return report

@@ -1,0 +1,270 @@
+"""What a discovery found: per iteration the evidence, the effect added, errors before/after."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...physics import CircuitModel
+from ...physics.fit import FitResult
+from ...physics.parameters import ParameterSet
+from .diagnostics import Diagnostics
+from .residuals import ResidualSet
+from .scoring import CandidateScore
+from .sparse import SparseFit
+
+__all__ = ["DiscoveryResult", "IterationRecord", "ModelState"]
+
+
+@dataclass
+class ModelState:
+    """A fitted model during discovery, with its residual and its errors.
+
+    Attributes
+    ----------
+    fit : FitResult
+        The fit (possibly not converged: ``fit.success`` False, best iterate).
+    residual : ResidualSet
+        Training residual at the fitted parameters.
+    train, test : dict
+        ``rmse_bar`` and ``fit_pct`` of the dither-period-mean pressure on the
+        training and test experiments (NaN without test experiments).
+    test_residual : dict
+        Test experiment name -> ``(current_mA, residual_bar)`` arrays for figures.
+    """
+
+    fit: FitResult
+    residual: ResidualSet
+    train: dict[str, float]
+    test: dict[str, float]
+    test_residual: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+
+    @property
+    def model(self) -> CircuitModel:
+        """The model structure."""
+        return self.fit.model()
+
+    @property
+    def params(self) -> ParameterSet:
+        """The fitted parameters."""
+        return self.fit.params()
+
+
+def _parameters(fit: FitResult) -> list[dict[str, Any]]:
+    return [
+        {
+            "name": n,
+            "value": fit.values[n],
+            "std_error": fit.std_errors.get(n, math.nan),
+            "unit": fit.units.get(n, ""),
+            "identifiable": n not in fit.unidentifiable,
+        }
+        for n in fit.free
+    ]
+
+
+def _clean(x):
+    """JSON-safe: NaN/inf -> None, numpy scalars -> Python."""
+    if isinstance(x, dict):
+        return {k: _clean(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_clean(v) for v in x]
+    if isinstance(x, np.generic):
+        x = x.item()
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+@dataclass
+class IterationRecord:
+    """One turn of the loop: residual → evidence → (effect added, refit) → errors.
+
+    Attributes
+    ----------
+    index : int
+        0-based.
+    effect : str or None
+        Effect added, or None when none was (see ``decision``).
+    decision : str
+        Why: ``"added"``, ``"no significant effect"``, ``"information criterion did
+        not improve"``, ``"effect limit reached"``, ``"no candidates left"``.
+    candidates : list of CandidateScore
+        Evidence for every candidate, best statistic first.
+    before, after : ModelState
+        The model before and after (the same object when nothing was added).
+    diagnostics : Diagnostics
+        Of the residual before.
+    sparse : SparseFit
+        Sparse regression of the residual before.
+    delta_bic : float or None
+        Information criterion change of the added effect (negative: better).
+    threshold_p : float
+        Per-candidate significance level (α/m).
+    wall_s : float
+        Time of the iteration (s).
+    reference : dict
+        The residual sum of squares the refits were compared with, and how it was
+        obtained (the current fit, or its continuation when it had not converged).
+    refits : dict
+        Effect name -> :class:`ModelState` of every confirmatory refit that ran.
+    """
+
+    index: int
+    effect: str | None
+    decision: str
+    candidates: list[CandidateScore]
+    before: ModelState
+    after: ModelState
+    diagnostics: Diagnostics
+    sparse: SparseFit
+    delta_bic: float | None = None
+    threshold_p: float = 0.0
+    wall_s: float = 0.0
+    reference: dict = field(default_factory=dict)
+    refits: dict[str, ModelState] = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        """JSON-ready dict (the issue's keys first)."""
+        return {
+            "effect": self.effect,
+            "candidates": [c.to_dict() for c in self.candidates],
+            "train_rmse_before_bar": self.before.train["rmse_bar"],
+            "train_rmse_after_bar": self.after.train["rmse_bar"],
+            "test_rmse_before_bar": self.before.test["rmse_bar"],
+            "test_rmse_after_bar": self.after.test["rmse_bar"],
+            "train_fit_pct_before": self.before.train["fit_pct"],
+            "train_fit_pct_after": self.after.train["fit_pct"],
+            "test_fit_pct_before": self.before.test["fit_pct"],
+            "test_fit_pct_after": self.after.test["fit_pct"],
+            "decision": self.decision,
+            "delta_bic": self.delta_bic,
+            "threshold_p": self.threshold_p,
+            "reference": self.reference,
+            "effects_before": list(self.before.fit.effects),
+            "effects_after": list(self.after.fit.effects),
+            "parameters_after": _parameters(self.after.fit),
+            "fit_status_after": self.after.fit.status,
+            "fit_converged_after": bool(self.after.fit.success),
+            "residual_before": self.diagnostics.to_dict(),
+            "residual_after_rms_bar": self.after.residual.rms_bar,
+            "sparse_regression": self.sparse.to_dict(),
+            "wall_s": self.wall_s,
+        }
+
+
+@dataclass
+class DiscoveryResult:
+    """The outcome of :func:`~clutchlab.validation.discover.discover`.
+
+    Attributes
+    ----------
+    iterations : list of IterationRecord
+        In order; the last one adds no effect unless the effect limit stopped the loop.
+    baseline : ModelState
+        The fitted starting model.
+    final : ModelState
+        The fitted model after the last effect added.
+    unexplained : bool
+        True when the final residual is still structured (not white) and no library
+        effect explains a significant share of it.
+    signature : list of str
+        Signals the final residual follows (empty when white).
+    summary : str
+        One paragraph for people.
+    train, test : list of str
+        Experiment names fitted on / only scored.
+    wall_s : float
+        Wall time of the discovery (s).
+    settings : dict
+        The discovery settings used.
+    """
+
+    iterations: list[IterationRecord]
+    baseline: ModelState
+    final: ModelState
+    unexplained: bool
+    signature: list[str]
+    summary: str
+    train: list[str]
+    test: list[str]
+    wall_s: float
+    settings: dict = field(default_factory=dict)
+
+    @property
+    def added(self) -> list[str]:
+        """Effects added, in order."""
+        return [it.effect for it in self.iterations if it.effect]
+
+    @property
+    def best_model(self) -> CircuitModel:
+        """The augmented model structure (base effects + the ones added)."""
+        return self.final.model
+
+    @property
+    def params(self) -> ParameterSet:
+        """Fitted parameters of :attr:`best_model`."""
+        return self.final.params
+
+    @property
+    def fit_result(self) -> FitResult:
+        """The final fit (values, standard errors, identifiability)."""
+        return self.final.fit
+
+    def to_dict(self) -> dict:
+        """JSON-ready dict: ``{"iterations": [...], "unexplained": bool, ...}``."""
+        return _clean(
+            {
+                "iterations": [it.to_dict() for it in self.iterations],
+                "unexplained": self.unexplained,
+                "added": self.added,
+                "signature": self.signature,
+                "summary": self.summary,
+                "effects_initial": list(self.baseline.fit.effects),
+                "effects_final": list(self.final.fit.effects),
+                "train": self.train,
+                "test": self.test,
+                "baseline": {"train": self.baseline.train, "test": self.baseline.test},
+                "final": {
+                    "train": self.final.train,
+                    "test": self.final.test,
+                    "parameters": _parameters(self.final.fit),
+                    "values": self.final.fit.values,
+                },
+                "wall_s": self.wall_s,
+                "settings": self.settings,
+            }
+        )
+
+    def to_json(self, path: str | Path | None = None) -> str:
+        """JSON text (written to ``path`` when given, atomically)."""
+        text = json.dumps(self.to_dict(), indent=2, ensure_ascii=False)
+        if path is not None:
+            path = Path(path)
+            tmp = path.with_suffix(path.suffix + ".part")
+            tmp.write_text(text + "\n", encoding="utf-8")
+            tmp.replace(path)
+        return text
+
+    def table(self) -> str:
+        """Per iteration: effect, winner and runner-up scores, RMSE before → after."""
+        lines = [
+            f"{'it':>2s}  {'effect':30s} {'train RMSE (bar)':>20s} {'test RMSE (bar)':>20s}  "
+            "evidence (statistic, share)"
+        ]
+        for it in self.iterations:
+            top = ", ".join(
+                f"{c.effect} {c.statistic:.1f}/{c.share:.2f}{'*' if c.significant else ''}"
+                for c in it.candidates[:3]
+            )
+            lines.append(
+                f"{it.index:2d}  {(it.effect or '— ' + it.decision):30s} "
+                f"{it.before.train['rmse_bar']:9.4f} → {it.after.train['rmse_bar']:7.4f} "
+                f"{it.before.test['rmse_bar']:9.4f} → {it.after.test['rmse_bar']:7.4f}  {top}"
+            )
+        return "\n".join(lines)

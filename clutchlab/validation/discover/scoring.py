@@ -1,0 +1,360 @@
+"""Attribution: how much of the residual each library effect's output sensitivity explains.
+
+A score (Lagrange-multiplier) test per candidate effect, evaluated at the fitted model
+with the candidate switched on at zero strength, where the model output equals the
+fitted model's:
+
+1. ``X = ∂ŷ/∂s`` — the output sensitivities to the effect's strength parameters ``s``
+   (CasADi forward sensitivities through the compiled integrator, the same residual
+   operator as the fit: dither-period mean, decimated).
+2. Project out what the fit can already do: with ``Q`` an orthonormal basis of the free
+   parameters' sensitivities ``J``, ``X⊥ = (I − QQᵀ) X`` and ``r⊥ = (I − QQᵀ) r``. The
+   *novelty* ``‖X⊥‖ / ‖X‖`` says how much of the effect's signature is new (0: the free
+   parameters mimic it exactly, e.g. a latch threshold shift against the latch preload).
+3. Bounded linear least squares ``min ‖r⊥ + X⊥ b‖`` with ``b`` inside the strength bounds
+   (effects act one way: friction, leakage, lag ≥ 0), the one-step estimate of the
+   strength. ``share = 1 − RSS₁/RSS₀`` is the fraction of the residual it explains.
+4. Statistic ``T = n_eff · ln(RSS₀/RSS₁)`` (the linearized likelihood ratio) with
+   ``n_eff`` the effective number of independent residuals of the alternative
+   (:func:`~.residuals.effective_size`), referred to χ² with ``k`` = number of strength
+   parameters (conservative for one-sided bounds). Significant when ``p < α / m``.
+
+Where the sensitivity is identically zero at zero strength (a strength entering
+quadratically, e.g. the supply restriction's area ratio), it is taken at a small probe
+strength instead; the residual is still the fitted model's. An effect's fitted
+parameters that are not strengths (a lag's time constant) have no sensitivity at zero
+strength but shape the strength's; they are scored on a grid and the largest statistic
+kept (a sup-score test: the significance level is divided by the grid size).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+from scipy.optimize import lsq_linear
+from scipy.stats import chi2
+from tqdm.auto import tqdm
+
+from ...data import Trace
+from ...errors import ClutchlabError
+from ...physics import CircuitModel
+from ...physics.effects import EFFECTS
+from ...physics.fit import FitSettings
+from ...physics.parameters import ParameterSet
+from .residuals import ResidualSet, effective_size, residual_problem
+from .warm import warm_sensitivities
+
+__all__ = ["CandidateScore", "Projector", "score_candidates", "score_effect"]
+
+#: Relative singular-value cut-off of the free parameters' sensitivity basis.
+RANK_TOL = 1e-8
+#: Below this novelty an effect is reported as confounded with the free parameters.
+MIN_NOVELTY = 0.02
+#: Multiples of the default at which an effect's fitted non-strength parameters (a lag's
+#: time constant) are scored, see :func:`nuisance_grid`.
+NUISANCE_FACTORS = (0.3, 1.0, 3.0, 10.0)
+
+
+@dataclass
+class CandidateScore:
+    """Evidence for one candidate effect in one iteration.
+
+    Attributes
+    ----------
+    effect : str
+        Library name.
+    k : int
+        Number of strength parameters tested.
+    share : float
+        Fraction of the (projected) residual sum of squares its sensitivity explains.
+    statistic : float
+        ``n_eff · ln(RSS₀/RSS₁)``.
+    p_value : float
+        χ²ₖ tail probability of ``statistic``.
+    n_eff : float
+        Effective number of independent residuals used.
+    novelty : float
+        ``‖X⊥‖/‖X‖``: part of the sensitivity the free parameters cannot mimic.
+    strength : dict
+        One-step (linearized) estimate of each strength parameter (its unit).
+    nuisance : dict
+        Values of the fitted non-strength parameters at which the score was largest.
+    n_tests : int
+        Number of nuisance values scored (the significance level is divided by it).
+    probe : str
+        ``"zero"`` (sensitivity at zero strength) or ``"probe"`` (at a small strength).
+    significant : bool
+        ``p_value < α/(m·n_tests)`` and ``share ≥ min_share``.
+    status : str
+        ``"scored"``, ``"confounded"`` (novelty below :data:`MIN_NOVELTY`) or
+        ``"failed: <reason>"``.
+    signature : str
+        The effect's documented residual signature.
+    refit : dict
+        Filled when the candidate was refitted to confirm: ``status``, ``rss_bar2``,
+        ``delta_bic``, ``wall_s``.
+    wall_s : float
+        Time to score it (s).
+    """
+
+    effect: str
+    k: int
+    share: float = 0.0
+    statistic: float = 0.0
+    p_value: float = 1.0
+    n_eff: float = 0.0
+    novelty: float = 0.0
+    strength: dict[str, float] = field(default_factory=dict)
+    nuisance: dict[str, float] = field(default_factory=dict)
+    n_tests: int = 1
+    probe: str = "zero"
+    significant: bool = False
+    status: str = "scored"
+    signature: str = ""
+    refit: dict = field(default_factory=dict)
+    wall_s: float = 0.0
+
+    def to_dict(self) -> dict:
+        """JSON-ready dict."""
+        return asdict(self)
+
+
+class Projector:
+    """Orthogonal projection away from the free parameters' output sensitivities.
+
+    Parameters
+    ----------
+    jacobian : numpy.ndarray
+        Residuals × scaled free parameters (bar per unit z).
+    """
+
+    def __init__(self, jacobian: np.ndarray | None) -> None:
+        if jacobian is None or jacobian.size == 0:
+            self.q = None
+            return
+        norms = np.linalg.norm(jacobian, axis=0)
+        j = jacobian[:, norms > 0] / norms[norms > 0]
+        if j.shape[1] == 0:
+            self.q = None
+            return
+        u, s, _ = np.linalg.svd(j, full_matrices=False)
+        self.q = u[:, s > RANK_TOL * s[0]]
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        """``(I − QQᵀ) x``."""
+        if self.q is None:
+            return np.array(x, dtype=float, copy=True)
+        return x - self.q @ (self.q.T @ x)
+
+
+def _sensitivity(
+    model: CircuitModel,
+    values: dict[str, float],
+    strength: tuple[str, ...],
+    probe: dict[str, float],
+    traces: list[Trace],
+    fit: FitSettings,
+    keep: np.ndarray,
+):
+    params = model.params(**values, **probe)
+    problem = residual_problem(model, params, strength, traces, fit)
+    warm_sensitivities(model, traces, fit, len(strength))
+    problem.start_workers(traces, fit.workers)
+    try:
+        ev = problem.evaluate(np.zeros(problem.n_z), True)
+    finally:
+        problem.close()
+    if not ev["ok"] or ev.get("J") is None:
+        raise ClutchlabError("the model with the effect diverges at its probe strength")
+    x = ev["J"].toarray()[keep]
+    if not np.all(np.isfinite(x)):
+        raise ClutchlabError("non-finite output sensitivity")
+    return x, problem.bounds_z()
+
+
+def score_effect(
+    name: str,
+    model: CircuitModel,
+    values: dict[str, float],
+    traces: list[Trace],
+    base: ResidualSet,
+    projector: Projector,
+    fit: FitSettings,
+    probe_fraction: float = 0.1,
+) -> CandidateScore:
+    """Score test of one library effect ``name`` against the fitted ``model``.
+
+    Parameters
+    ----------
+    name : str
+        Effect not yet in ``model``.
+    model : CircuitModel
+        The fitted model structure.
+    values : dict
+        Its fitted parameter values (engineering units).
+    traces : list of Trace
+        Training experiments (the ones ``base`` was computed on, same order).
+    base : ResidualSet
+        Residual of the fitted model.
+    projector : Projector
+        Projection away from the free parameters' sensitivities.
+    fit : FitSettings
+        Residual operator (substeps, decimation, settle time, workers).
+    probe_fraction : float
+        Fraction of the default strength used when the zero-strength sensitivity vanishes.
+
+    Returns
+    -------
+    CandidateScore
+        Never raises for a failing candidate: its ``status`` says why.
+    """
+    t0 = time.perf_counter()
+    cls = EFFECTS[name]
+    strength = tuple(cls.STRENGTH)
+    out = CandidateScore(effect=name, k=len(strength), signature=cls.signature)
+    try:
+        cand = model.with_effects(name)
+        grid = nuisance_grid(cand, name)
+        out.n_tests = len(grid)
+        rp = projector(base.r[base.keep])
+        rss0 = float(np.dot(rp, rp))
+        best = None
+        for nuisance in grid:
+            trial = _score_at(
+                cand, name, values | nuisance, traces, base, projector, fit, rp, probe_fraction
+            )
+            trial.nuisance = nuisance
+            if best is None or trial.statistic > best.statistic:
+                best = trial
+        for key in ("share", "statistic", "p_value", "n_eff", "novelty", "strength", "probe"):
+            setattr(out, key, getattr(best, key))
+        out.nuisance, out.status = best.nuisance, best.status
+        if rss0 <= 0:
+            out.status = "confounded"
+    except ClutchlabError as exc:
+        out.status = f"failed: {exc}"
+    except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+        out.status = f"failed: {type(exc).__name__}: {exc}"
+    out.wall_s = time.perf_counter() - t0
+    return out
+
+
+def nuisance_grid(cand: CircuitModel, name: str) -> list[dict[str, float]]:
+    """Values of the effect's fitted non-strength parameters to score at.
+
+    Such a parameter (a lag's time constant) has no output sensitivity at zero
+    strength, yet shapes the strength's sensitivity; the score is taken at each of
+    :data:`NUISANCE_FACTORS` × its default (clipped to the bounds) and the largest is
+    kept — a sup-score test, whose significance level is divided by the grid size.
+    """
+    cls = EFFECTS[name]
+    specs = {p.name: p for p in cand.parameters}
+    nuisance = [n for n in cls.fit_parameters() if n not in cls.STRENGTH]
+    grid: list[dict[str, float]] = [{}]
+    for n in nuisance:
+        spec = specs[n]
+        values = sorted(
+            {min(max(spec.default * f, spec.lower), spec.upper) for f in NUISANCE_FACTORS}
+        )
+        grid = [g | {n: v} for g in grid for v in values]
+    return grid
+
+
+def _score_at(
+    cand: CircuitModel,
+    name: str,
+    values: dict[str, float],
+    traces: list[Trace],
+    base: ResidualSet,
+    projector: Projector,
+    fit: FitSettings,
+    rp: np.ndarray,
+    probe_fraction: float = 0.1,
+) -> CandidateScore:
+    """The score of effect ``name`` at fixed non-strength parameter ``values``."""
+    cls = EFFECTS[name]
+    strength = tuple(cls.STRENGTH)
+    out = CandidateScore(effect=name, k=len(strength))
+    specs = {p.name: p for p in cand.parameters}
+    probe = {s: 0.0 for s in strength}
+    x, (lo, hi) = _sensitivity(cand, values, strength, probe, traces, fit, base.keep)
+    if not np.any(x):
+        probe = {s: probe_fraction * (specs[s].default or specs[s].scale) for s in strength}
+        probe = {s: min(max(v, specs[s].lower), specs[s].upper) for s, v in probe.items()}
+        x, (lo, hi) = _sensitivity(cand, values, strength, probe, traces, fit, base.keep)
+        out.probe = "probe"
+    xp = projector(x)
+    out.novelty = float(np.linalg.norm(xp) / max(np.linalg.norm(x), 1e-300))
+    rss0 = float(np.dot(rp, rp))
+    if out.novelty < MIN_NOVELTY or rss0 <= 0:
+        out.status = "confounded"
+        return out
+    sol = lsq_linear(xp, -rp, bounds=(lo, hi), method="bvls")
+    e1 = rp + xp @ sol.x
+    rss1 = float(np.dot(e1, e1))
+    out.share = float(max(1.0 - rss1 / rss0, 0.0))
+    n_eff, _ = effective_size(e1, base.kept_slices)
+    out.n_eff = n_eff
+    out.statistic = float(n_eff * np.log(rss0 / max(rss1, 1e-300)))
+    out.p_value = float(chi2.sf(out.statistic, len(strength)))
+    steps = zip(strength, sol.x, strict=True)
+    out.strength = {s: float(probe[s] + specs[s].scale * b) for s, b in steps}
+    return out
+
+
+def score_candidates(
+    candidates: list[str],
+    model: CircuitModel,
+    params: ParameterSet,
+    traces: list[Trace],
+    base: ResidualSet,
+    fit: FitSettings,
+    *,
+    alpha: float = 0.01,
+    min_share: float = 0.1,
+    probe_fraction: float = 0.1,
+    progress: bool = False,
+) -> list[CandidateScore]:
+    """Score every candidate; flag the significant ones; best statistic first.
+
+    Parameters
+    ----------
+    candidates : list of str
+        Library effects not in ``model``.
+    model, params : CircuitModel, ParameterSet
+        The fitted model and its parameters.
+    traces : list of Trace
+        Training experiments.
+    base : ResidualSet
+        Residual with the Jacobian of the free parameters (``jacobian`` set).
+    fit : FitSettings
+        Residual operator.
+    alpha : float
+        Family-wise level; Bonferroni: each test at ``alpha / len(candidates)``.
+    min_share : float
+        Smallest explained share that counts.
+    probe_fraction : float
+        See :func:`score_effect`.
+    progress : bool
+        Progress bar.
+
+    Returns
+    -------
+    list of CandidateScore
+    """
+    projector = Projector(None if base.jacobian is None else base.jacobian[base.keep])
+    values = dict(params.values)
+    scores = []
+    for name in tqdm(candidates, desc="score effects", unit="effect", disable=not progress):
+        scores.append(
+            score_effect(name, model, values, traces, base, projector, fit, probe_fraction)
+        )
+    level = alpha / max(len(candidates), 1)
+    for s in scores:
+        s.significant = (
+            s.status == "scored" and s.p_value < level / s.n_tests and s.share >= min_share
+        )
+    scores.sort(key=lambda s: (-s.statistic, s.effect))
+    return scores

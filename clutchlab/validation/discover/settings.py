@@ -1,0 +1,104 @@
+"""Typed settings of effect discovery (closing the loop)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from ...errors import FitError
+from ...physics.fit import FitSettings
+
+__all__ = ["DiscoverySettings"]
+
+
+def _quiet_fit() -> FitSettings:
+    return FitSettings(progress=False)
+
+
+@dataclass(frozen=True)
+class DiscoverySettings:
+    """How :func:`discover` closes the loop.
+
+    Attributes
+    ----------
+    fit : FitSettings
+        Settings of every physics fit (baseline, confirmatory refits). Its
+        ``train_ramps`` are the experiments fitted on and scored in the evidence;
+        ``free=None`` frees the default parameters plus each declared effect's fit set.
+    test_ramps : tuple of str
+        Ramp labels only scored (before / after), never used for a decision.
+    candidates : tuple of str or None
+        Library effects considered; None: every effect not yet in the model.
+    max_effects : int
+        At most this many effects are added.
+    alpha : float
+        Family-wise significance level of the score test: a candidate is
+        significant when its p-value is below ``alpha / m`` (Bonferroni over the
+        ``m`` candidates scored in the iteration).
+    min_share : float
+        A candidate is considered only if its sensitivity explains at least this
+        fraction of the residual sum of squares (linearized, after projecting out
+        the free parameters), besides being significant: an effect must explain a
+        *significant share*, not merely a statistically detectable sliver.
+    confirm_top : int
+        At most this many significant candidates (best score first) are refitted
+        to confirm; the one with the lowest information criterion is added.
+    confirm_ratio : float
+        Runners-up are refitted only when their score statistic reaches this
+        fraction of the best one.
+    probe_fraction : float
+        When an effect's output sensitivity is identically zero at zero strength
+        (strength entering quadratically), it is taken at this fraction of the
+        default strength instead.
+    snap_guard_s : float
+        Training residuals within this time (s) of a latch snap (the measured
+        period-mean pressure moving faster than ``fit.snap_rate_bar_s``) stay out of
+        the evidence: there the residual is the snap's timing jitter on the sample
+        grid, not a missing effect (at the true parameters these few samples carry
+        most of the residual sum of squares on the stand).
+    max_lag_s : float
+        Largest lag (s) of the cross-correlation diagnostics.
+    sparse_threshold : float
+        STLSQ threshold of the sparse regression, on standardized terms (a term
+        is kept when its coefficient exceeds this many residual standard
+        deviations per standard deviation of the term).
+    progress : bool
+        Show a progress bar per stage.
+    """
+
+    fit: FitSettings = field(default_factory=_quiet_fit)
+    test_ramps: tuple[str, ...] = ("medium",)
+    candidates: tuple[str, ...] | None = None
+    max_effects: int = 3
+    alpha: float = 0.01
+    min_share: float = 0.1
+    confirm_top: int = 3
+    confirm_ratio: float = 0.5
+    probe_fraction: float = 0.1
+    snap_guard_s: float = 0.05
+    max_lag_s: float = 0.1
+    sparse_threshold: float = 0.1
+    progress: bool = True
+
+    def __post_init__(self) -> None:
+        problems = []
+        if self.max_effects < 0:
+            problems.append("max_effects must be ≥ 0")
+        if not 0.0 < self.alpha < 1.0:
+            problems.append("alpha must be in (0, 1)")
+        if not 0.0 <= self.min_share < 1.0:
+            problems.append("min_share must be in [0, 1)")
+        if self.confirm_top < 1:
+            problems.append("confirm_top must be ≥ 1")
+        if not 0.0 <= self.confirm_ratio <= 1.0:
+            problems.append("confirm_ratio must be in [0, 1]")
+        if not 0.0 < self.probe_fraction <= 1.0:
+            problems.append("probe_fraction must be in (0, 1]")
+        if self.snap_guard_s < 0:
+            problems.append("snap_guard_s must be ≥ 0")
+        if self.max_lag_s <= 0:
+            problems.append("max_lag_s must be > 0")
+        overlap = set(self.test_ramps) & set(self.fit.train_ramps)
+        if overlap:
+            problems.append(f"ramp(s) {sorted(overlap)} both trained on and tested on")
+        if problems:
+            raise FitError("invalid discovery settings: " + "; ".join(problems))

@@ -1,0 +1,208 @@
+"""Closing the loop (issue 7): the discovery machinery on a tiny dataset, and its statistics.
+
+Fast tests. The tiny stand dataset has one undeclared effect (``supply_droop``, which
+changes the dither-period-mean pressure by up to 0.45 bar at the stand's default
+strength) and short ramps; the fit frees two parameters. The slow tests in
+``test_discover_effects.py`` / ``test_discover_null.py`` check the science.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import clutchlab.validation.discover.loop as loop
+import clutchlab.validation.discover.scoring as scoring
+from clutchlab.cli import main
+from clutchlab.data import load_dataset
+from clutchlab.errors import FitError, SimulationError
+from clutchlab.physics import CircuitModel
+from clutchlab.physics.fit import FitSettings
+from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, write_stand
+from clutchlab.validation.discover import (
+    DiscoverySettings,
+    discover,
+    residual_problem,
+    residual_set,
+)
+from clutchlab.validation.discover.residuals import effective_size, integrated_time
+from clutchlab.validation.discover.scoring import Projector, score_effect
+
+TINY_RAMPS = (
+    RampProfile("fast", 1.5, 0.3),
+    RampProfile("medium", 3.0, 0.3),
+    RampProfile("slow", 6.0, 0.3),
+)
+FREE = ("vfs_K_m", "reg_F0")
+CANDIDATES = ("supply_droop", "latch_threshold_drift")
+#: The issue's JSON keys of one iteration.
+ITERATION_KEYS = {
+    "effect",
+    "candidates",
+    "train_rmse_before_bar",
+    "train_rmse_after_bar",
+    "test_rmse_before_bar",
+    "test_rmse_after_bar",
+}
+
+
+@pytest.fixture(scope="module")
+def tiny_dir(tmp_path_factory):
+    config = StandConfig(
+        builtin_effects=False,
+        effects=("supply_droop",),
+        settings=(DitherSetting(50.0, "B"),),
+        ramps=TINY_RAMPS,
+        seed=3,
+    )
+    out = tmp_path_factory.mktemp("discover") / "stand"
+    write_stand(out, config, progress=False, figure=False)
+    return out
+
+
+@pytest.fixture(scope="module")
+def cli_run(tiny_dir, tmp_path_factory):
+    out = tmp_path_factory.mktemp("discover_out")
+    argv = [
+        "discover",
+        str(tiny_dir),
+        "--out",
+        str(out / "report"),
+        "--json",
+        str(out / "discovery.json"),
+        "--max-effects",
+        "1",
+        "--free",
+        ",".join(FREE),
+        "--candidates",
+        ",".join(CANDIDATES),
+        "--max-iter",
+        "5",
+        "--quiet",
+    ]
+    code = main(argv)
+    return code, out
+
+
+def test_cli_writes_the_issue_json_and_a_report(cli_run):
+    code, out = cli_run
+    assert code == 0
+    doc = json.loads((out / "discovery.json").read_text())
+    assert isinstance(doc["unexplained"], bool)
+    assert doc["iterations"], "at least one iteration"
+    for it in doc["iterations"]:
+        assert ITERATION_KEYS <= set(it)
+        for key in ITERATION_KEYS - {"effect", "candidates"}:
+            assert it[key] is None or it[key] >= 0.0
+    first = doc["iterations"][0]
+    assert {c["effect"] for c in first["candidates"]} == set(CANDIDATES)
+    for c in first["candidates"]:
+        assert {"share", "statistic", "p_value", "novelty", "significant", "status"} <= set(c)
+    report = out / "report"
+    assert json.loads((report / "discovery.json").read_text()) == doc
+    html = (report / "report.html").read_text()
+    assert "Iteration 0" in html and "supply_droop" in html
+    for kind in ("residuals", "evidence", "diagnostics"):
+        png = report / f"iteration0_{kind}.png"
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_one_undeclared_effect_is_named_and_lowers_both_errors(cli_run):
+    """Supply droop explains most of the residual; a latch threshold shift moves mainly the
+    latch snaps, which the evidence leaves out."""
+    _, out = cli_run
+    first = json.loads((out / "discovery.json").read_text())["iterations"][0]
+    assert first["effect"] == "supply_droop"
+    assert first["train_rmse_after_bar"] < first["train_rmse_before_bar"]
+    assert first["test_rmse_after_bar"] < first["test_rmse_before_bar"]
+    by_name = {c["effect"]: c for c in first["candidates"]}
+    assert by_name["supply_droop"]["share"] > by_name["latch_threshold_drift"]["share"]
+    assert by_name["supply_droop"]["refit"]["delta_bic"] < 0
+
+
+# ---- statistics with known answers --------------------------------------------------------
+def test_integrated_time_of_white_noise_and_ar1():
+    rng = np.random.default_rng(0)
+    assert integrated_time(rng.standard_normal(20_000)) == pytest.approx(1.0, abs=0.15)
+    phi = 0.8  # AR(1): τ = (1 + φ) / (1 − φ) = 9
+    e = rng.standard_normal(50_000)
+    x = np.empty_like(e)
+    x[0] = e[0]
+    for k in range(1, len(e)):
+        x[k] = phi * x[k - 1] + e[k]
+    assert integrated_time(x) == pytest.approx(9.0, rel=0.2)
+    n_eff, _ = effective_size(np.concatenate([x, e[:1000]]), [(0, len(x)), (len(x), len(x) + 1000)])
+    assert n_eff == pytest.approx(len(x) / 9.0 + 1000.0, rel=0.2)
+
+
+def test_projector_removes_the_free_parameter_directions():
+    rng = np.random.default_rng(1)
+    j = rng.standard_normal((200, 3))
+    j[:, 2] = j[:, 0] + j[:, 1]  # rank 2
+    proj = Projector(j)
+    assert np.allclose(proj(j), 0.0, atol=1e-10)
+    v = rng.standard_normal(200)
+    assert np.allclose(proj(proj(v)), proj(v))
+    assert np.allclose(j.T @ proj(v), 0.0, atol=1e-9)
+
+
+def test_invalid_settings_are_refused():
+    with pytest.raises(FitError, match="both trained on and tested on"):
+        DiscoverySettings(test_ramps=("slow",))
+    with pytest.raises(FitError, match="alpha"):
+        DiscoverySettings(alpha=0.0)
+
+
+# ---- failure modes ----------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def tiny(tiny_dir):
+    return load_dataset(tiny_dir)
+
+
+def _settings(**kw) -> DiscoverySettings:
+    fit = FitSettings(progress=False, free=("reg_F0",), max_iter=3, workers=1)
+    return DiscoverySettings(fit=fit, progress=False, **kw)
+
+
+def test_no_training_ramps_is_a_clear_error(tiny):
+    with pytest.raises(FitError, match="no training experiments"):
+        discover(tiny.select(ramps=["medium"]), settings=_settings())
+
+
+def test_a_candidate_that_fails_to_score_is_reported_not_raised(tiny, monkeypatch):
+    train = list(tiny.select(ramps=["fast", "slow"]))
+    model = CircuitModel()
+    params = model.default_params()
+    fit = _settings().fit
+    base = residual_set(residual_problem(model, params, ("reg_F0",), train, fit), train, True)
+
+    def boom(*args, **kwargs):
+        raise SimulationError("state not finite at t = 0.1 s")
+
+    monkeypatch.setattr(scoring, "_sensitivity", boom)
+    out = score_effect(
+        "stribeck_friction", model, dict(params.values), train, base, Projector(None), fit
+    )
+    assert out.status.startswith("failed: state not finite")
+    assert not out.significant and out.share == 0.0
+
+
+def test_a_candidate_whose_refit_fails_is_not_added(tiny, monkeypatch):
+    real = loop._run_fit
+
+    def failing(model, train, settings, free, start):
+        if "supply_droop" in model.effect_names:
+            raise FitError("the model diverges at the start parameters")
+        return real(model, train, settings, free, start)
+
+    monkeypatch.setattr(loop, "_run_fit", failing)
+    res = discover(tiny, settings=_settings(candidates=("supply_droop",), max_effects=1))
+    (it,) = res.iterations
+    assert it.effect is None
+    assert res.added == []
+    (cand,) = it.candidates
+    assert cand.significant  # so it was refitted
+    assert cand.refit["status"].startswith("failed: the model diverges")
+    assert it.decision == "information criterion did not improve"
