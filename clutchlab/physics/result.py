@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from .model import OutputSpec
 from .parameters import ParameterSet
+
+if TYPE_CHECKING:  # pandas is imported on use: simulation workers start faster without it
+    import pandas as pd
 
 __all__ = ["SimulationResult"]
 
@@ -75,6 +78,8 @@ class SimulationResult:
         cols = {"time_s": self.time_s} | dict(self.outputs)
         if states:
             cols |= {f"state_{n}": self.states[:, k] for k, n in enumerate(self.state_names)}
+        import pandas as pd
+
         df = pd.DataFrame(cols)
         df.attrs["units"] = {k: v for k, v in self.units().items() if k in df.columns}
         df.attrs["trace"] = self.trace_name

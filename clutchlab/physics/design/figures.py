@@ -6,16 +6,18 @@ matplotlib ``Figure`` objects only (no pyplot state): safe in workers and server
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
-from matplotlib.figure import Figure
-from matplotlib.ticker import NullFormatter
 
 from .evaluate import STATUS_FAILED, STATUS_OK
 from .metrics import METRIC_UNITS, metric_names
 from .sensitivity import sensitivity_table
 from .spec import SweepSpec
+
+if TYPE_CHECKING:  # matplotlib is imported on use: sweep workers import this package
+    from matplotlib.figure import Figure
 
 __all__ = ["metric_unit", "plot_metrics_vs_variables", "plot_tornado", "write_figures"]
 
@@ -51,6 +53,8 @@ def plot_tornado(table: pd.DataFrame, spec: SweepSpec) -> Figure:
     ncols = 3
     nrows = int(np.ceil(len(metrics) / ncols))
     height = max(1.2, 0.35 * len(spec.variables) + 0.9)
+    from matplotlib.figure import Figure
+
     fig = Figure(figsize=(5.2 * ncols, height * nrows), constrained_layout=True)
     axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
     for ax, name in zip(axes, metrics, strict=False):
@@ -89,6 +93,9 @@ def plot_metrics_vs_variables(table: pd.DataFrame, spec: SweepSpec) -> Figure:
     ok = table[table["status"] == STATUS_OK]
     failed = table[table["status"] == STATUS_FAILED]
     w, h = 2.6 * max(len(variables), 1) + 1.2, 1.7 * len(metrics) + 0.9
+    from matplotlib.figure import Figure
+    from matplotlib.ticker import NullFormatter
+
     fig = Figure(figsize=(w, h))  # fixed margins: constrained layout is slow for big grids
     axes = fig.subplots(len(metrics), max(len(variables), 1), squeeze=False)
     fig.subplots_adjust(

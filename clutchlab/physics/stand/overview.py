@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from matplotlib.figure import Figure
-
 from ...data import Dataset, dither_period_mean, dither_period_samples
 
 __all__ = ["plot_pressure_vs_current"]
@@ -22,6 +20,8 @@ def plot_pressure_vs_current(dataset: Dataset, setting: str | None = None):
         Only experiments whose name ends with this dither tag (e.g. ``50Hz_A``);
         the first experiment's tag when omitted.
     """
+    from matplotlib.figure import Figure  # imported on use: simulation workers never draw
+
     fig = Figure(figsize=(7.5, 5), layout="constrained")  # no pyplot: no global backend
     ax = fig.subplots()
     tag = setting or "_".join(dataset[0].name.split("_")[1:])
