@@ -19,7 +19,7 @@ from .demodulate import (
     nominal_current,
     nominal_didt,
 )
-from .derived import didt, dither_period_mean, dither_period_samples
+from .derived import causal_didt, causal_window, didt, dither_period_mean, dither_period_samples
 from .formats import FORMATS, FileFormat
 from .io_csv import read_csv, write_csv
 from .io_dataset import DatasetScan, load_dataset, save_dataset, scan_dataset
@@ -51,6 +51,8 @@ __all__ = [
     "SignalSpec",
     "Timing",
     "Trace",
+    "causal_didt",
+    "causal_window",
     "check_log",
     "check_path",
     "convert",

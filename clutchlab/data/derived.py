@@ -1,5 +1,9 @@
 """Derived signals used by every layer: one-dither-period mean and a filtered dI/dt.
 
+:func:`didt` is centred (it looks half a window ahead, for offline use);
+:func:`causal_didt` uses past samples only, so a real-time model (an FMU) computes it
+exactly as offline training did.
+
 Both work on uniformly sampled arrays (a trace read by :mod:`clutchlab.data` is uniform when
 its log was irregular or multi-rate).
 """
@@ -11,7 +15,7 @@ from numpy.typing import ArrayLike
 
 from ..errors import DataError
 
-__all__ = ["didt", "dither_period_mean"]
+__all__ = ["causal_didt", "causal_window", "didt", "dither_period_mean"]
 
 
 def _finite_1d(x: ArrayLike, name: str) -> np.ndarray:
@@ -114,6 +118,72 @@ def didt(x: ArrayLike, sample_rate_Hz: float, n: float, *, polyorder: int = 2) -
             return np.zeros_like(arr)
         return np.full(arr.size, np.polyfit(np.arange(arr.size), arr, 1)[0] * sample_rate_Hz)
     return savgol_filter(arr, window, polyorder, deriv=1, delta=1.0 / sample_rate_Hz, mode="interp")
+
+
+def causal_window(n: float) -> int:
+    """Samples of the causal dI/dt window for a length of ``n`` samples (see :func:`didt`).
+
+    ``ceil(n)`` (with a 1e-6 allowance, so that ``n`` computed in another order of floating
+    point operations, as an FMU does, gives the same count), at least 4, rounded up to odd:
+    the same count as the centred :func:`didt` window.
+
+    Parameters
+    ----------
+    n : float
+        Window length, samples (> 0).
+
+    Returns
+    -------
+    int
+        Odd window length, samples (≥ 5).
+    """
+    window = max(int(np.ceil(n - 1e-6)), 4)
+    return window + 1 - window % 2
+
+
+def causal_didt(x: ArrayLike, sample_rate_Hz: float, n: float) -> np.ndarray:
+    """Causal filtered time derivative: least-squares slope over the trailing window.
+
+    At sample k the slope of the straight line fitted to samples ``k − N + 1 … k``,
+    ``N = causal_window(n)``; before the first sample the signal is taken as constant at its
+    first value (the history a real-time model starts with). For a ramp of rate r it is r
+    (as :func:`didt`), lagging by ``(N − 1)/2`` samples; white noise of standard deviation σ
+    gives a derivative noise of ``σ · fs · sqrt(12 / (N (N² − 1)))``. The weights are those
+    of :class:`clutchlab.physics.fmu.DidtSpec`, which computes it inside an FMU.
+
+    Parameters
+    ----------
+    x : array_like
+        Uniformly sampled signal (e.g. nominal current, mA); finite.
+    sample_rate_Hz : float
+        Sample rate, Hz.
+    n : float
+        Window length, samples (rounded by :func:`causal_window`).
+
+    Returns
+    -------
+    numpy.ndarray
+        Derivative in units of ``x`` per second (mA/s for a current in mA).
+
+    Raises
+    ------
+    DataError
+        If ``x`` is not finite and 1-D, or the rate or window is not usable.
+    """
+    arr = _finite_1d(x, "x")
+    if not np.isfinite(sample_rate_Hz) or sample_rate_Hz <= 0:
+        raise DataError(f"sample_rate_Hz must be positive, got {sample_rate_Hz!r}")
+    if not np.isfinite(n) or n <= 0:
+        raise DataError(f"window length n must be positive, got {n!r}")
+    if arr.size == 0:
+        return arr.copy()
+    window = causal_window(n)
+    dt = 1.0 / sample_rate_Hz
+    j = np.arange(window, dtype=np.float64)  # age of the sample, samples
+    w = (-j * dt + (window - 1) * dt / 2) / (dt * dt * window * (window * window - 1) / 12)
+    padded = np.concatenate([np.full(window - 1, arr[0]), arr])
+    # slope[k] = Σ_j w_j x[k − j]: a correlation of the newest-first window with w
+    return np.lib.stride_tricks.sliding_window_view(padded, window)[:, ::-1] @ w
 
 
 def dither_period_samples(trace) -> float:

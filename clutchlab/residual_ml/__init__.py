@@ -40,6 +40,7 @@ from .features import (
 from .hybrid import HYBRID_FEATURES, HybridModel
 from .kernels import KERNELS, KernelSpec, kernel_spec
 from .labels import EVENT, LATCHED, UNLATCHED, LatchLabelRule, latch_labels
+from .lag import LAG_GRID_S, LagSelection, select_lag
 from .local_gp import LocalGPRegressor, log_marginal_likelihood
 from .persist import load_model, save_model
 from .physics import DefaultPhysics, PhysicsPredictor
@@ -54,6 +55,7 @@ __all__ = [
     "FEATURES",
     "HYBRID_FEATURES",
     "KERNELS",
+    "LAG_GRID_S",
     "LATCHED",
     "PHYSICS_FEATURES",
     "RBF_FEATURE_WEIGHTS",
@@ -69,6 +71,7 @@ __all__ = [
     "GPWithDerivative",
     "HybridModel",
     "KernelSpec",
+    "LagSelection",
     "LatchLabelRule",
     "LocalGPRegressor",
     "PhysicsPredictor",
@@ -88,6 +91,7 @@ __all__ = [
     "make_variant",
     "save_model",
     "score_traces",
+    "select_lag",
     "step_predictor",
     "target_pressure",
 ]

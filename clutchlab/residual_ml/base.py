@@ -58,6 +58,23 @@ def as_traces(X) -> list[Trace] | None:
     return traces
 
 
+def _numeric_lag(value) -> float:
+    """A ``lag_s`` parameter as seconds (``"auto"`` before fitting: 0); ModelError if invalid."""
+    from ..errors import ModelError
+
+    if isinstance(value, str):
+        if value == "auto":
+            return 0.0
+        raise ModelError(f"lag_s must be 'auto' or a time constant >= 0 s, got {value!r}")
+    try:
+        lag = float(value)
+    except (TypeError, ValueError):
+        lag = float("nan")
+    if not (np.isfinite(lag) and lag >= 0):
+        raise ModelError(f"lag_s must be 'auto' or a time constant >= 0 s, got {value!r}")
+    return lag
+
+
 @dataclass
 class Block:
     """Features, target, weights and labels of one experiment (or one array input).
@@ -98,12 +115,32 @@ class TraceEstimator(RegressorMixin, BaseEstimator):
 
     # -- features ----------------------------------------------------------------------------
 
-    def _builder(self) -> FeatureBuilder:
+    def _builder(self, lag_s: float | None = None) -> FeatureBuilder:
         feats = getattr(self, "features", None)
+        if lag_s is None:
+            lag_s = getattr(self, "lag_s_", None)
+        if lag_s is None:
+            lag_s = _numeric_lag(getattr(self, "lag_s", 0.0))
         return FeatureBuilder(
             tuple(feats) if feats else self._default_features,
             float(getattr(self, "didt_periods", 5.0)),
+            lag_s=float(lag_s),
         )
+
+    def _resolve_lag(self, traces: list[Trace]) -> float:
+        """Time constant of ``current_lag_mA`` (s): the ``lag_s`` parameter, or chosen by
+        leave-one-ramp-rate-out on ``traces`` (:func:`~.lag.select_lag`) when ``"auto"``."""
+        from .lag import select_lag
+
+        self.lag_selection_ = None
+        param = getattr(self, "lag_s", 0.0)
+        builder = self._builder(0.0)
+        if "current_lag_mA" not in builder.features:
+            return _numeric_lag(param)
+        if isinstance(param, str) and param == "auto":
+            self.lag_selection_ = select_lag(traces, builder)
+            return self.lag_selection_.lag_s
+        return _numeric_lag(param)
 
     def _rule(self) -> LatchLabelRule:
         rule = getattr(self, "label_rule", None)
@@ -148,12 +185,14 @@ class TraceEstimator(RegressorMixin, BaseEstimator):
         if traces is not None:
             if y is not None:
                 raise DataError("y must be None when fitting on traces (targets come from them)")
+            self.lag_s_ = self._resolve_lag(traces)
             self.feature_names_ = list(self._builder().names)
             blocks = self._trace_blocks(traces)
             self.n_features_in_ = len(self.feature_names_)
             self.train_experiments_ = [t.name for t in traces]
         else:
             Xa, ya = validate_data(self, X, y, y_numeric=True, dtype=np.float64)
+            self.lag_s_ = _numeric_lag(getattr(self, "lag_s", 0.0))
             self.feature_names_ = [f"x{j}" for j in range(Xa.shape[1])]
             blocks = [self._array_block(Xa, ya)]
             self.train_experiments_ = []

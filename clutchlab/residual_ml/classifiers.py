@@ -69,13 +69,13 @@ __all__ = [
 #: length scales. Chosen by leave-one-experiment-out (LOEO, 6 of the 18 training experiments
 #: of the default stand held out in turn): dither frequency 0 and amplitude 0.3 (LOEO 0.9992
 #: against 0.9947 with all weights 1 — the latch boundary hardly depends on the frequency, and
-#: an isotropic kernel would make a held-out frequency look far from every training point);
-#: dI/dt 0.1 with the direction feature at 1 (LOEO flat within ±0.0002 over dI/dt weights
-#: 0.1–1, so the smoothest boundary along the rate axis was preferred).
+#: an isotropic kernel would make a held-out frequency look far from every training point).
+#: dI/dt keeps weight 1: LOEO over all 18 training experiments (``studies/ml_model_choices.py``,
+#: choice 3, with the lagged-current features) gave 0.9998 / 0.9999 / 0.9998 for weights
+#: 0.1 / 0.3 / 1 — a tie, so the neutral weight.
 RBF_FEATURE_WEIGHTS: dict[str, float] = {
     "dither_freq_Hz": 0.0,
     "dither_amp_mA": 0.3,
-    "didt_mA_s": 0.1,
 }
 
 

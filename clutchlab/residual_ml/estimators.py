@@ -20,7 +20,7 @@ import numpy as np
 from ..errors import ModelError
 from .base import Block, TraceEstimator
 from .classifiers import lean_decision, make_classifier
-from .features import BASE_FEATURES, DIDT_FEATURES
+from .features import BASE_FEATURES, LAG_DIDT_FEATURES
 from .labels import LatchLabelRule
 from .local_gp import LocalGPRegressor
 from .paths import knot_indices, piecewise_classes, predict_on_path
@@ -70,12 +70,17 @@ class GPBaseline(_GPParams, TraceEstimator):
         dI/dt filter window in dither periods, when ``didt_mA_s`` is a feature (default 5).
     target : {"period_mean", "raw"}
         Training target: the dither-period-mean clutch pressure (default) or the raw one.
+    lag_s : float or "auto"
+        Time constant of the ``current_lag_mA`` feature, s, when it is one of the features;
+        ``"auto"`` (default): chosen from the training experiments by leave-one-ramp-rate-out
+        (:func:`~clutchlab.residual_ml.select_lag`; fitted value in ``lag_s_``).
     kernel : {"rq", "rbf"}, optional
         GP kernel. Default (None): the one chosen by leave-one-experiment-out on the 18
-        training experiments of the default stand (6 folds, RMSE of the dither-period-mean
-        pressure): RBF for :class:`GPBaseline` (0.99 against 1.09 bar for RQ) and
-        :class:`SVCPartitionedGP` (0.103 against 0.119 bar), rational quadratic for
-        :class:`GPWithDerivative` (0.164 against 0.273 bar).
+        training experiments of the default stand (6 held out in turn, RMSE of the
+        dither-period-mean pressure; ``studies/ml_model_choices.py``, choice 1): RBF for
+        :class:`GPBaseline` (0.615 against 0.679 bar for RQ) and :class:`SVCPartitionedGP`
+        (0.104 against 0.118 bar), rational quadratic for :class:`GPWithDerivative` (0.164
+        against 0.283 bar).
     ard : bool
         One length scale per feature (default).
     bin_width, bin_frac, max_points, n_hyper, n_restarts
@@ -109,6 +114,7 @@ class GPBaseline(_GPParams, TraceEstimator):
         features: tuple[str, ...] | None = None,
         didt_periods: float = 5.0,
         target: str = "period_mean",
+        lag_s: float | str = "auto",
         kernel: str | None = None,
         ard: bool = True,
         bin_width: float = 0.01,
@@ -123,6 +129,7 @@ class GPBaseline(_GPParams, TraceEstimator):
         self.features = features
         self.didt_periods = didt_periods
         self.target = target
+        self.lag_s = lag_s
         self.kernel = kernel
         self.ard = ard
         self.bin_width = bin_width
@@ -160,7 +167,7 @@ class GPWithDerivative(GPBaseline):
     default kernel is the rational quadratic.
     """
 
-    _default_features = DIDT_FEATURES
+    _default_features = LAG_DIDT_FEATURES
     _default_kernel = "rq"
 
 
@@ -169,7 +176,7 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
 
     Training: latch labels from the measured pressure
     (:class:`~clutchlab.residual_ml.labels.LatchLabelRule`); the classifier (RBF SVC by
-    default) is trained on latched / unlatched samples; one GP (rational quadratic by default)
+    default) is trained on latched / unlatched samples; one GP (RBF by default, see ``kernel``)
     per latch state on that state's samples. Prediction: the classifier picks the GP of every
     sample. The paper chose the rational-quadratic kernel for the local GPs; here the default
     is the RBF kernel, which leave-one-experiment-out preferred on the default stand data
@@ -187,9 +194,10 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
     event_points : {"exclude", "assign"}
         Latch-event samples train no GP (``"exclude"``, default) or the GP of their
         Schmitt-trigger state (``"assign"``). With ``"assign"`` the unlatched GP has to
-        follow the snap transient, which sits at a different current for every ramp rate,
-        and rang between the training rates (medium-ramp RMSE 1.25 against 0.30 bar on the
-        default stand; this choice was made after looking at the medium ramp).
+        follow the snap transient, which sits at a different current for every ramp rate.
+        Leave-one-experiment-out on the training experiments of the default stand
+        (``studies/ml_model_choices.py``, choice 2): 0.104 bar excluding, 0.110 bar
+        assigning.
     classifier_features : tuple of str, optional
         Features the classifier sees (default: all of ``features``).
     classifier : str
@@ -213,13 +221,14 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         Classifier accuracy on its (non-event) training samples.
     """
 
-    _default_features = DIDT_FEATURES
+    _default_features = LAG_DIDT_FEATURES
 
     def __init__(
         self,
         features: tuple[str, ...] | None = None,
         didt_periods: float = 5.0,
         target: str = "period_mean",
+        lag_s: float | str = "auto",
         label_rule: LatchLabelRule | None = None,
         event_points: str = "exclude",
         classifier_features: tuple[str, ...] | None = None,
@@ -241,6 +250,7 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         self.features = features
         self.didt_periods = didt_periods
         self.target = target
+        self.lag_s = lag_s
         self.label_rule = label_rule
         self.event_points = event_points
         self.classifier_features = classifier_features

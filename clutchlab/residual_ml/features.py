@@ -6,6 +6,9 @@ Features, each a per-sample signal with a unit:
 name                      unit   meaning
 ========================  =====  ==========================================================
 ``current_mA``            mA     nominal VFS current (``current_cmd_mA``, else demodulated)
+``current_lag_mA``        mA     nominal current through a first-order lag of time constant
+                                 ``lag_s`` (causal): the current the circuit has caught up
+                                 with, so one pressure curve serves every ramp rate
 ``dither_amp_mA``         mA     dither amplitude (logged, else demodulated)
 ``dither_freq_Hz``        Hz     dither frequency (logged, else demodulated)
 ``didt_mA_s``             mA/s   filtered dI/dt of the nominal current (rate of travel)
@@ -15,6 +18,9 @@ name                      unit   meaning
 ``physics_bar``           bar    physics-model clutch pressure, dither-period mean (hybrid)
 ``physics_pilot_bar``     bar    physics-model pilot (VFS accumulator) pressure, dither-period
                                  mean (hybrid): what the latch valve responds to
+``didt_causal_mA_s``      mA/s   causal dI/dt: least-squares slope over the *trailing* window
+                                 (:func:`clutchlab.data.causal_didt`), no look-ahead
+``direction_causal``      1      last direction of travel from ``didt_causal_mA_s``
 ========================  =====  ==========================================================
 
 The paper's stage 1 uses the first three, stage 2 adds the current derivative "to indicate the
@@ -23,10 +29,21 @@ lag-induced part of the hysteresis) and the direction it implies (``direction``,
 the friction part and, unlike the sign of dI/dt, is remembered while the current holds).
 Building features is the estimators' job (:class:`FeatureBuilder` is one of their
 parameters), not the caller's.
+
+**Causal features.** ``didt_mA_s`` is a centred Savitzky–Golay slope and the physics
+features are centred dither-period means: each looks half a window ahead, which offline
+training and scoring can afford but a real-time model (an exported FMU) cannot. The causal
+counterparts (:data:`CAUSAL_COUNTERPART`) use past samples only; a model trained on them
+(``features=causal_features(...)``, ``clutchlab train --causal``) is reproduced exactly by
+its FMU. They are separate feature names rather than a switch so that the choice travels
+with the model wherever its feature names do (estimator parameters, saved model JSON,
+reports, the FMU exporter), and a model trained on the centred features can never be
+mistaken for a causal one. The physics features have no causal counterpart yet.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from types import MappingProxyType
 
@@ -34,6 +51,7 @@ import numpy as np
 
 from ..data import (
     Trace,
+    causal_didt,
     demodulate_trace,
     didt,
     dither_period_mean,
@@ -43,11 +61,17 @@ from ..errors import DataError
 
 __all__ = [
     "BASE_FEATURES",
+    "CAUSAL_COUNTERPART",
+    "CAUSAL_DIDT_FEATURES",
     "DIDT_FEATURES",
     "FEATURES",
+    "LAG_DIDT_FEATURES",
+    "LOOKAHEAD_FEATURES",
     "PHYSICS_FEATURES",
     "FeatureBuilder",
+    "causal_features",
     "direction_of_travel",
+    "first_order_lag",
     "target_pressure",
 ]
 
@@ -55,12 +79,15 @@ __all__ = [
 FEATURES: MappingProxyType[str, tuple[str, str]] = MappingProxyType(
     {
         "current_mA": ("mA", "nominal VFS current"),
+        "current_lag_mA": ("mA", "nominal VFS current through a first-order lag (lag_s)"),
         "dither_amp_mA": ("mA", "dither amplitude"),
         "dither_freq_Hz": ("Hz", "dither frequency"),
         "didt_mA_s": ("mA/s", "filtered dI/dt of the nominal current"),
         "direction": ("1", "last direction of travel of the nominal current (+1 / -1 / 0)"),
         "physics_bar": ("bar", "physics-model clutch pressure (dither-period mean)"),
         "physics_pilot_bar": ("bar", "physics-model pilot pressure (dither-period mean)"),
+        "didt_causal_mA_s": ("mA/s", "causal dI/dt of the nominal current (trailing window)"),
+        "direction_causal": ("1", "last direction of travel, from the causal dI/dt (+1/-1/0)"),
     }
 )
 
@@ -72,6 +99,44 @@ PHYSICS_FEATURES: MappingProxyType[str, str] = MappingProxyType(
 )
 #: The paper's stage-2 inputs (stage 1 + dI/dt).
 DIDT_FEATURES: tuple[str, ...] = (*BASE_FEATURES, "didt_mA_s", "direction")
+#: The stage-2 inputs with the nominal current seen through the circuit's lag (the estimators'
+#: default for stage 2 and 3; see :mod:`~clutchlab.residual_ml.lag`).
+LAG_DIDT_FEATURES: tuple[str, ...] = ("current_lag_mA", *DIDT_FEATURES[1:])
+#: Features computed with a centred window (they look ahead in time).
+LOOKAHEAD_FEATURES: tuple[str, ...] = ("didt_mA_s", "direction", *PHYSICS_FEATURES)
+#: Centred feature → its causal counterpart (past samples only).
+CAUSAL_COUNTERPART: MappingProxyType[str, str] = MappingProxyType(
+    {"didt_mA_s": "didt_causal_mA_s", "direction": "direction_causal"}
+)
+#: The stage-2 inputs with causal dI/dt and direction.
+CAUSAL_DIDT_FEATURES: tuple[str, ...] = (*BASE_FEATURES, "didt_causal_mA_s", "direction_causal")
+
+
+def causal_features(features: tuple[str, ...]) -> tuple[str, ...]:
+    """``features`` with every centred feature replaced by its causal counterpart.
+
+    Parameters
+    ----------
+    features : tuple of str
+        Feature names (:data:`FEATURES`).
+
+    Returns
+    -------
+    tuple of str
+        Same order; features that are already causal are kept.
+
+    Raises
+    ------
+    DataError
+        If a feature has no causal counterpart (the physics features), naming it.
+    """
+    missing = [f for f in features if f in LOOKAHEAD_FEATURES and f not in CAUSAL_COUNTERPART]
+    if missing:
+        raise DataError(
+            f"feature(s) {', '.join(missing)} have no causal counterpart (centred "
+            "dither-period means of the physics outputs); leave them out for a causal model"
+        )
+    return tuple(CAUSAL_COUNTERPART.get(f, f) for f in features)
 
 
 @dataclass(frozen=True)
@@ -89,11 +154,15 @@ class FeatureBuilder:
         |dI/dt| below which the direction of travel is held, mA/s (default 10: above the
         ~6 mA/s noise of dI/dt from a demodulated current, below the slowest stand ramp,
         27.5 mA/s).
+    lag_s : float
+        Time constant of ``current_lag_mA``, s (default 0: no lag; the estimators choose it
+        from their training data, see :func:`clutchlab.residual_ml.select_lag`).
     """
 
     features: tuple[str, ...] = DIDT_FEATURES
     didt_periods: float = 5.0
     deadband_mA_s: float = 10.0
+    lag_s: float = 0.0
 
     def __post_init__(self) -> None:
         unknown = [f for f in self.features if f not in FEATURES]
@@ -105,6 +174,8 @@ class FeatureBuilder:
             raise DataError(f"didt_periods must be > 0, got {self.didt_periods!r}")
         if not (np.isfinite(self.deadband_mA_s) and self.deadband_mA_s >= 0):
             raise DataError(f"deadband_mA_s must be >= 0, got {self.deadband_mA_s!r}")
+        if not (np.isfinite(self.lag_s) and self.lag_s >= 0):
+            raise DataError(f"lag_s must be >= 0 s, got {self.lag_s!r}")
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -115,6 +186,11 @@ class FeatureBuilder:
     def units(self) -> tuple[str, ...]:
         """Unit of each feature column."""
         return tuple(FEATURES[f][0] for f in self.features)
+
+    @property
+    def causal(self) -> bool:
+        """Whether every feature uses past samples only (none of :data:`LOOKAHEAD_FEATURES`)."""
+        return not any(f in LOOKAHEAD_FEATURES for f in self.features)
 
     @property
     def needs_physics(self) -> bool:
@@ -157,30 +233,41 @@ class FeatureBuilder:
 
         cols: dict[str, np.ndarray] = {}
         need = set(self.features)
-        if need & {"current_mA", "didt_mA_s", "direction"}:
+        slopes = {"didt_mA_s", "direction", "didt_causal_mA_s", "direction_causal"}
+        if need & ({"current_mA", "current_lag_mA"} | slopes):
             if trace.has("current_cmd_mA"):
                 cols["current_mA"] = np.asarray(trace.get("current_cmd_mA"), dtype=float)
             else:
                 cols["current_mA"] = est().nominal_mA
+        if "current_lag_mA" in need:
+            cols["current_lag_mA"] = first_order_lag(
+                cols["current_mA"], self.lag_s, trace.sample_rate_Hz
+            )
         if "dither_amp_mA" in need:
             cols["dither_amp_mA"] = (
                 np.asarray(trace.get("dither_amp_mA"), dtype=float)
                 if trace.has("dither_amp_mA")
                 else est().amplitude_mA
             )
-        if need & {"dither_freq_Hz", "didt_mA_s", "direction"}:
+        if need & ({"dither_freq_Hz"} | slopes):
             cols["dither_freq_Hz"] = (
                 np.asarray(trace.get("dither_freq_Hz"), dtype=float)
                 if trace.has("dither_freq_Hz")
                 else est().frequency_Hz
             )
-        if need & {"didt_mA_s", "direction"}:
+        if need & slopes:
             f = cols["dither_freq_Hz"]
             fpos = f[f > 0]
             fs = trace.sample_rate_Hz
             period = fs / float(np.median(fpos)) if fpos.size else dither_period_samples(trace)
-            cols["didt_mA_s"] = didt(cols["current_mA"], fs, self.didt_periods * period)
-            cols["direction"] = direction_of_travel(cols["didt_mA_s"], self.deadband_mA_s)
+            window = self.didt_periods * period
+            if need & {"didt_mA_s", "direction"}:
+                cols["didt_mA_s"] = didt(cols["current_mA"], fs, window)
+                cols["direction"] = direction_of_travel(cols["didt_mA_s"], self.deadband_mA_s)
+            if need & {"didt_causal_mA_s", "direction_causal"}:
+                slope = causal_didt(cols["current_mA"], fs, window)
+                cols["didt_causal_mA_s"] = slope
+                cols["direction_causal"] = direction_of_travel(slope, self.deadband_mA_s)
         for feat, output in PHYSICS_FEATURES.items():
             if feat not in need:
                 continue
@@ -196,6 +283,37 @@ class FeatureBuilder:
                 )
             cols[feat] = p
         return np.column_stack([cols[f] for f in self.features])
+
+
+def first_order_lag(x: np.ndarray, tau_s: float, sample_rate_Hz: float) -> np.ndarray:
+    """Signal through a first-order lag ``τ dy/dt = x − y``, starting at rest at ``x[0]``.
+
+    Exact discretization for a signal held between samples: ``y[k] = a y[k−1] + (1 − a)
+    x[k]``, ``a = exp(−1 / (τ fs))``. Causal (past samples only). On a ramp of rate ``r``
+    the output trails the input by ``τ · r`` once the start transient (a few τ) has decayed.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        Uniformly sampled signal (e.g. nominal current, mA).
+    tau_s : float
+        Time constant τ, s (0: the signal itself).
+    sample_rate_Hz : float
+        Sample rate fs, Hz.
+
+    Returns
+    -------
+    numpy.ndarray
+        The lagged signal, in the units of ``x``.
+    """
+    from scipy.signal import lfilter
+
+    x = np.asarray(x, dtype=float)
+    if tau_s <= 0 or x.size == 0:
+        return x.copy()
+    a = math.exp(-1.0 / (tau_s * sample_rate_Hz))
+    y, _ = lfilter([1.0 - a], [1.0, -a], x, zi=[a * x[0]])
+    return y
 
 
 def direction_of_travel(didt_mA_s: np.ndarray, deadband_mA_s: float = 10.0) -> np.ndarray:

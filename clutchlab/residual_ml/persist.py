@@ -100,6 +100,7 @@ def _state(est, arrays: dict, prefix: str) -> dict:
         "feature_names": list(est.feature_names_),
         "train_experiments": list(est.train_experiments_),
         "n_features_in": int(est.n_features_in_),
+        "lag_s": float(getattr(est, "lag_s_", 0.0)),
     }
     if isinstance(est, HybridModel):
         state["physics"] = None if est.physics_ is None else _as_predictor(est.physics_).to_dict()
@@ -137,6 +138,7 @@ def _restore(est, state: dict, arrays, prefix: str) -> None:
     est.feature_names_ = list(state["feature_names"])
     est.train_experiments_ = list(state["train_experiments"])
     est.n_features_in_ = int(state["n_features_in"])
+    est.lag_s_ = float(state.get("lag_s", 0.0))  # files written before the lag feature: 0
     if isinstance(est, HybridModel):
         est.physics_ = (
             None if state["physics"] is None else PhysicsPredictor.from_dict(state["physics"])
