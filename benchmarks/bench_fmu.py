@@ -3,18 +3,26 @@
 Budget (DESIGN §7): FMU step ≤ 100 µs (median). Anchor: the budget itself, and the
 in-process simulator's time per sample in the same run.
 
-Each FMU is driven through one medium ramp (23 s, 23 000 steps of 1 ms) twice:
+FMUs: the physics model (both drives, and the stand's model with its effects), and the four
+ML variants trained here on the training ramps (fast + slow) at their default sizes, as
+``clutchlab train`` trains them — ``gp_base``, and ``gp_didt``, ``paper_svc_gp`` and
+``hybrid`` with ``--causal`` so that they export exactly — each without and with the
+predictive-std output. Each FMU is driven through one medium ramp (23 s, 23 000 steps of
+1 ms; rows with the std output: its first ``--std-steps`` steps):
 
 - **C host**: a small C program (compiled here) loads the FMU binary with ``dlopen`` and runs
   the 1 kHz loop — ``fmi2SetReal`` + ``fmi2SetRealInputDerivatives`` + ``fmi2DoStep`` +
   ``fmi2GetReal`` per tick — timing every tick with ``clock_gettime``: what a real-time host
   (HIL, Simulink S-function, Silver) pays per step.
-- **Python host**: :class:`clutchlab.physics.fmu.FmuPhysics` (FMPy's FMI 2.0 API via ctypes);
-  wall time per step, Python overhead included.
+- **Python host** (physics rows): :class:`clutchlab.physics.fmu.FmuPhysics` (FMPy's FMI 2.0
+  API via ctypes); wall time per step, Python overhead included.
 
-Usage: ``python benchmarks/bench_fmu.py [--model FIT.json] [--runs 3] [--out DIR]``
-(without ``--model`` the datasheet parameters are exported; the step cost does not depend
-on the values).
+It also prints, per ML FMU, the largest difference from the in-process model (evaluated at
+every sample) on the medium-ramp experiments (must-show 1: ≤ 0.01 bar).
+
+Usage: ``python benchmarks/bench_fmu.py [--model FIT.json] [--data DATASET] [--runs 3]
+[--out DIR]`` (without ``--model`` the datasheet parameters are the physics; without
+``--data`` the default stand is generated).
 """
 
 from __future__ import annotations
@@ -34,18 +42,14 @@ import numpy as np
 
 from clutchlab.physics import CircuitModel, SimulationSettings, simulate
 from clutchlab.physics.fmu import (
-    DecisionSpec,
-    DidtSpec,
     FmuPhysics,
-    GPSpec,
     build_fmu,
     export_physics_fmu,
     inspect_fmu,
-    ml_program,
-    physics_program,
 )
+from clutchlab.physics.fmu.adapters import STD_TOL_BAR, ml_program_from
 from clutchlab.physics.fmu.build import fmi_headers_dir
-from clutchlab.physics.stand import DitherSetting, StandConfig, run_stand
+from clutchlab.physics.stand import StandConfig, run_stand
 
 BUDGET_US = 100.0
 
@@ -174,82 +178,99 @@ def c_host_times(
     return times[0], times[1]
 
 
-def synthetic_gp(n: int, d: int, seed: int, std: bool) -> GPSpec:
-    """A GP of ``n`` points in ``d`` features (step cost depends on the sizes only)."""
-    rng = np.random.default_rng(seed)
-    a = rng.normal(size=(n, n))
-    return GPSpec(
-        "rq",
-        x_mean=np.array([500.0, 100.0, 50.0, 0.0, 8.0][:d]),
-        x_scale=np.array([400.0, 60.0, 15.0, 300.0, 6.0][:d]),
-        length_scales=np.full(d, 0.5),
-        alpha=1.5,
-        points=rng.normal(size=(n, d)),
-        weights=rng.normal(size=n) * 1e-3,
-        y_mean=5.0,
-        signal_var=1.0,
-        y_scale=3.0,
-        k_inv=(a @ a.T / n + np.eye(n)) * 1e-3 if std else None,
+def trained_models(data, physics) -> dict:
+    """The four ML variants trained on the training ramps of ``data`` (fast + slow) as
+    ``clutchlab train`` does: ``gp_base`` as is (its features are FMU inputs), ``gp_didt``,
+    ``paper_svc_gp`` and ``hybrid`` with ``--causal`` (exact export)."""
+    from clutchlab.residual_ml import PhysicsPredictor, SVCPartitionedGP, make_variant
+    from clutchlab.residual_ml.features import PHYSICS_FEATURES, causal_features
+    from clutchlab.residual_ml.hybrid import HYBRID_FEATURES
+
+    train = data.select(ramps=["fast", "slow"])
+    models = {}
+    for variant in ("gp_base", "gp_didt", "paper_svc_gp"):
+        names = make_variant(variant)._builder().names
+        models[variant] = make_variant(variant, features=causal_features(names))
+    own = causal_features(tuple(f for f in HYBRID_FEATURES if f not in PHYSICS_FEATURES))
+    model, params = physics
+    models["hybrid"] = make_variant(
+        "hybrid",
+        physics=PhysicsPredictor(tuple(model.effect_names), params.changed()),
+        residual=SVCPartitionedGP(features=own),
     )
+    for variant, est in models.items():
+        t0 = time.perf_counter()
+        est.fit(train)
+        print(f"trained {variant} in {time.perf_counter() - t0:.1f} s", flush=True)
+    return models
 
 
-def ml_fmus(work: Path, physics_source) -> dict[str, Path]:
-    """ML and hybrid FMUs at the sizes of the paper pipeline's defaults (LocalGPRegressor
-    max_points 3000, RBF-SVC svc_max_points 4000) and at a typical fitted size (600 bins)."""
-    base = ("current_mA", "dither_amp_mA", "dither_freq_Hz")
-    didt = (*base, "didt_mA_s")
-    rng = np.random.default_rng(0)
-    svc = DecisionSpec(
-        "rbf",
-        mean=np.array([550.0, 110.0, 50.0, 0.0]),
-        scale=np.array([300.0, 50.0, 10.0, 100.0]),
-        intercept=0.0,
-        support=rng.normal(size=(4000, 4)),
-        coef=rng.normal(size=4000),
-        gamma=1.0,
-    )
-    physics = physics_program(*physics_source, "command")
-    progs = {
-        "gp_base, 600 bins, mean+std": ml_program(
-            synthetic_gp(600, 3, 1, True), base, name="gp600"
-        ),
-        "gp_base, 3000 bins, mean only": ml_program(
-            synthetic_gp(3000, 3, 2, False), base, with_std=False, name="gp3000"
-        ),
-        "gp_base, 3000 bins, mean+std": ml_program(
-            synthetic_gp(3000, 3, 3, True), base, name="gp3000s"
-        ),
-        "paper_svc_gp, 4000 SV, 2x3000, mean": ml_program(
-            {0: synthetic_gp(3000, 4, 4, False), 1: synthetic_gp(3000, 4, 5, False)},
-            didt,
-            decision=svc,
-            didt=DidtSpec(),
-            with_std=False,
-            name="svcgp",
-        ),
-        "hybrid: physics + GP 600, mean+std": ml_program(
-            synthetic_gp(600, 4, 6, True),
-            (*base, "physics_bar"),
-            physics=physics,
-            name="hybrid600",
-        ),
-    }
-    return {label: build_fmu(prog, work / f"{prog.name}.fmu") for label, prog in progs.items()}
+def ml_fmus(work: Path, models: dict, std_tol: float) -> dict[str, tuple[Path, object, bool]]:
+    """FMU per trained model, without and with the predictive-std output."""
+    out = {}
+    for variant, est in models.items():
+        for with_std in (False, True):
+            label = f"{variant}{', mean+std' if with_std else ''}"
+            prog = ml_program_from(est, with_std=with_std, std_tol=std_tol, name=variant)
+            path = work / f"{variant}{'_std' if with_std else ''}.fmu"
+            out[label] = (build_fmu(prog, path), est, with_std)
+    return out
+
+
+def _command_only(trace):
+    signals = {k: v for k, v in trace.signals.items() if k != "current_mA"}
+    return type(trace)(trace.name, signals, trace.meta)
+
+
+def fmu_vs_in_process(fmu: Path, est, with_std: bool, traces) -> tuple[float, float]:
+    """Max |FMU − in-process| (bar) of the pressure and of the std on ``traces``; the
+    in-process model evaluated at every sample (``knot_tol=0``)."""
+    own = est.residual_ if hasattr(est, "residual_") else est
+    knot_tol = own.knot_tol
+    own.set_params(knot_tol=0.0)
+    worst, worst_std = 0.0, float("nan")
+    try:
+        for tr in traces:
+            tr = _command_only(tr) if hasattr(est, "residual_") else tr
+            sim = FmuPhysics(fmu).simulate(tr)
+            if with_std:
+                mean, std = est.predict(tr, return_std=True)
+                err = np.abs(sim.outputs["clutch_pressure_std_bar"] - std).max()
+                worst_std = err if np.isnan(worst_std) else max(worst_std, err)
+            else:
+                mean = est.predict(tr)
+            worst = max(worst, float(np.abs(sim.pressure_bar - mean).max()))
+    finally:
+        own.set_params(knot_tol=knot_tol)
+    return worst, worst_std
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--model", help="fitted physics model JSON (default: datasheet values)")
+    ap.add_argument("--data", help="dataset folder (default: the default stand, generated)")
     ap.add_argument("--runs", type=int, default=3, help="runs per FMU (median of the medians)")
     ap.add_argument("--out", help="folder for the FMUs (default: a temporary folder)")
     ap.add_argument("--physics-only", action="store_true", help="skip the ML / hybrid FMUs")
     ap.add_argument(
-        "--ml-steps", type=int, default=2000, help="steps timed per ML / hybrid FMU (2000)"
+        "--std-steps",
+        type=int,
+        default=500,
+        help="steps timed (once) and compared per FMU with the std output (500)",
+    )
+    ap.add_argument(
+        "--std-tol", type=float, default=STD_TOL_BAR, help="std error bound, bar (1e-4)"
     )
     args = ap.parse_args()
 
-    stand = run_stand(StandConfig(settings=(DitherSetting(50.0, "B"),)), progress=False)
-    trace = stand.dataset["medium_50Hz_B"]
+    if args.data:
+        from clutchlab.data import load_dataset
+
+        data = load_dataset(args.data)
+    else:
+        data = run_stand(StandConfig(), progress=False).dataset
+    trace = data["medium_50Hz_B"]
+    medium = list(data.select(ramps=["medium"]))
     base = CircuitModel()
     source = args.model or (base, base.default_params())
     work = Path(args.out or tempfile.mkdtemp(prefix="clutchlab-bench-fmu-"))
@@ -260,39 +281,56 @@ def main() -> None:
     )
     print(
         f"trace: {trace.name}, {trace.duration_s:.1f} s at {trace.sample_rate_Hz:.0f} Hz "
-        f"({len(trace) - 1} steps of 1 ms); model: {args.model or 'datasheet parameters'}"
+        f"({len(trace) - 1} steps of 1 ms); physics: {args.model or 'datasheet parameters'}"
     )
-    fmus = {
-        "physics, command drive": export_physics_fmu(source, work / "physics_command.fmu"),
-        "physics, measured drive": export_physics_fmu(
-            source, work / "physics_measured.fmu", drive="measured"
+    stand_model = StandConfig().model()
+    fmus: dict[str, tuple[Path, object, bool]] = {
+        "physics, command drive": (
+            export_physics_fmu(source, work / "physics_command.fmu"),
+            None,
+            False,
         ),
-        "stand model (3 effects), command": export_physics_fmu(
-            (stand.model, stand.model.default_params()),
-            work / "stand_command.fmu",
-            name="stand_circuit_command",
+        "physics, measured drive": (
+            export_physics_fmu(source, work / "physics_measured.fmu", drive="measured"),
+            None,
+            False,
+        ),
+        "stand model (its effects), command": (
+            export_physics_fmu(
+                (stand_model, stand_model.default_params()),
+                work / "stand_command.fmu",
+                name="stand_circuit_command",
+            ),
+            None,
+            False,
         ),
     }
     if not args.physics_only:
-        model, params = (base, base.default_params()) if not args.model else _fitted(args.model)
-        fmus |= ml_fmus(work, (model, params))
+        physics = (base, base.default_params()) if not args.model else _fitted(args.model)
+        models = trained_models(data, physics)
+        fmus |= ml_fmus(work, models, args.std_tol)
     exe = build_host(work)
     rows = []
-    physics_labels = list(fmus)[:3]
-    for label, fmu in fmus.items():
-        steps = None if label in physics_labels else args.ml_steps
+    for label, (fmu, est, with_std) in fmus.items():
+        steps = args.std_steps if with_std else None
+        runs = 1 if with_std else args.runs
         med_tick, p99_tick, med_step, p99_step, worst, py = [], [], [], [], [], []
-        for _ in range(args.runs):
+        for _ in range(runs):
             tick, step = c_host_times(exe, fmu, trace, work, steps)
             med_tick.append(np.median(tick))
             p99_tick.append(np.percentile(tick, 99))
             med_step.append(np.median(step))
             p99_step.append(np.percentile(step, 99))
             worst.append(tick.max())
-            if steps is None:  # the import path (FmuPhysics) matters for physics FMUs
+            if est is None:  # the import path (FmuPhysics) matters for physics FMUs
                 t0 = time.perf_counter()
                 FmuPhysics(fmu).simulate(trace)
                 py.append((time.perf_counter() - t0) / (len(trace) - 1) * 1e6)
+        err = (float("nan"), float("nan"))
+        if est is not None:
+            n = (steps or len(trace)) + 1
+            traces = [trace.slice_time(None, trace.time_s[n - 1])] if steps else medium
+            err = fmu_vs_in_process(fmu, est, with_std, traces)
         rows.append(
             (
                 label,
@@ -302,6 +340,7 @@ def main() -> None:
                 statistics.median(p99_step),
                 statistics.median(worst),
                 statistics.median(py) if py else float("nan"),
+                *err,
             )
         )
     drive_ref = {}
@@ -312,27 +351,32 @@ def main() -> None:
         simulate(base, None, trace, settings)
         drive_ref[drive] = (time.perf_counter() - t0) / (len(trace) - 1) * 1e6
     print(
-        f"\n{'FMU':38s} {'tick med':>9s} {'tick p99':>9s} {'doStep med':>11s} "
-        f"{'doStep p99':>11s} {'tick max':>9s} {'Python/step':>12s} {'med/budget':>11s}"
+        f"\n{'FMU':36s} {'tick med':>9s} {'tick p99':>9s} {'doStep med':>11s} "
+        f"{'doStep p99':>11s} {'tick max':>9s} {'Python/step':>12s} {'med/budget':>11s} "
+        f"{'max|dp| bar':>12s} {'max|dstd| bar':>14s}"
     )
-    for label, mt, pt, ms, ps, mx, py in rows:
+    for label, mt, pt, ms, ps, mx, py, ep, es in rows:
         print(
-            f"{label:38s} {mt:9.2f} {pt:9.2f} {ms:11.2f} {ps:11.2f} {mx:9.1f} {py:12.2f} "
-            f"{mt / BUDGET_US:11.3f}"
+            f"{label:36s} {mt:9.2f} {pt:9.2f} {ms:11.2f} {ps:11.2f} {mx:9.1f} {py:12.2f} "
+            f"{mt / BUDGET_US:11.3f} {ep:12.2e} {es:14.2e}"
         )
     print(
         "(µs; tick = set inputs + derivatives + doStep + get output, as a C host runs it; "
-        f"ML / hybrid rows: first {args.ml_steps} steps of the ramp)"
+        f"rows with the std output: first {args.std_steps} steps of the ramp, one run; "
+        "max|dp|, max|dstd|: FMU against the in-process model at every sample on the medium "
+        "ramp experiments, pressure and predictive std)"
     )
     print(
         "in-process simulator per sample (compiled chunk, same model): "
         + ", ".join(f"{d} {v:.2f} µs" for d, v in drive_ref.items())
     )
-    worst_med = max(r[1] for r in rows)
-    print(
-        f"\nworst median tick {worst_med:.2f} µs (budget ≤ {BUDGET_US:g} µs): "
-        f"{'PASS' if worst_med <= BUDGET_US else 'FAIL'}"
-    )
+    for name, subset in (("without std", [r for r in rows if "std" not in r[0]]), ("all", rows)):
+        worst_med = max(r[1] for r in subset)
+        print(
+            f"worst median tick, {name}: {worst_med:.2f} µs (budget ≤ {BUDGET_US:g} µs): "
+            f"{'PASS' if worst_med <= BUDGET_US else 'FAIL'}"
+        )
+    print(f"load average at the end: {os.getloadavg()[0]:.1f}")
 
 
 if __name__ == "__main__":

@@ -37,6 +37,11 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     from .validation import evaluate, write_report
 
     dataset = load_dataset(args.dataset, channel_map=args.map)
+    fmu = None
+    if args.physics_fmu:
+        from .physics.fmu import FmuPhysics
+
+        fmu = FmuPhysics(args.physics_fmu, timeout_s=args.fmu_timeout, isolate=args.fmu_isolate)
     kw = {"progress": not args.quiet, "time_limit_s": args.fit_time_limit}
     if args.fit_max_iter is not None:
         kw["max_iter"] = args.fit_max_iter
@@ -51,6 +56,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         classifiers=False if args.no_classifiers else None,
         command=command_line(),
+        physics_fmu=fmu,
     )
     files = write_report(ev, Path(args.out))
     return _finish(files, ev.failed, args.json)
@@ -101,6 +107,24 @@ def register(sub) -> None:
         "--no-classifiers",
         action="store_true",
         help="skip the latch-classifier comparison (run by default with an ML variant)",
+    )
+    p.add_argument(
+        "--physics-fmu",
+        metavar="FILE.fmu",
+        help="an FMI 2.0 co-simulation FMU as the physics model (e.g. from Amesim or "
+        "`clutchlab export-fmu`): scored as variant physics_fmu, and the physics under "
+        "hybrid instead of the fitted in-process model",
+    )
+    p.add_argument(
+        "--fmu-timeout",
+        type=float,
+        default=600.0,
+        help="wall-time limit of one experiment's FMU simulation, s (600)",
+    )
+    p.add_argument(
+        "--fmu-isolate",
+        action="store_true",
+        help="run the FMU in a child process (killed at the timeout; survives a crash)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--json", help="also write metrics.json here")

@@ -28,7 +28,8 @@ def _export(args: argparse.Namespace) -> Path:
         program = ml_program_from(
             load_model(args.model),
             with_std=not args.no_std,
-            causal_didt=args.causal_didt,
+            approximate_didt=args.approximate_didt,
+            std_tol=args.std_tol,
             name=args.name,
         )
         return build_fmu(program, args.out)
@@ -79,7 +80,8 @@ def register(sub) -> None:
     p.add_argument(
         "model",
         help="fitted physics model JSON (clutchlab fit-physics --out) or a residual_ml "
-        "model JSON (gp_base; gp_didt / paper_svc_gp with --causal-didt)",
+        "model JSON (clutchlab train --out; gp_didt, paper_svc_gp and hybrid trained with "
+        "--causal export exactly)",
     )
     p.add_argument("--out", required=True, help="FMU file to write (.fmu)")
     p.add_argument(
@@ -96,9 +98,19 @@ def register(sub) -> None:
         "--no-std", action="store_true", help="ML models: no predictive-std output (faster)"
     )
     p.add_argument(
-        "--causal-didt",
+        "--std-tol",
+        type=float,
+        default=1e-4,
+        help="ML models: guaranteed bound on the error of the predictive-std output, bar "
+        "(1e-4); rows of its quadratic form with a negligible kernel are skipped while the "
+        "bound holds; 0: the full n x n product every step",
+    )
+    p.add_argument(
+        "--approximate-didt",
         action="store_true",
-        help="ML models: compute dI/dt causally (lags the offline feature at ramp reversals)",
+        help="ML models trained on the centred dI/dt / direction (without `train --causal`): "
+        "export anyway with causal stand-ins; APPROXIMATE, the output moves at ramp "
+        "reversals (retrain with --causal for an exact FMU)",
     )
     p.add_argument("--json", help="write a summary as JSON here")
     p.set_defaults(func=_cmd_export_fmu)

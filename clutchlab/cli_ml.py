@@ -72,6 +72,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     from .data import load_dataset
     from .errors import ModelError
     from .residual_ml import SVCPartitionedGP, make_variant, score_traces
+    from .residual_ml.features import PHYSICS_FEATURES, causal_features
     from .residual_ml.hybrid import HYBRID_FEATURES
 
     dataset = load_dataset(args.dataset)
@@ -79,14 +80,26 @@ def _cmd_train(args: argparse.Namespace) -> int:
     params = {}
     if args.variant == "hybrid":
         params["physics"] = _physics(args.physics)
-        if args.kernel:
+        if args.causal:
+            # the physics features are centred dither-period means with no causal form yet
+            own = tuple(f for f in HYBRID_FEATURES if f not in PHYSICS_FEATURES)
+            params["residual"] = SVCPartitionedGP(
+                features=causal_features(own), kernel=args.kernel or None
+            )
+        elif args.kernel:
             params["residual"] = SVCPartitionedGP(features=HYBRID_FEATURES, kernel=args.kernel)
     else:
         if args.physics:
             raise ModelError("--physics is only used by the hybrid variant")
         if args.kernel:
             params["kernel"] = args.kernel
+        if args.causal:
+            params["features"] = causal_features(make_variant(args.variant)._builder().names)
     model = make_variant(args.variant, **params)
+    if args.causal and not args.quiet:
+        names = model.residual._builder().names if args.variant == "hybrid" else None
+        names = names or model._builder().names
+        print(f"causal features (past samples only): {', '.join(names)}")
     if not args.quiet:
         print(f"fitting {args.variant} on {len(train)} experiments ({', '.join(train.names)})")
     t0 = time.perf_counter()
@@ -113,6 +126,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
     if args.json:
         doc = {
             "variant": args.variant,
+            "causal": bool(args.causal),
+            "features": list(model.feature_names_),
             "dataset": str(args.dataset),
             "train": train.names,
             "fit_s": fit_s,
@@ -158,6 +173,13 @@ def register(sub) -> None:
         "--physics",
         help="hybrid only: physics model JSON (PhysicsPredictor or fit-physics output); "
         "default: datasheet parameters",
+    )
+    p.add_argument(
+        "--causal",
+        action="store_true",
+        help="causal features (trailing-window dI/dt and direction, no look-ahead) so that "
+        "`clutchlab export-fmu` reproduces the model exactly; hybrid: the residual model "
+        "uses I, A_d, f_d and the causal dI/dt and direction (no physics features)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", help="also write the training metrics here")

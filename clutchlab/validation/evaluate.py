@@ -30,6 +30,7 @@ from .variants import (
     VariantContext,
     VariantSpec,
     available_variants,
+    fmu_variants,
     get_variant,
     unavailable_variants,
     variant_names,
@@ -56,13 +57,26 @@ def versions() -> dict[str, str]:
     return out
 
 
-def resolve_variants(requested: Sequence[str] | None) -> list[str]:
+def _order(overrides: Mapping[str, VariantSpec]) -> list[str]:
+    """Report order: the registry's, extra variants after ``physics_fitted`` (else first)."""
+    names = variant_names()
+    extra = [n for n in overrides if n not in names]
+    at = names.index("physics_fitted") + 1 if "physics_fitted" in names else 0
+    return names[:at] + extra + names[at:]
+
+
+def resolve_variants(
+    requested: Sequence[str] | None, overrides: Mapping[str, VariantSpec] | None = None
+) -> list[str]:
     """The variants to run, in report order, with the ones they require added.
 
     Parameters
     ----------
     requested : sequence of str or None
         Variant names; None for every available variant.
+    overrides : mapping of str to VariantSpec, optional
+        Specs used instead of (or besides) the registry's, e.g. those of
+        :func:`~clutchlab.validation.variants.fmu_variants`.
 
     Returns
     -------
@@ -73,12 +87,20 @@ def resolve_variants(requested: Sequence[str] | None) -> list[str]:
     ClutchlabError
         Naming unknown or unavailable variants (an explicit request is never skipped).
     """
+    overrides = dict(overrides or {})
+
+    def spec_of(name: str) -> VariantSpec:
+        return overrides[name] if name in overrides else get_variant(name)
+
+    order = _order(overrides)
     if requested is None:
         wanted = set(available_variants())
+        wanted |= {n for n, sp in overrides.items() if sp.availability() is None}
     else:
         wanted = set(requested)
-        missing = unavailable_variants()
-        unknown = sorted(n for n in wanted if n not in variant_names() and n not in missing)
+        missing = {k: v for k, v in unavailable_variants().items() if k not in overrides}
+        missing |= {n: why for n, sp in overrides.items() if (why := sp.availability())}
+        unknown = sorted(n for n in wanted if n not in order and n not in missing)
         blocked = sorted(n for n in wanted if n in missing)
         problems = [f"unknown variant {n!r}" for n in unknown]
         problems += [f"variant {n!r} is not available: {missing[n]}" for n in blocked]
@@ -88,11 +110,11 @@ def resolve_variants(requested: Sequence[str] | None) -> list[str]:
             )
     stack = list(wanted)
     while stack:
-        for r in get_variant(stack.pop()).requires:
+        for r in spec_of(stack.pop()).requires:
             if r not in wanted:
                 wanted.add(r)
                 stack.append(r)
-    return [n for n in variant_names() if n in wanted]
+    return [n for n in order if n in wanted]
 
 
 @dataclass
@@ -292,6 +314,7 @@ def evaluate(
     bands: bool = True,
     command: str = "",
     random_state: int = 0,
+    physics_fmu: Any = None,
 ) -> Evaluation:
     """Fit each variant on the training ramps, score it on the test ramps.
 
@@ -326,6 +349,12 @@ def evaluate(
         Command line recorded in the report.
     random_state : int
         Seed handed to randomized models.
+    physics_fmu : FmuPhysics, optional
+        An FMU as the physics model (:class:`clutchlab.physics.fmu.FmuPhysics`, simulated
+        with FMPy on each experiment's inputs, with its timeout): scored as the variant
+        ``physics_fmu`` (beside ``physics_fitted``, like it), and the physics under
+        ``hybrid`` instead of the fitted in-process model
+        (:func:`~clutchlab.validation.variants.fmu_variants`).
 
     Returns
     -------
@@ -342,9 +371,14 @@ def evaluate(
     if on_error not in ("raise", "report"):
         raise ValueError(f"on_error must be 'raise' or 'report', got {on_error!r}")
     t_start = time.perf_counter()
-    names = resolve_variants(variants)
+    overrides = fmu_variants(physics_fmu) if physics_fmu is not None else {}
+    names = resolve_variants(variants, overrides)
     protocol = Protocol(dataset, train=train, test=test, settings=analysis)
-    missing = unavailable_variants()
+    missing = {
+        n: r
+        for n, r in unavailable_variants().items()
+        if n not in overrides or overrides[n].availability() is not None
+    }
     ev = Evaluation(
         protocol=protocol,
         scores={},
@@ -355,12 +389,18 @@ def evaluate(
         command=command,
         created_utc=_dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
     )
+    if physics_fmu is not None:
+        ev.extra["physics_fmu"] = {
+            "fmu": str(getattr(physics_fmu, "fmu", "")),
+            "label": str(getattr(physics_fmu, "label", "")),
+            "timeout_s": getattr(physics_fmu, "timeout_s", None),
+        }
     total_fit: dict[str, float] = {}
     bar = tqdm(names, desc="variants", unit="variant", disable=not progress)
     for name in bar:
         bar.set_postfix_str(name)
         t_variant = time.perf_counter()
-        spec = ev.specs[name] = get_variant(name)
+        spec = ev.specs[name] = overrides.get(name) or get_variant(name)
         broken = [r for r in spec.requires if r not in ev.models]
         if broken:
             ev.failed[name] = f"requires {', '.join(broken)}, which failed"

@@ -29,11 +29,13 @@ from ..errors import ClutchlabError, FitError
 
 __all__ = [
     "DESIGN_VARIANTS",
+    "FMU_VARIANT",
     "DefaultPhysics",
     "FittedPhysics",
     "VariantContext",
     "VariantSpec",
     "available_variants",
+    "fmu_variants",
     "get_variant",
     "predict_with_std",
     "register_variant",
@@ -453,3 +455,57 @@ for _name, _cls in _ML_CLASSES.items():
             layer="residual_ml",
         )
     )
+
+
+# ---- an FMU as the physics (clutchlab evaluate --physics-fmu) -----------------------------
+
+#: Name of the variant scoring a physics FMU (as ``physics_fitted`` is scored).
+FMU_VARIANT = "physics_fmu"
+
+
+def fmu_variants(fmu: Any) -> dict[str, VariantSpec]:
+    """Variant specs that use an FMU as the physics model, overriding the registry.
+
+    ``physics_fmu`` scores the FMU itself (nothing is fitted; scored like
+    ``physics_fitted``); ``hybrid`` trains its residual model on top of the FMU instead of
+    the fitted in-process physics.
+
+    Parameters
+    ----------
+    fmu : FmuPhysics
+        The FMU as a physics model (:class:`clutchlab.physics.fmu.FmuPhysics`: simulated
+        with FMPy on each experiment's inputs, with its timeout).
+
+    Returns
+    -------
+    dict of str to VariantSpec
+        ``{"physics_fmu": ..., "hybrid": ...}``.
+    """
+    label = getattr(fmu, "label", type(fmu).__name__)
+    specs = {
+        FMU_VARIANT: VariantSpec(
+            FMU_VARIANT,
+            f"physics model from the FMU {label} (FMI 2.0, simulated with FMPy), not fitted",
+            lambda ctx: fmu,
+            layer="physics (FMU)",
+        )
+    }
+
+    def build_hybrid(ctx: VariantContext) -> Any:
+        ml = _residual_ml()
+        kwargs = dict(ctx.options.get("hybrid", {}))
+        if "physics" not in kwargs:
+            kwargs["physics"] = ctx.fitted[FMU_VARIANT]
+        if hasattr(ml, "make_variant") and "hybrid" in getattr(ml, "VARIANTS", {}):
+            return ml.make_variant("hybrid", **kwargs)
+        return getattr(ml, _ML_CLASSES["hybrid"])(**kwargs)
+
+    specs["hybrid"] = VariantSpec(
+        "hybrid",
+        f"FMU physics ({label}) + SVC-partitioned GP on its residual",
+        build_hybrid,
+        requires=(FMU_VARIANT,),
+        availability=_ml_available("hybrid"),
+        layer="residual_ml",
+    )
+    return specs

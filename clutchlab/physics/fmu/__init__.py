@@ -14,7 +14,7 @@ from .errors import FmuError, FmuTimeoutError
 from .export import export_physics_fmu, physics_source
 from .importer import FmuPhysics, FmuSimulation
 from .inspect import FmuInterface, FmuPort, inspect_fmu
-from .ml import ML_FEATURES, DecisionSpec, DidtSpec, GPSpec, ml_program
+from .ml import ML_FEATURES, DecisionSpec, DidtSpec, GPSpec, LagSpec, ml_program
 from .physics import DRIVES, physics_program
 from .program import FmuProgram, FmuVariable
 
@@ -32,6 +32,7 @@ __all__ = [
     "FmuTimeoutError",
     "FmuVariable",
     "GPSpec",
+    "LagSpec",
     "build_fmu",
     "export_physics_fmu",
     "inspect_fmu",

@@ -1,49 +1,79 @@
 """Fitted ``clutchlab.residual_ml`` estimators → :class:`FmuProgram` (duck-typed).
 
-This module reads the fitted attributes of the estimators (``gp_``, ``gps_``, ``decision_``,
-``feature_names_`` …) without importing :mod:`clutchlab.residual_ml`, which sits above the
-physics layer. Only models whose features the FMU computes exactly from its inputs are
-exported as they are: the nominal current, dither amplitude and frequency. The offline
-dI/dt is a centred Savitzky–Golay slope (it looks ahead); with ``causal_didt=True`` the FMU
-uses the causal slope of :class:`~.ml.DidtSpec` instead and lags at ramp reversals.
+This module reads the fitted estimators through their public surface (``feature_names_``,
+``gp_`` / ``gps_`` and ``LocalGPRegressor.prediction_arrays``, ``decision_`` …) without
+importing :mod:`clutchlab.residual_ml`, which sits above the physics layer.
+
+A model is exported **exactly** when the FMU computes every feature as training did: the
+nominal current, dither amplitude and frequency (inputs), the lagged current
+``current_lag_mA`` (first-order lag, :class:`~.ml.LagSpec`, time constant ``lag_s_``), and
+the causal features ``didt_causal_mA_s`` / ``direction_causal`` (trailing-window slope and
+the direction it implies, :class:`~.ml.DidtSpec`) of a model trained with
+``clutchlab train --causal``. A
+model trained on the centred features (``didt_mA_s``, ``direction``: Savitzky–Golay slope
+centred on the sample, i.e. looking half a window ahead) is refused, unless
+``approximate_didt=True``: then the FMU substitutes the causal slope and direction, which
+lag the centred ones by half a window and move the model's output at ramp reversals (up to
+~0.1 bar on the default stand). Models using the physics features (dither-period means
+centred on the sample) are refused: they have no causal form.
+
+A hybrid (``HybridModel``) is exported as its physics (command drive) plus its residual
+model, when the physics is a :class:`~clutchlab.residual_ml.physics.PhysicsPredictor`
+(effects + parameter values) and the residual's features are exact.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg import cho_solve
 
 from .errors import FmuError
-from .ml import DecisionSpec, DidtSpec, GPSpec, ml_program
+from .ml import DecisionSpec, DidtSpec, GPSpec, LagSpec, ml_program
 from .program import FmuProgram
 
-__all__ = ["EXACT_FEATURES", "decision_spec", "gp_spec", "ml_program_from"]
+__all__ = [
+    "CAUSAL_FEATURES",
+    "EXACT_FEATURES",
+    "STD_TOL_BAR",
+    "decision_spec",
+    "gp_spec",
+    "ml_program_from",
+]
 
-#: Features an FMU computes exactly as the offline estimators do.
+#: Features an FMU reads from its inputs exactly as the offline estimators do.
 EXACT_FEATURES: tuple[str, ...] = ("current_mA", "dither_amp_mA", "dither_freq_Hz")
+#: Causal features the FMU computes exactly as the offline feature builder does.
+CAUSAL_FEATURES: tuple[str, ...] = ("current_lag_mA", "didt_causal_mA_s", "direction_causal")
+#: Centred features and the causal ones substituted with ``approximate_didt``.
+_APPROXIMATE = {"didt_mA_s": "didt_causal_mA_s", "direction": "direction_causal"}
+_DEFAULT_DEADBAND_MA_S = 10.0
 
 
-def gp_spec(gp, with_std: bool = True) -> GPSpec:
-    """The :class:`GPSpec` of a fitted ``LocalGPRegressor``."""
-    s2, ell, alpha = gp.kernel_.unpack(gp.theta_[:-1])
-    d = gp.X_bins_.shape[1]
-    k_inv = None
-    if with_std:
-        L = gp._factor()
-        k_inv = cho_solve((L, True), np.eye(L.shape[0]))
-    return GPSpec(
-        kernel=gp.kernel_.name,
-        x_mean=np.asarray(gp.x_mean_, dtype=float),
-        x_scale=np.asarray(gp.x_scale_, dtype=float),
-        length_scales=np.broadcast_to(np.asarray(ell, dtype=float), (d,)).copy(),
+#: Default bound on the error of the exported predictive standard deviation, bar.
+STD_TOL_BAR = 1e-4
+
+
+def gp_spec(gp, with_std: bool = True, std_tol: float = STD_TOL_BAR) -> GPSpec:
+    """The :class:`GPSpec` of a fitted ``LocalGPRegressor`` (its ``prediction_arrays``).
+
+    With ``with_std`` and ``std_tol`` > 0 (bar) the standard deviation takes the fast path
+    of :meth:`GPSpec.with_fast_std` (error ≤ ``std_tol``, guaranteed); 0: the full product.
+    """
+    a = gp.prediction_arrays(inverse=with_std)
+    alpha = a["alpha"]
+    spec = GPSpec(
+        kernel=a["kernel"],
+        x_mean=a["x_mean"],
+        x_scale=a["x_scale"],
+        length_scales=a["length_scales"],
         alpha=float(alpha) if np.isfinite(alpha) else 1.0,
-        points=np.asarray(gp.X_bins_, dtype=float),
-        weights=np.asarray(gp.dual_coef_, dtype=float) * s2 * gp.y_scale_,
-        y_mean=float(gp.y_mean_),
-        signal_var=float(s2),
-        y_scale=float(gp.y_scale_),
-        k_inv=k_inv,
+        points=a["points"],
+        weights=a["weights"],
+        y_mean=a["y_mean"],
+        signal_var=a["signal_var"],
+        y_scale=a["y_scale"],
+        k_inv=a["k_inv"],
     )
+    return spec.with_fast_std(std_tol) if with_std and std_tol > 0 else spec
 
 
 def decision_spec(decision, columns=None) -> DecisionSpec:
@@ -76,64 +106,128 @@ def decision_spec(decision, columns=None) -> DecisionSpec:
     )
 
 
+def _fmu_features(model, kind: str, approximate_didt: bool) -> tuple[str, ...]:
+    """The model's features as the FMU names them; FmuError for those it cannot compute."""
+    names = tuple(getattr(model, "feature_names_", ()))
+    allowed = EXACT_FEATURES + CAUSAL_FEATURES + (tuple(_APPROXIMATE) if approximate_didt else ())
+    bad = [f for f in names if f not in allowed]
+    if bad:
+        centred = [f for f in bad if f in _APPROXIMATE]
+        other = [f for f in bad if f not in _APPROXIMATE]
+        lines = []
+        if centred:
+            lines.append(
+                f"{', '.join(centred)}: centred filters (they look half a window ahead); "
+                "retrain with `clutchlab train ... --causal` (features "
+                f"{', '.join(_APPROXIMATE[f] for f in centred)}) for an exact FMU, or export "
+                "with --approximate-didt (causal stand-ins; the output moves at ramp "
+                "reversals)"
+            )
+        if other:
+            lines.append(
+                f"{', '.join(other)}: not computable in real time (physics features are "
+                "dither-period means centred on the sample)"
+            )
+        raise FmuError(
+            f"cannot export the {kind}: the FMU cannot compute the feature(s) "
+            f"{', '.join(bad)} as the model was trained on them:\n  - " + "\n  - ".join(lines)
+        )
+    return tuple(_APPROXIMATE.get(f, f) for f in names)
+
+
+def _didt_spec(model, features: tuple[str, ...]) -> DidtSpec | None:
+    if not any(f in ("didt_causal_mA_s", "direction_causal") for f in features):
+        return None
+    builder = getattr(model, "_builder", None)
+    deadband = getattr(builder(), "deadband_mA_s", None) if callable(builder) else None
+    return DidtSpec(
+        periods=float(getattr(model, "didt_periods", 5.0)),
+        deadband_mA_s=float(deadband if deadband is not None else _DEFAULT_DEADBAND_MA_S),
+    )
+
+
+def _physics_program(hybrid, kind: str):
+    """The physics program (command drive) of a hybrid's physics."""
+    from ..model import CircuitModel
+    from .physics import physics_program
+
+    phys = getattr(hybrid, "physics_", None)
+    needed = ("effects", "params", "substeps")
+    if phys is None or not all(hasattr(phys, a) for a in needed):
+        raise FmuError(
+            f"cannot export the {kind}: its physics ({type(phys).__name__}) is not a "
+            "PhysicsPredictor (effects + parameter values); a hybrid trained on an imported "
+            "FMU needs that FMU beside it and cannot be re-exported"
+        )
+    model = CircuitModel().with_effects(*phys.effects)
+    return physics_program(
+        model, model.params(**phys.params), "command", substeps=int(phys.substeps)
+    )
+
+
 def ml_program_from(
     model,
     with_std: bool = True,
-    causal_didt: bool = False,
+    approximate_didt: bool = False,
     name: str | None = None,
+    std_tol: float = STD_TOL_BAR,
 ) -> FmuProgram:
-    """The FMU program of a fitted ``GPBaseline`` / ``GPWithDerivative`` / ``SVCPartitionedGP``.
+    """The FMU program of a fitted ``GPBaseline`` / ``GPWithDerivative`` /
+    ``SVCPartitionedGP`` / ``HybridModel``.
 
     Parameters
     ----------
     model : estimator
-        Fitted; its ``feature_names_`` must be among :data:`EXACT_FEATURES`, plus
-        ``didt_mA_s`` when ``causal_didt``.
+        Fitted. Its features (a hybrid's: its residual model's) must be among
+        :data:`EXACT_FEATURES` and :data:`CAUSAL_FEATURES`.
     with_std : bool
-        Output the predictive standard deviation (an n × n product per step).
-    causal_didt : bool
-        Compute ``didt_mA_s`` causally (see the module docstring).
+        Output the predictive standard deviation.
+    std_tol : float
+        Guaranteed bound on its error, bar (default 1e-4; 0: the full n × n product per
+        step); see :class:`~.ml.GPSpec`.
+    approximate_didt : bool
+        Accept the centred ``didt_mA_s`` / ``direction`` and compute causal stand-ins: the
+        FMU then differs from the model at ramp reversals (approximate export).
     name : str, optional
         Model identifier (default ``clutch_<class name>``).
 
     Raises
     ------
     FmuError
-        For a hybrid model, a feature the FMU cannot compute, or a classifier it cannot export.
+        For a feature the FMU cannot compute (naming it and what to do), a classifier it
+        cannot export, or a hybrid whose physics is not a PhysicsPredictor.
     """
     kind = type(model).__name__
-    if hasattr(model, "residual_"):
-        raise FmuError(
-            f"cannot export the {kind} yet: its residual features are dither-period means of "
-            "the physics outputs (a centred window that looks ahead), which a real-time FMU "
-            "cannot compute; see ml_program(physics=...) for hybrids with causal features"
-        )
-    names = tuple(getattr(model, "feature_names_", ()))
-    allowed = EXACT_FEATURES + (("didt_mA_s",) if causal_didt else ())
-    bad = [f for f in names if f not in allowed]
-    if bad:
-        hint = (
-            " (didt_mA_s: pass causal_didt=True to use a causal slope, which lags by half "
-            "its window at ramp reversals)"
-            if "didt_mA_s" in bad
-            else ""
-        )
-        raise FmuError(
-            f"cannot export the {kind}: the FMU cannot compute the feature(s) "
-            f"{', '.join(bad)} as the model was trained on them{hint}"
-        )
-    didt = DidtSpec(periods=float(model.didt_periods)) if "didt_mA_s" in names else None
     ident = name or f"clutch_{kind.lower()}"
-    if hasattr(model, "gp_"):
-        return ml_program(
-            gp_spec(model.gp_, with_std), names, didt=didt, with_std=with_std, name=ident
-        )
-    gps = {g: gp_spec(gp, with_std) for g, gp in model.gps_.items()}
-    decision = None
-    if model.decision_ is not None:
-        decision = decision_spec(model.decision_, getattr(model, "classifier_columns_", None))
-    elif len(gps) > 1:
-        raise FmuError(f"cannot export the {kind}: two GPs but no decision function")
-    if decision is None:
-        gps = {0: next(iter(gps.values()))}
-    return ml_program(gps, names, decision=decision, didt=didt, with_std=with_std, name=ident)
+    physics = None
+    est = model
+    if hasattr(model, "residual_"):
+        est = model.residual_
+        features = _fmu_features(est, kind, approximate_didt)
+        physics = _physics_program(model, kind)
+    else:
+        features = _fmu_features(model, kind, approximate_didt)
+    didt = _didt_spec(est, features)
+    lag = LagSpec(float(getattr(est, "lag_s_", 0.0))) if "current_lag_mA" in features else None
+    if hasattr(est, "gp_"):
+        gps = {0: gp_spec(est.gp_, with_std, std_tol)}
+        decision = None
+    else:
+        gps = {g: gp_spec(gp, with_std, std_tol) for g, gp in est.gps_.items()}
+        decision = None
+        if est.decision_ is not None:
+            decision = decision_spec(est.decision_, getattr(est, "classifier_columns_", None))
+        elif len(gps) > 1:
+            raise FmuError(f"cannot export the {kind}: two GPs but no decision function")
+        else:
+            gps = {0: next(iter(gps.values()))}
+    return ml_program(
+        gps,
+        features,
+        decision=decision,
+        didt=didt,
+        physics=physics,
+        with_std=with_std,
+        name=ident,
+        lag=lag,
+    )

@@ -2,17 +2,20 @@
 
 The learned models live in :mod:`clutchlab.residual_ml`, a layer above this one, so they
 reach the exporter as plain arrays: a :class:`GPSpec` per GP, a :class:`DecisionSpec` for the
-latch classifier, a :class:`DidtSpec` for the dI/dt feature. :func:`ml_program` turns them
-into an :class:`~clutchlab.physics.fmu.program.FmuProgram` — standalone, or on top of a
-physics program (hybrid: physics pressure + residual GP).
+latch classifier, a :class:`DidtSpec` for the causal dI/dt and direction features.
+:func:`ml_program` turns them into an :class:`~clutchlab.physics.fmu.program.FmuProgram` —
+standalone, or on top of a physics program (hybrid: physics pressure + residual GP).
 
 Per step the FMU evaluates the features at the step's end, the decision (> 0: latched,
-then only the latched GP is evaluated) and the GP: ``n·d`` kernel terms for the mean, an
-``n × n`` product for the standard deviation (``with_std``).
+then only the latched GP is evaluated) and the GP: ``n·d`` kernel terms for the mean (shared
+with the standard deviation), an ``n × n`` product for the standard deviation
+(``with_std``).
 """
 
 from __future__ import annotations
 
+import functools
+import math
 from dataclasses import dataclass
 
 import casadi as ca
@@ -22,16 +25,23 @@ from ...errors import ModelError
 from .physics import FMU_INPUTS
 from .program import FmuProgram, FmuVariable
 
-__all__ = ["ML_FEATURES", "DecisionSpec", "DidtSpec", "GPSpec", "ml_program"]
+__all__ = ["ML_FEATURES", "DecisionSpec", "DidtSpec", "GPSpec", "LagSpec", "ml_program"]
 
-#: Features an exported ML model may use, with their units.
+#: Features an exported ML model may use, with their units. ``current_lag_mA``,
+#: ``didt_causal_mA_s`` and ``direction_causal`` are computed as the offline feature builder
+#: computes them (``first_order_lag``, :func:`clutchlab.data.causal_didt`,
+#: ``direction_of_travel``); ``physics_bar`` is the physics program's clutch pressure at the
+#: step's end (not a dither-period mean).
 ML_FEATURES: dict[str, str] = {
     "current_mA": "mA",
+    "current_lag_mA": "mA",
     "dither_amp_mA": "mA",
     "dither_freq_Hz": "Hz",
-    "didt_mA_s": "mA/s",
+    "didt_causal_mA_s": "mA/s",
+    "direction_causal": "1",
     "physics_bar": "bar",
 }
+_SLOPE_FEATURES = ("didt_causal_mA_s", "direction_causal")
 
 
 class _Constants:
@@ -72,7 +82,22 @@ class GPSpec:
     ``mean(x) = y_mean + Σ_i weights_i · κ(r_i²)``, ``r_i² = Σ_j ((z_j − points_ij) /
     length_scales_j)²``, ``z = (x − x_mean) / x_scale``; ``κ(r²) = (1 + r²/2α)^(−α)``
     (``"rq"``) or ``exp(−r²/2)`` (``"rbf"``). Standard deviation (latent, noise excluded):
-    ``y_scale · sqrt(max(s² − s²κᵀ K⁻¹ s²κ, 0))`` with ``s² = signal_var``.
+    ``y_scale · sqrt(max(s² − q, 0))``, ``q = kᵀ K⁻¹ k``, ``k = s²κ``, ``s² = signal_var``.
+
+    **Fast standard deviation** (``std_level`` > 0): ``q`` costs n² per step, too much for
+    a few thousand bins. Rows ``i`` whose kernel profile ``κ_i ≤ std_level`` are left out
+    of ``q = Σ_i k_i (K⁻¹k)_i`` (each kept row costs n). The error of that is bounded at
+    every step: ``|Δq| ≤ B = max_j k_j · Σ_{i dropped} k_i c_i`` with ``c_i = Σ_j |K⁻¹_ij|``
+    (since ``|(K⁻¹k)_i| ≤ c_i max_j k_j``), computed in O(n); when ``B`` exceeds
+    ``(std_tol / y_scale)²`` the step falls back to the full product. As
+    ``|√a − √b| ≤ √|a − b|``, the standard deviation is then always within ``std_tol``
+    (bar) of the exact one — in exact arithmetic: ``K⁻¹`` in floating point adds a rounding
+    error of order cond(K)·ε·s² to ``q`` on both paths (the in-process model solves with
+    the Cholesky factor instead; on the ill-conditioned GPs of the default stand, cond(K)
+    ~1e7–1e10, the two differ by up to ~2e-4 bar). How much the fast path saves depends
+    on how local the kernel is: :meth:`with_fast_std` picks the level on the GP's own
+    points; a broad kernel (long length scales, or a rational quadratic with small α)
+    leaves nothing to skip and costs the full n² per step.
 
     Attributes
     ----------
@@ -95,6 +120,11 @@ class GPSpec:
         Target scale (bar).
     k_inv : ndarray (n, n) or None
         ``K⁻¹`` in normalized units (noise included); None: no std output.
+    std_level : float
+        Kernel-profile level (0–1) below which rows of the std's quadratic form are left
+        out; 0 (default): the full product.
+    std_tol : float
+        Guaranteed bound on the std error of the fast path, bar.
     """
 
     kernel: str
@@ -108,6 +138,8 @@ class GPSpec:
     signal_var: float = 1.0
     y_scale: float = 1.0
     k_inv: np.ndarray | None = None
+    std_level: float = 0.0
+    std_tol: float = 0.0
 
     def __post_init__(self) -> None:
         n, d = np.shape(self.points)
@@ -121,6 +153,10 @@ class GPSpec:
             problems.append(f"weights must have shape ({n},)")
         if self.k_inv is not None and np.shape(self.k_inv) != (n, n):
             problems.append(f"k_inv must have shape ({n}, {n})")
+        if not (0.0 <= self.std_level < 1.0 and self.std_tol >= 0.0):
+            problems.append("std_level must be in [0, 1) and std_tol >= 0")
+        if self.std_level > 0 and not self.std_tol > 0:
+            problems.append("a std_level > 0 needs a std_tol > 0 (bar)")
         if problems:
             raise ModelError("invalid GPSpec: " + "; ".join(problems))
 
@@ -145,15 +181,99 @@ class GPSpec:
 
     def mean(self, x: ca.MX, const: _Constants = _INLINE) -> ca.MX:
         """Predictive mean (bar) at the row vector of features ``x`` (1 × d)."""
-        return self.y_mean + ca.mtimes(self._profile(x, const), const(self.weights))
+        return self.mean_std(x, const, False)[0]
 
     def std(self, x: ca.MX, const: _Constants = _INLINE) -> ca.MX:
         """Predictive standard deviation (bar) at ``x``; requires ``k_inv``."""
+        return self.mean_std(x, const, True)[1]
+
+    def mean_std(
+        self, x: ca.MX, const: _Constants = _INLINE, with_std: bool = True
+    ) -> tuple[ca.MX, ca.MX | None]:
+        """Predictive mean and standard deviation (bar) at ``x`` from one kernel profile.
+
+        Raises
+        ------
+        ModelError
+            If ``with_std`` and the spec has no ``k_inv``.
+        """
+        if with_std and self.k_inv is None:
+            raise ModelError("this GPSpec has no k_inv: no standard deviation")
+        prof = self._profile(x, const)
+        mean = self.y_mean + ca.mtimes(prof, const(self.weights))
+        if not with_std:
+            return mean, None
+        ks = self.signal_var * prof.T
+        k_inv = const(self.k_inv)
+        full = ca.dot(ks, ca.mtimes(k_inv, ks))
+        if self.std_level > 0:
+            n = self.points.shape[0]
+            ki, col, kk = ca.MX.sym("ki"), ca.MX.sym("col", n), ca.MX.sym("k", n)
+            row = ca.if_else(ki > self.signal_var * self.std_level, ki * ca.dot(col, kk), 0, True)
+            rows = ca.Function("std_row", [ki, col, kk], [row]).map(n, "serial")
+            dropped = ks * (prof.T <= self.std_level)
+            bound = ca.mmax(ks) * ca.dot(dropped, const(self._row_abs))
+            fast = ca.sum2(rows(ks.T, k_inv, ks))
+            tol_var = (self.std_tol / self.y_scale) ** 2
+            q = ca.if_else(bound <= tol_var, fast, full, True)
+        else:
+            q = full
+        return mean, self.y_scale * ca.sqrt(ca.fmax(self.signal_var - q, 0.0))
+
+    @functools.cached_property
+    def _row_abs(self) -> np.ndarray:
+        """``c_i = Σ_j |K⁻¹_ij|`` (the fast std's error bound)."""
+        return np.abs(np.asarray(self.k_inv)).sum(axis=1)
+
+    def with_fast_std(self, std_tol: float, probe: np.ndarray | None = None) -> GPSpec:
+        """This spec with the fast standard deviation (see the class docstring).
+
+        The level is the largest power of ten at which the certified bound ``B`` holds at
+        every probe point (so the fast path is taken there); elsewhere the FMU falls back
+        to the full product, never exceeding ``std_tol``.
+
+        Parameters
+        ----------
+        std_tol : float
+            Bound on the std error, bar (> 0).
+        probe : ndarray (m, d), optional
+            Standardized points where the fast path should hold (default the GP's own
+            points, i.e. its training data).
+
+        Returns
+        -------
+        GPSpec
+            With ``std_level`` and ``std_tol`` set (``std_level`` 0 when no level holds).
+        """
         if self.k_inv is None:
             raise ModelError("this GPSpec has no k_inv: no standard deviation")
-        ks = self.signal_var * self._profile(x, const).T
-        var = self.signal_var - ca.dot(ks, ca.mtimes(const(self.k_inv), ks))
-        return self.y_scale * ca.sqrt(ca.fmax(var, 0.0))
+        if not std_tol > 0:
+            raise ModelError(f"std_tol must be > 0 bar, got {std_tol!r}")
+        z = self.points if probe is None else np.asarray(probe, dtype=float)
+        tol_var = (std_tol / self.y_scale) ** 2
+        candidates = 10.0 ** -np.arange(1, 17)  # descending
+        level = float(candidates[0])
+        for start in range(0, z.shape[0], 256):
+            pz = _np_profile(self, z[start : start + 256])
+            ks = self.signal_var * pz
+            kmax = ks.max(axis=1)
+            for cand in candidates[candidates <= level]:
+                if np.all(kmax * ((ks * (pz <= cand)) @ self._row_abs) <= tol_var):
+                    level = float(cand)
+                    break
+            else:
+                level = 0.0
+                break
+        fields = {k: getattr(self, k) for k in self.__dataclass_fields__}
+        return GPSpec(**{**fields, "std_level": level, "std_tol": float(std_tol)})
+
+
+def _np_profile(spec: GPSpec, z: np.ndarray) -> np.ndarray:
+    """Kernel profile of standardized points ``z`` (m × d) against the spec's points."""
+    d2 = (((z[:, None, :] - spec.points[None]) / spec.length_scales) ** 2).sum(-1)
+    if spec.kernel == "rbf":
+        return np.exp(-0.5 * d2)
+    return (1.0 + d2 / (2.0 * spec.alpha)) ** (-spec.alpha)
 
 
 @dataclass(frozen=True)
@@ -201,29 +321,65 @@ class DecisionSpec:
 
 @dataclass(frozen=True)
 class DidtSpec:
-    """Causal dI/dt of the nominal current: least-squares slope over the last N samples.
+    """Causal dI/dt of the nominal current (least-squares slope over the last N samples)
+    and the direction of travel it implies.
 
-    ``N`` = ``periods`` dither periods (rounded up to odd, as ``clutchlab.data.didt``), at
-    most ``max_samples``. Unlike the offline (centred) Savitzky–Golay slope it lags by
-    ``(N − 1)/2`` samples: a model must be trained on the same causal feature for the FMU
-    to reproduce it.
+    ``N = causal_window(periods · fs / f)`` with ``fs = 1 / sample_s`` and ``f`` the dither
+    frequency input: the window of :func:`clutchlab.data.causal_didt` as the feature builder
+    uses it (``didt_causal_mA_s``), at most ``max_samples`` (255: 5 periods down to 19.7 Hz
+    at 1 kHz). The buffer starts full of the initial current, as the offline slope assumes
+    the current constant before the first sample. Direction (``direction_causal``): +1 / −1
+    where the slope is above ``deadband_mA_s`` / below its negative, else held (0 at start).
+
+    Offline the window uses the trace's median dither frequency; the FMU uses the current
+    input, the same for an experiment at one dither frequency.
     """
 
     periods: float = 5.0
     max_samples: int = 255
     sample_s: float = 1e-3
+    deadband_mA_s: float = 10.0
 
     def slope(self, buffer: ca.MX, freq: ca.MX) -> ca.MX:
         """Slope (mA/s) from ``buffer`` (newest first, mA) at dither frequency ``freq`` (Hz)."""
         m = self.max_samples
-        n = ca.ceil(self.periods / (ca.fmax(freq, 1e-9) * self.sample_s))
-        n = ca.fmin(ca.fmax(n + 1 - ca.fmod(n, 2), 3), m)
+        period = (1.0 / self.sample_s) / ca.fmax(freq, 1e-9)
+        n = ca.fmax(ca.ceil(self.periods * period - 1e-6), 4)
+        n = ca.fmin(n + 1 - ca.fmod(n, 2), m)
         j = ca.DM(np.arange(m, dtype=float))
-        t = -j * self.sample_s
-        t_bar = -(n - 1) * self.sample_s / 2
-        s = self.sample_s**2 * n * (n * n - 1) / 12
-        w = ca.if_else(j < n, (t - t_bar) / s, 0)
+        dt = self.sample_s
+        w = ca.if_else(j < n, (-j * dt + (n - 1) * dt / 2) / (dt * dt * n * (n * n - 1) / 12), 0)
         return ca.dot(w, buffer)
+
+    def direction(self, slope: ca.MX, previous: ca.MX) -> ca.MX:
+        """Direction of travel (+1 / −1, held inside the dead band) after ``previous``."""
+        db = self.deadband_mA_s
+        return ca.if_else(slope > db, 1.0, ca.if_else(slope < -db, -1.0, previous))
+
+
+@dataclass(frozen=True)
+class LagSpec:
+    """The nominal current through a first-order lag (``current_lag_mA``).
+
+    ``y ← a·y + (1 − a)·I`` per sample, ``a = exp(−1 / (tau_s · fs))``, ``fs = 1 /
+    sample_s``, starting at the initial current: the exact discretization
+    ``clutchlab.residual_ml.features.first_order_lag`` uses offline.
+    """
+
+    tau_s: float
+    sample_s: float = 1e-3
+
+    @property
+    def pole(self) -> float:
+        """``a`` (0 for no lag)."""
+        if not self.tau_s > 0:
+            return 0.0
+        return math.exp(-1.0 / (self.tau_s * (1.0 / self.sample_s)))
+
+
+def _rows(x: ca.MX, a: int, b: int) -> ca.MX:
+    """Rows ``a:b`` of the column ``x`` (a 0 × 1 column when empty)."""
+    return x[a:b] if b > a else ca.MX(0, 1)
 
 
 def _inputs(physics: FmuProgram | None) -> tuple[FmuVariable, ...]:
@@ -246,6 +402,7 @@ def ml_program(
     with_std: bool = True,
     name: str = "clutch_gp",
     description: str = "",
+    lag: LagSpec | None = None,
 ) -> FmuProgram:
     """The FMU program of a GP model (one GP, or one per latch state with a decision).
 
@@ -258,7 +415,8 @@ def ml_program(
     decision : DecisionSpec, optional
         Latch classifier (required for two GPs); its output is ``latch_state``.
     didt : DidtSpec, optional
-        Causal dI/dt (required when ``didt_mA_s`` is a feature).
+        Causal dI/dt and direction (required when ``didt_causal_mA_s`` or
+        ``direction_causal`` is a feature).
     physics : FmuProgram, optional
         Physics program (command drive) under a residual GP: hybrid. The output
         ``clutch_pressure_bar`` is then physics + residual; the physics outputs remain.
@@ -266,6 +424,8 @@ def ml_program(
         Output ``clutch_pressure_std_bar`` (the GPs need ``k_inv``).
     name, description : str
         Model identifier and description.
+    lag : LagSpec, optional
+        First-order lag of the current (required when ``current_lag_mA`` is a feature).
 
     Returns
     -------
@@ -276,8 +436,11 @@ def ml_program(
     problems = [f"unknown feature(s) {unknown}; known: {list(ML_FEATURES)}"] if unknown else []
     if len(gps) > 1 and decision is None:
         problems.append("two GPs need a decision function")
-    if "didt_mA_s" in features and didt is None:
-        problems.append("feature didt_mA_s needs a DidtSpec")
+    slopes = [f for f in features if f in _SLOPE_FEATURES]
+    if slopes and didt is None:
+        problems.append(f"feature(s) {', '.join(slopes)} need a DidtSpec")
+    if "current_lag_mA" in features and lag is None:
+        problems.append("feature current_lag_mA needs a LagSpec")
     if "physics_bar" in features and physics is None:
         problems.append("feature physics_bar needs a physics program")
     if physics is not None and physics.inputs[0].name != "current_cmd_mA":
@@ -291,7 +454,10 @@ def ml_program(
 
     inputs = _inputs(physics)
     nv = len(inputs)
-    nb = didt.max_samples if didt is not None else 1
+    use_didt = didt is not None and bool(slopes)
+    nb = didt.max_samples if use_didt else 0
+    nd = 1 if "direction_causal" in features else 0  # the held direction of travel
+    nl = 1 if "current_lag_mA" in features else 0  # the lagged current
     npx = physics.nx if physics is not None else 0
     pars = physics.parameters if physics is not None else ()
     if physics is None:
@@ -299,73 +465,84 @@ def ml_program(
         pars = (FmuVariable("max_step_s", "s", "longest internal step", step_s),)
     npar = len(pars)
     const = _Constants()
-    x = ca.MX.sym("x", npx + nb)
+    nx = max(npx + nb + nd + nl, 1)
+    x = ca.MX.sym("x", nx)
     v, dv, h, p = ca.MX.sym("v", nv), ca.MX.sym("dv", nv), ca.MX.sym("h"), ca.MX.sym("p", npar)
-    xp, buf = x[:npx], x[npx:]
+    xp, buf, dir0 = _rows(x, 0, npx), _rows(x, npx, npx + nb), _rows(x, npx + nb, npx + nb + nd)
+    lag0 = _rows(x, npx + nb + nd, npx + nb + nd + nl)
 
-    def residual(vv: ca.MX, buffer: ca.MX, phys_bar: ca.MX | None):
+    def features_at(
+        vv: ca.MX, buffer: ca.MX, previous: ca.MX, lagged: ca.MX, phys_bar: ca.MX | None
+    ):
+        """Feature row (1 × d) and the direction state after it."""
+        slope = didt.slope(buffer, vv[2]) if use_didt else ca.MX(0)
+        direction = didt.direction(slope, previous[0]) if nd else ca.MX(0)
         cols = {
             "current_mA": vv[0],
+            "current_lag_mA": lagged[0] if nl else ca.MX(0),
             "dither_amp_mA": vv[1],
             "dither_freq_Hz": vv[2],
-            "didt_mA_s": didt.slope(buffer, vv[2]) if didt is not None else ca.MX(0),
+            "didt_causal_mA_s": slope,
+            "direction_causal": direction,
             "physics_bar": phys_bar if phys_bar is not None else ca.MX(0),
         }
-        feat = ca.horzcat(*(cols[f] for f in features))
+        return ca.horzcat(*(cols[f] for f in features)), direction
+
+    def residual(feat: ca.MX):
         if decision is None:
             g = next(iter(gps.values()))
-            mean = g.mean(feat, const)
-            std = g.std(feat, const) if with_std else None
-            return mean, std, None, feat
-        dec = decision(feat, const)
-        latched = dec > 0
+            mean, std = g.mean_std(feat, const, with_std)
+            return mean, std, None
+        latched = decision(feat, const) > 0
         g0, g1 = gps.get(0, gps.get(1)), gps.get(1, gps.get(0))
-        mean = ca.if_else(latched, g1.mean(feat, const), g0.mean(feat, const), True)
-        std = (
-            ca.if_else(latched, g1.std(feat, const), g0.std(feat, const), True)
-            if with_std
-            else None
-        )
-        return mean, std, latched, feat
+        m1, s1 = g1.mean_std(feat, const, with_std)
+        m0, s0 = g0.mean_std(feat, const, with_std)
+        if with_std:
+            both0, both1 = ca.vertcat(m0, s0), ca.vertcat(m1, s1)
+            pair = ca.if_else(latched, both1, both0, True)
+            return pair[0], pair[1], latched
+        return ca.if_else(latched, m1, m0, True), None, latched
 
-    def outputs(y_phys: ca.MX | None, vv: ca.MX, buffer: ca.MX) -> ca.MX:
+    def outputs(y_phys: ca.MX | None, vv: ca.MX, buffer: ca.MX, previous: ca.MX, lagged):
         phys_bar = y_phys[0] if y_phys is not None else None
-        mean, std, latched, _ = residual(vv, buffer, phys_bar)
-        out = []
-        if y_phys is not None:
-            out.append(y_phys[0] + mean)
-        else:
-            out.append(mean)
+        feat, direction = features_at(vv, buffer, previous, lagged, phys_bar)
+        mean, std, latched = residual(feat)
+        out = [y_phys[0] + mean if y_phys is not None else mean]
         if std is not None:
             out.append(std)
         if latched is not None:
             out.append(latched)
         if y_phys is not None:
             out += [mean, y_phys[0], *(y_phys[k] for k in range(1, y_phys.shape[0]))]
-        return ca.vertcat(*out)
+        return ca.vertcat(*out), direction
 
     v1 = v + h * dv
-    buf1 = ca.vertcat(v1[0], buf[: nb - 1]) if didt is not None else buf
+    buf1 = ca.vertcat(v1[0], _rows(buf, 0, nb - 1)) if nb else buf
     if physics is not None:
         xp1, yp1 = physics.step(xp, v, dv, h, p)
-        x1 = ca.vertcat(xp1, buf1)
     else:
-        yp1, x1 = None, buf1
-    y_step = outputs(yp1, v1, buf1)
+        xp1, yp1 = xp, None
+    a = lag.pole if nl else 0.0
+    lag1 = a * lag0 + (1.0 - a) * v1[0] if nl else lag0
+    y_step, dir1 = outputs(yp1, v1, buf1, dir0, lag1)
+    x1 = ca.vertcat(xp1, buf1, dir1 if nd else dir0, lag1)
     yp0 = physics.output(xp, v, p) if physics is not None else None
-    y_out = outputs(yp0, v, buf)
+    y_out, _ = outputs(yp0, v, buf, dir0, lag0)
     t_pre = ca.MX.sym("t_pre")
-    start_buf = ca.repmat(v[0], nb, 1)
+    pad = ca.MX.zeros(nx - npx - nb - nd - nl, 1)
+    rest = ca.vertcat(ca.repmat(v[0], nb, 1), ca.MX.zeros(nd, 1), ca.repmat(v[0], nl, 1), pad)
+    if x1.shape[0] < nx:
+        x1 = ca.vertcat(x1, pad)
     cs = const.symbols
     step = ca.Function("step", [x, v, dv, h, p, *cs], [x1, y_step])
     output = ca.Function("output", [x, v, p, *cs], [y_out])
     if physics is not None:
-        x_start = ca.vertcat(physics.start(v, dv, p, t_pre), start_buf)
+        x_start = ca.vertcat(physics.start(v, dv, p, t_pre), rest)
         start = ca.Function("start", [v, dv, p, t_pre, *cs], [x_start])
-        x_settle = ca.vertcat(physics.settle(xp, v, dv, h, p), buf)
+        x_settle = ca.vertcat(physics.settle(xp, v, dv, h, p), _rows(x, npx, nx))
         settle = ca.Function("settle", [x, v, dv, h, p, *cs], [x_settle])
     else:
-        start = ca.Function("start", [v, dv, p, t_pre, *cs], [start_buf])
+        start = ca.Function("start", [v, dv, p, t_pre, *cs], [rest])
         settle = None
 
     kind = "hybrid" if physics is not None else "ml"
@@ -403,7 +580,7 @@ def ml_program(
         inputs=inputs,
         outputs=tuple(outs),
         parameters=pars,
-        nx=npx + nb,
+        nx=nx,
         start=start,
         settle=settle,
         step=step,
@@ -415,7 +592,7 @@ def ml_program(
             "kind": kind,
             "features": ",".join(features),
             "gps": str(len(gps)),
-            "didt": "causal" if didt is not None else "none",
+            "didt": "causal" if use_didt else "none",
         },
         constants=tuple(const.arrays),
     )
