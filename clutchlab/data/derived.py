@@ -73,6 +73,16 @@ def dither_period_mean(x: ArrayLike, n: float | ArrayLike) -> np.ndarray:
     return integral / width + offset
 
 
+def _derivative_input(x: ArrayLike, sample_rate_Hz: float, n: float) -> np.ndarray:
+    """``x`` as a finite 1-D float array, after checking the rate (Hz) and window (samples)."""
+    arr = _finite_1d(x, "x")
+    if not np.isfinite(sample_rate_Hz) or sample_rate_Hz <= 0:
+        raise DataError(f"sample_rate_Hz must be positive, got {sample_rate_Hz!r}")
+    if not np.isfinite(n) or n <= 0:
+        raise DataError(f"window length n must be positive, got {n!r}")
+    return arr
+
+
 def didt(x: ArrayLike, sample_rate_Hz: float, n: float, *, polyorder: int = 2) -> np.ndarray:
     """Filtered time derivative (Savitzky–Golay) over about one dither period.
 
@@ -106,11 +116,7 @@ def didt(x: ArrayLike, sample_rate_Hz: float, n: float, *, polyorder: int = 2) -
     """
     from scipy.signal import savgol_filter
 
-    arr = _finite_1d(x, "x")
-    if not np.isfinite(sample_rate_Hz) or sample_rate_Hz <= 0:
-        raise DataError(f"sample_rate_Hz must be positive, got {sample_rate_Hz!r}")
-    if not np.isfinite(n) or n <= 0:
-        raise DataError(f"window length n must be positive, got {n!r}")
+    arr = _derivative_input(x, sample_rate_Hz, n)
     window = max(int(np.ceil(n)), polyorder + 2)
     window += 1 - window % 2
     if arr.size < window:
@@ -170,11 +176,7 @@ def causal_didt(x: ArrayLike, sample_rate_Hz: float, n: float) -> np.ndarray:
     DataError
         If ``x`` is not finite and 1-D, or the rate or window is not usable.
     """
-    arr = _finite_1d(x, "x")
-    if not np.isfinite(sample_rate_Hz) or sample_rate_Hz <= 0:
-        raise DataError(f"sample_rate_Hz must be positive, got {sample_rate_Hz!r}")
-    if not np.isfinite(n) or n <= 0:
-        raise DataError(f"window length n must be positive, got {n!r}")
+    arr = _derivative_input(x, sample_rate_Hz, n)
     if arr.size == 0:
         return arr.copy()
     window = causal_window(n)
