@@ -7,8 +7,9 @@ FMUs: the physics model (both drives, and the stand's model with its effects), a
 ML variants trained here on the training ramps (fast + slow) at their default sizes, as
 ``clutchlab train`` trains them — ``gp_base``, and ``gp_didt``, ``paper_svc_gp`` and
 ``hybrid`` with ``--causal`` so that they export exactly — each without and with the
-predictive-std output. Each FMU is driven through one medium ramp (23 s, 23 000 steps of
-1 ms; rows with the std output: its first ``--std-steps`` steps):
+predictive-std output (the GP's std given its coarse std bins, ``max_std_points``). Each FMU
+is driven through one medium ramp (23 s, 23 000 steps of 1 ms; with ``--std-steps N`` the
+rows with the std output run its first N steps once):
 
 - **C host**: a small C program (compiled here) loads the FMU binary with ``dlopen`` and runs
   the 1 kHz loop — ``fmi2SetReal`` + ``fmi2SetRealInputDerivatives`` + ``fmi2DoStep`` +
@@ -47,7 +48,7 @@ from clutchlab.physics.fmu import (
     export_physics_fmu,
     inspect_fmu,
 )
-from clutchlab.physics.fmu.adapters import STD_TOL_BAR, ml_program_from
+from clutchlab.physics.fmu.adapters import ml_program_from
 from clutchlab.physics.fmu.build import fmi_headers_dir
 from clutchlab.physics.stand import StandConfig, run_stand
 
@@ -205,13 +206,13 @@ def trained_models(data, physics) -> dict:
     return models
 
 
-def ml_fmus(work: Path, models: dict, std_tol: float) -> dict[str, tuple[Path, object, bool]]:
+def ml_fmus(work: Path, models: dict) -> dict[str, tuple[Path, object, bool]]:
     """FMU per trained model, without and with the predictive-std output."""
     out = {}
     for variant, est in models.items():
         for with_std in (False, True):
             label = f"{variant}{', mean+std' if with_std else ''}"
-            prog = ml_program_from(est, with_std=with_std, std_tol=std_tol, name=variant)
+            prog = ml_program_from(est, with_std=with_std, name=variant)
             path = work / f"{variant}{'_std' if with_std else ''}.fmu"
             out[label] = (build_fmu(prog, path), est, with_std)
     return out
@@ -255,11 +256,9 @@ def main() -> None:
     ap.add_argument(
         "--std-steps",
         type=int,
-        default=500,
-        help="steps timed (once) and compared per FMU with the std output (500)",
-    )
-    ap.add_argument(
-        "--std-tol", type=float, default=STD_TOL_BAR, help="std error bound, bar (1e-4)"
+        default=None,
+        help="steps timed (once) and compared per FMU with the std output (default: the "
+        "whole ramp, --runs runs, all medium ramps compared, as the rows without std)",
     )
     args = ap.parse_args()
 
@@ -308,12 +307,12 @@ def main() -> None:
     if not args.physics_only:
         physics = (base, base.default_params()) if not args.model else _fitted(args.model)
         models = trained_models(data, physics)
-        fmus |= ml_fmus(work, models, args.std_tol)
+        fmus |= ml_fmus(work, models)
     exe = build_host(work)
     rows = []
     for label, (fmu, est, with_std) in fmus.items():
         steps = args.std_steps if with_std else None
-        runs = 1 if with_std else args.runs
+        runs = 1 if steps else args.runs
         med_tick, p99_tick, med_step, p99_step, worst, py = [], [], [], [], [], []
         for _ in range(runs):
             tick, step = c_host_times(exe, fmu, trace, work, steps)
@@ -362,8 +361,12 @@ def main() -> None:
         )
     print(
         "(µs; tick = set inputs + derivatives + doStep + get output, as a C host runs it; "
-        f"rows with the std output: first {args.std_steps} steps of the ramp, one run; "
-        "max|dp|, max|dstd|: FMU against the in-process model at every sample on the medium "
+        + (
+            f"rows with the std output: first {args.std_steps} steps of the ramp, one run; "
+            if args.std_steps
+            else ""
+        )
+        + "max|dp|, max|dstd|: FMU against the in-process model at every sample on the medium "
         "ramp experiments, pressure and predictive std)"
     )
     print(

@@ -29,7 +29,6 @@ def _export(args: argparse.Namespace) -> Path:
             load_model(args.model),
             with_std=not args.no_std,
             approximate_didt=args.approximate_didt,
-            std_tol=args.std_tol,
             name=args.name,
         )
         return build_fmu(program, args.out)
@@ -96,14 +95,6 @@ def register(sub) -> None:
     p.add_argument("--stop-time", type=float, default=23.0, help="default experiment stop, s")
     p.add_argument(
         "--no-std", action="store_true", help="ML models: no predictive-std output (faster)"
-    )
-    p.add_argument(
-        "--std-tol",
-        type=float,
-        default=1e-4,
-        help="ML models: guaranteed bound on the error of the predictive-std output, bar "
-        "(1e-4); rows of its quadratic form with a negligible kernel are skipped while the "
-        "bound holds; 0: the full n x n product every step",
     )
     p.add_argument(
         "--approximate-didt",

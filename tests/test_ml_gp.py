@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from scipy.optimize import approx_fprime
@@ -142,3 +144,88 @@ def test_contract_not_fitted_clone_and_bad_params():
         LocalGPRegressor(kernel="matern").fit(X, y)
     with pytest.raises(ValueError, match="length_scale"):
         LocalGPRegressor(length_scale=1e6).fit(X, y)
+
+
+def _explicit_std(gp: LocalGPRegressor, Xt: np.ndarray, xb: np.ndarray, wb: np.ndarray):
+    """Reference: latent std of an RBF GP with the fitted hyperparameters conditioned on
+    bins ``xb`` (scaled inputs) of weights ``wb``, by a dense solve (no Cholesky)."""
+    s2, noise = np.exp(gp.theta_[0]), np.exp(gp.theta_[-1])
+    ell = gp.length_scales_ / gp.x_scale_  # standardized units
+
+    def kern(a, b):
+        return s2 * np.exp(-0.5 * (((a[:, None] - b[None]) / ell) ** 2).sum(-1))
+
+    z = (Xt - gp.x_mean_) / gp.x_scale_
+    k = kern(z, xb)
+    K = kern(xb, xb) + np.diag(noise / wb)
+    var = s2 - np.einsum("ij,ji->i", k, np.linalg.solve(K, k.T))
+    return gp.y_scale_ * np.sqrt(np.maximum(var, 0.0))
+
+
+def _ramp_data(n=20000, seed=3):
+    t = np.linspace(0.0, 1.0, n)
+    X = np.column_stack([1100 * t, 40 + 10 * np.sin(6 * t)])
+    rng = np.random.default_rng(seed)
+    y = 0.02 * X[:, 0] + 0.3 * np.sin(X[:, 0] / 90.0) + 0.02 * rng.standard_normal(n)
+    return X, y
+
+
+def test_std_is_the_same_gp_given_the_coarse_std_bins():
+    X, y = _ramp_data()
+    kw = {"kernel": "rbf", "bin_frac": 0.01, "max_points": 400, "n_hyper": 400, "random_state": 0}
+    gp = LocalGPRegressor(max_std_points=40, **kw).fit(X, y)
+    assert gp.n_std_bins_ <= 40 < gp.n_bins_
+    # a grid binning of all the samples: every sample's weight lands in one std bin
+    assert gp.w_std_bins_.sum() == pytest.approx(X.shape[0])
+    assert np.all(gp.std_bin_widths_ >= gp.bin_widths_)
+    Xt = X[::97] + 3.0  # between the samples
+    mean, std = gp.predict(Xt, return_std=True)
+    ref = _explicit_std(gp, Xt, gp.X_std_bins_, gp.w_std_bins_)
+    np.testing.assert_allclose(std, ref, rtol=1e-6, atol=1e-9)
+    # the mean is not touched: the same as with the std on the mean's bins
+    fine = LocalGPRegressor(max_std_points=400, **kw).fit(X, y)
+    assert fine.X_std_bins_ is fine.X_bins_
+    np.testing.assert_array_equal(fine.predict(Xt), mean)
+    fine_ref = _explicit_std(fine, Xt, fine.X_bins_, fine.w_bins_)
+    np.testing.assert_allclose(fine.predict(Xt, return_std=True)[1], fine_ref, atol=1e-9)
+    assert np.abs(std - fine_ref).max() > 1e-6  # the coarse bins do change the std
+
+
+def test_few_bins_keep_the_std_on_the_final_bins():
+    X, y = _data()
+    gp = LocalGPRegressor(kernel="rbf", bin_width=0, bin_frac=0, max_std_points=60).fit(X, y)
+    assert gp.n_bins_ == 60 and gp.X_std_bins_ is gp.X_bins_ and gp.n_std_bins_ == 60
+    Xt = _data(40, seed=5)[0]
+    ref = _explicit_std(gp, Xt, gp.X_bins_, gp.w_bins_)
+    np.testing.assert_allclose(gp.predict(Xt, return_std=True)[1], ref, rtol=1e-8, atol=1e-12)
+    with pytest.raises(ValueError, match="max_std_points"):
+        LocalGPRegressor(max_std_points=1).fit(X, y)
+
+
+def test_state_round_trip_keeps_the_std_bins_and_reads_older_states(tmp_path):
+    X, y = _ramp_data(8000)
+    gp = LocalGPRegressor(
+        kernel="rbf", bin_frac=0.02, max_points=300, n_hyper=300, max_std_points=30
+    )
+    gp.fit(X, y)
+    assert gp.n_std_bins_ < gp.n_bins_
+    Xt = X[::53] + 2.0
+    mean, std = gp.predict(Xt, return_std=True)
+    meta, arrays = gp.get_state()
+    # through files, as clutchlab.residual_ml.persist writes them: JSON + NPZ
+    (tmp_path / "gp.json").write_text(json.dumps(meta))
+    np.savez(tmp_path / "gp.npz", **arrays)
+    with np.load(tmp_path / "gp.npz") as npz:
+        read = {k: npz[k] for k in npz.files}
+    back = LocalGPRegressor().set_state(json.loads((tmp_path / "gp.json").read_text()), read)
+    assert back.n_std_bins_ == gp.n_std_bins_ <= 30
+    m2, s2 = back.predict(Xt, return_std=True)
+    np.testing.assert_array_equal(m2, mean)
+    np.testing.assert_allclose(s2, std, rtol=1e-12, atol=1e-15)
+    # a state written before the std bins: the std on the final bins, as then
+    old = {k: v for k, v in arrays.items() if "std" not in k}
+    legacy = LocalGPRegressor().set_state(meta, old)
+    assert legacy.X_std_bins_ is legacy.X_bins_
+    m3, s3 = legacy.predict(Xt, return_std=True)
+    np.testing.assert_array_equal(m3, mean)
+    np.testing.assert_allclose(s3, _explicit_std(gp, Xt, gp.X_bins_, gp.w_bins_), atol=1e-9)

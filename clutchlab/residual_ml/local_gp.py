@@ -29,8 +29,14 @@ to *bin means* instead of raw samples:
    ``max(bin_width, bin_frac · r_j)`` per input, ``r_j = ℓ_j · min(1, √α)`` the kernel's
    resolution (a rational quadratic with small α mixes in length scales well below ℓ),
    coarsened further until at most ``max_points`` bins remain.
-5. One Cholesky factorization of the re-binned problem gives the predictive mean weights;
-   the predictive standard deviation uses the same factor.
+5. One Cholesky factorization of the re-binned problem gives the predictive mean weights.
+6. **Standard deviation on coarser bins**: the predictive standard deviation is the same GP's
+   (same hyperparameters) given a coarser binning of the training data, built as in step 4
+   with the cell fraction coarsened further until at most ``max_std_points`` bins remain
+   (the final bins themselves when they are few enough). It costs m² per prediction
+   (m ≤ ``max_std_points``) instead of n² (n ≤ ``max_points``), so that an exported FMU
+   computes it within a 1 kHz step, and the FMU and this model compute the same number.
+   The mean is unaffected.
 
 On scattered data without redundancy (every sample its own bin, ``n ≤ n_hyper``) this is the
 exact GP of scikit-learn's ``GaussianProcessRegressor`` with a ``ConstantKernel * kernel``
@@ -191,6 +197,13 @@ class LocalGPRegressor(RegressorMixin, BaseEstimator):
         Final grid cell as a fraction of each fitted length scale (default 0.1).
     max_points : int
         At most this many bins in the final GP (its O(n³) solve; default 3000).
+    max_std_points : int
+        At most this many bins (a count, ≥ 2) in the GP the predictive standard deviation is
+        computed from (default 300: a real-time cost choice, m²/2 ≈ 4.5·10⁴ multiply-adds
+        per sample, which an exported FMU does within a 1 kHz step; not tuned for accuracy).
+        The std (target units) is the predictive std of the same GP (same hyperparameters)
+        given these coarser bins of the training data; when the final GP has no more bins
+        than this, they are the same bins and the same std.
     n_hyper : int
         At most this many bins (random subset) in the marginal-likelihood optimization
         (default 2000).
@@ -246,6 +259,13 @@ class LocalGPRegressor(RegressorMixin, BaseEstimator):
         Bin means (scaled inputs, normalized targets) and weights of the final GP.
     dual_coef_ : numpy.ndarray
         ``K⁻¹ y`` of the final GP (normalized units).
+    X_std_bins_, w_std_bins_ : numpy.ndarray
+        Bin means (scaled inputs) and weights of the GP the standard deviation is computed
+        from (at most ``max_std_points`` bins; the final bins when they are that few).
+    n_std_bins_ : int
+        Number of those bins.
+    std_bin_widths_ : numpy.ndarray
+        Their grid cell per input, in input units.
     n_features_in_ : int
         Number of inputs.
     """
@@ -257,6 +277,7 @@ class LocalGPRegressor(RegressorMixin, BaseEstimator):
         bin_width: float = 0.01,
         bin_frac: float = 0.1,
         max_points: int = 3000,
+        max_std_points: int = 300,
         n_hyper: int = 2000,
         block_size: int = 250,
         block_assignment: str = "random",
@@ -279,6 +300,7 @@ class LocalGPRegressor(RegressorMixin, BaseEstimator):
         self.bin_width = bin_width
         self.bin_frac = bin_frac
         self.max_points = max_points
+        self.max_std_points = max_std_points
         self.n_hyper = n_hyper
         self.block_size = block_size
         self.block_assignment = block_assignment
@@ -310,7 +332,7 @@ class LocalGPRegressor(RegressorMixin, BaseEstimator):
                 "block_assignment must be 'auto', 'random' or 'compact', got "
                 f"{self.block_assignment!r}"
             )
-        for name in ("max_points", "n_hyper", "block_size"):
+        for name in ("max_points", "max_std_points", "n_hyper", "block_size"):
             if int(getattr(self, name)) < 2:
                 raise ValueError(f"{name} must be >= 2, got {getattr(self, name)!r}")
         for name in ("length_scale", "alpha", "signal_var", "noise_var"):
@@ -418,6 +440,15 @@ class LocalGPRegressor(RegressorMixin, BaseEstimator):
             final = grid_bins(xs, yn, w, widths)
         self.bin_widths_ = widths * x_std
         self._set_posterior(final.x, final.y, final.weight)
+        coarse = final
+        while len(coarse) > self.max_std_points:  # the std's bins: the same grid, coarser
+            frac = max(frac, 1e-3) * 1.25
+            widths = np.maximum(float(self.bin_width), frac * ell)
+            coarse = grid_bins(xs, yn, w, widths)
+        if coarse is final:
+            self._set_std_posterior(self.X_bins_, self.w_bins_, self.bin_widths_, self._L)
+        else:
+            self._set_std_posterior(coarse.x, coarse.weight, widths * x_std)
         return self
 
     def _choose_blocks(self, spec: KernelSpec, bins, rng) -> tuple[np.ndarray, str]:
@@ -501,10 +532,32 @@ class LocalGPRegressor(RegressorMixin, BaseEstimator):
         """Cholesky factor of the final GP (recomputed after loading)."""
         L = getattr(self, "_L", None)
         if L is None:
-            K = self.kernel_(self.theta_[:-1], self.X_bins_)
-            K[np.diag_indices_from(K)] += math.exp(self.theta_[-1]) / self.w_bins_
-            L = _jittered_cholesky(K)
+            L = self._bins_factor(self.X_bins_, self.w_bins_)
             self._L = L
+        return L
+
+    def _bins_factor(self, xb: np.ndarray, wb: np.ndarray) -> np.ndarray:
+        """Cholesky factor of ``K + diag(σ² / w)`` on bins (scaled inputs, weights)."""
+        K = self.kernel_(self.theta_[:-1], xb)
+        K[np.diag_indices_from(K)] += math.exp(self.theta_[-1]) / wb
+        return _jittered_cholesky(K)
+
+    def _set_std_posterior(
+        self, xb: np.ndarray, wb: np.ndarray, widths: np.ndarray, L: np.ndarray | None = None
+    ) -> None:
+        """The bins (scaled inputs, weights; cells in input units) of the std's GP."""
+        self.X_std_bins_, self.w_std_bins_, self.std_bin_widths_ = xb, wb, widths
+        self.n_std_bins_ = int(wb.size)
+        self._L_std = L
+
+    def _std_factor(self) -> np.ndarray:
+        """Cholesky factor of the std's GP (the final GP's when they share the bins)."""
+        if self.X_std_bins_ is self.X_bins_:
+            return self._factor()
+        L = getattr(self, "_L_std", None)
+        if L is None:
+            L = self._bins_factor(self.X_std_bins_, self.w_std_bins_)
+            self._L_std = L
         return L
 
     @staticmethod
@@ -582,14 +635,15 @@ class LocalGPRegressor(RegressorMixin, BaseEstimator):
         return out + self.y_mean_
 
     def _std_scaled(self, xs: np.ndarray) -> np.ndarray:
-        """Predictive standard deviation of the latent function (target units)."""
-        L = self._factor()
+        """Predictive standard deviation of the latent function (target units), given the
+        std bins: ``y_scale · sqrt(max(s² − vᵀv, 0))``, ``v = L_s⁻¹ k_s``."""
+        L = self._std_factor()
         spec, theta = self.kernel_, self.theta_
         out = np.empty(xs.shape[0])
-        step = max(1, _BLOCK_ELEMENTS // max(self.X_bins_.shape[0], 1))
+        step = max(1, _BLOCK_ELEMENTS // max(self.X_std_bins_.shape[0], 1))
         prior = math.exp(theta[0])
         for i in range(0, xs.shape[0], step):
-            ks = spec(theta[:-1], xs[i : i + step], self.X_bins_)
+            ks = spec(theta[:-1], xs[i : i + step], self.X_std_bins_)
             v = solve_triangular(L, ks.T, lower=True, check_finite=False)
             var = prior - np.einsum("ij,ij->j", v, v)
             out[i : i + step] = np.sqrt(np.maximum(var, 0.0))
@@ -604,7 +658,9 @@ class LocalGPRegressor(RegressorMixin, BaseEstimator):
             m × d inputs, same units as in :meth:`fit`.
         return_std : bool
             Also return the predictive standard deviation of the latent function (noise
-            excluded), in target units.
+            excluded), in target units: that of the same GP given the coarser std bins (at
+            most ``max_std_points``; see the class docstring), cheap enough for a real-time
+            step.
 
         Returns
         -------
@@ -645,11 +701,18 @@ class LocalGPRegressor(RegressorMixin, BaseEstimator):
             "w_bins": self.w_bins_,
             "dual_coef": self.dual_coef_,
             "bin_widths": self.bin_widths_,
+            "X_std_bins": self.X_std_bins_,
+            "w_std_bins": self.w_std_bins_,
+            "std_bin_widths": self.std_bin_widths_,
         }
         return meta, arrays
 
     def set_state(self, meta: dict, arrays: dict[str, np.ndarray]) -> LocalGPRegressor:
-        """Restore the learned state written by :meth:`get_state`; returns self."""
+        """Restore the learned state written by :meth:`get_state`; returns self.
+
+        A state written before the std bins existed (no ``X_std_bins``) computes the standard
+        deviation on the final bins, as it was computed then.
+        """
         self.kernel_ = kernel_spec(meta["kernel"], int(meta["n_dims"]), bool(meta["ard"]))
         self.y_mean_ = float(meta["y_mean"])
         self.y_scale_ = float(meta["y_scale"])
@@ -665,6 +728,14 @@ class LocalGPRegressor(RegressorMixin, BaseEstimator):
         self.bin_widths_ = np.asarray(arrays["bin_widths"], dtype=float)
         self.n_bins_ = int(self.y_bins_.size)
         self._L = None
+        xs = np.asarray(arrays.get("X_std_bins", self.X_bins_), dtype=float)
+        ws = np.asarray(arrays.get("w_std_bins", self.w_bins_), dtype=float)
+        if np.array_equal(xs, self.X_bins_) and np.array_equal(ws, self.w_bins_):
+            # the final bins (a few of them, or a file written before the std bins)
+            self._set_std_posterior(self.X_bins_, self.w_bins_, self.bin_widths_)
+        else:
+            widths = np.asarray(arrays["std_bin_widths"], dtype=float)
+            self._set_std_posterior(xs, ws, widths)
         return self
 
     def __sklearn_tags__(self):
@@ -677,14 +748,16 @@ class LocalGPRegressor(RegressorMixin, BaseEstimator):
 
         ``mean(x) = y_mean + Σ_i weights_i · κ(r_i²)``, ``r_i² = Σ_j ((z_j − points_ij) /
         length_scales_j)²``, ``z = (x − x_mean) / x_scale``, with ``κ(r²) = (1 + r²/2α)^(−α)``
-        (``"rq"``) or ``exp(−r²/2)`` (``"rbf"``); latent standard deviation ``y_scale ·
-        sqrt(max(s² − s⁴ κᵀ K⁻¹ κ, 0))`` with ``s² = signal_var``.
+        (``"rq"``) or ``exp(−r²/2)`` (``"rbf"``). Latent standard deviation, from the std
+        bins (the GP given a coarser binning, see the class docstring): ``y_scale ·
+        sqrt(max(s² − vᵀv, 0))``, ``v = L_s⁻¹ k``, ``k_i = s² κ(r_i²)`` with ``r_i`` taken
+        to ``std_points``, ``s² = signal_var``.
 
         Parameters
         ----------
         inverse : bool
-            Also return ``k_inv`` = K⁻¹ (n × n, normalized target units, noise included),
-            needed for the standard deviation (O(n³) on first use).
+            Also return ``std_l_inv`` = L_s⁻¹ (m × m, m ≤ ``max_std_points``), needed for
+            the standard deviation.
 
         Returns
         -------
@@ -693,15 +766,18 @@ class LocalGPRegressor(RegressorMixin, BaseEstimator):
             ``length_scales`` (d, standardized units), ``alpha`` (RQ scale mixture; inf for
             RBF), ``points`` (n × d bin means, standardized), ``weights`` (n, target units,
             e.g. bar), ``y_mean`` (target units), ``signal_var`` (s², normalized units),
-            ``y_scale`` (target units), ``k_inv`` (n × n, or None).
+            ``y_scale`` (target units), ``std_points`` (m × d std bin means,
+            standardized), ``std_l_inv`` (m × m lower-triangular inverse of the Cholesky
+            factor of ``K_s + diag(σ² / w_s)``, normalized units, or None).
         """
         check_is_fitted(self, "dual_coef_")
         s2, ell, alpha = self.kernel_.unpack(self.theta_[:-1])
         d = self.X_bins_.shape[1]
-        k_inv = None
+        l_inv = None
         if inverse:
-            L = self._factor()
-            k_inv = cho_solve((L, True), np.eye(L.shape[0]), check_finite=False)
+            L = self._std_factor()
+            eye = np.eye(L.shape[0])
+            l_inv = solve_triangular(L, eye, lower=True, check_finite=False)
         return {
             "kernel": self.kernel_.name,
             "x_mean": np.asarray(self.x_mean_, dtype=float).copy(),
@@ -713,5 +789,6 @@ class LocalGPRegressor(RegressorMixin, BaseEstimator):
             "y_mean": float(self.y_mean_),
             "signal_var": float(s2),
             "y_scale": float(self.y_scale_),
-            "k_inv": k_inv,
+            "std_points": np.asarray(self.X_std_bins_, dtype=float).copy(),
+            "std_l_inv": l_inv,
         }

@@ -33,7 +33,6 @@ from .program import FmuProgram
 __all__ = [
     "CAUSAL_FEATURES",
     "EXACT_FEATURES",
-    "STD_TOL_BAR",
     "decision_spec",
     "gp_spec",
     "ml_program_from",
@@ -48,15 +47,12 @@ _APPROXIMATE = {"didt_mA_s": "didt_causal_mA_s", "direction": "direction_causal"
 _DEFAULT_DEADBAND_MA_S = 10.0
 
 
-#: Default bound on the error of the exported predictive standard deviation, bar.
-STD_TOL_BAR = 1e-4
-
-
-def gp_spec(gp, with_std: bool = True, std_tol: float = STD_TOL_BAR) -> GPSpec:
+def gp_spec(gp, with_std: bool = True) -> GPSpec:
     """The :class:`GPSpec` of a fitted ``LocalGPRegressor`` (its ``prediction_arrays``).
 
-    With ``with_std`` and ``std_tol`` > 0 (bar) the standard deviation takes the fast path
-    of :meth:`GPSpec.with_fast_std` (error ≤ ``std_tol``, guaranteed); 0: the full product.
+    With ``with_std`` the spec carries the estimator's std bins and their ``L⁻¹``: the FMU
+    computes the same predictive standard deviation (bar) as ``predict(return_std=True)``,
+    the GP's std given the coarse std bins (at most ``max_std_points``).
     """
     a = gp.prediction_arrays(inverse=with_std)
     alpha = a["alpha"]
@@ -71,9 +67,10 @@ def gp_spec(gp, with_std: bool = True, std_tol: float = STD_TOL_BAR) -> GPSpec:
         y_mean=a["y_mean"],
         signal_var=a["signal_var"],
         y_scale=a["y_scale"],
-        k_inv=a["k_inv"],
+        l_inv=a["std_l_inv"],
+        std_points=a["std_points"] if with_std else None,
     )
-    return spec.with_fast_std(std_tol) if with_std and std_tol > 0 else spec
+    return spec
 
 
 def decision_spec(decision, columns=None) -> DecisionSpec:
@@ -170,7 +167,6 @@ def ml_program_from(
     with_std: bool = True,
     approximate_didt: bool = False,
     name: str | None = None,
-    std_tol: float = STD_TOL_BAR,
 ) -> FmuProgram:
     """The FMU program of a fitted ``GPBaseline`` / ``GPWithDerivative`` /
     ``SVCPartitionedGP`` / ``HybridModel``.
@@ -181,10 +177,8 @@ def ml_program_from(
         Fitted. Its features (a hybrid's: its residual model's) must be among
         :data:`EXACT_FEATURES` and :data:`CAUSAL_FEATURES`.
     with_std : bool
-        Output the predictive standard deviation.
-    std_tol : float
-        Guaranteed bound on its error, bar (default 1e-4; 0: the full n × n product per
-        step); see :class:`~.ml.GPSpec`.
+        Output the predictive standard deviation (bar): the GP's std given its coarse std
+        bins, as the estimator computes it (see :class:`~.ml.GPSpec`).
     approximate_didt : bool
         Accept the centred ``didt_mA_s`` / ``direction`` and compute causal stand-ins: the
         FMU then differs from the model at ramp reversals (approximate export).
@@ -210,10 +204,10 @@ def ml_program_from(
     didt = _didt_spec(est, features)
     lag = LagSpec(float(getattr(est, "lag_s_", 0.0))) if "current_lag_mA" in features else None
     if hasattr(est, "gp_"):
-        gps = {0: gp_spec(est.gp_, with_std, std_tol)}
+        gps = {0: gp_spec(est.gp_, with_std)}
         decision = None
     else:
-        gps = {g: gp_spec(gp, with_std, std_tol) for g, gp in est.gps_.items()}
+        gps = {g: gp_spec(gp, with_std) for g, gp in est.gps_.items()}
         decision = None
         if est.decision_ is not None:
             decision = decision_spec(est.decision_, getattr(est, "classifier_columns_", None))

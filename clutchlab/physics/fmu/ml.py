@@ -7,9 +7,9 @@ latch classifier, a :class:`DidtSpec` for the causal dI/dt and direction feature
 standalone, or on top of a physics program (hybrid: physics pressure + residual GP).
 
 Per step the FMU evaluates the features at the step's end, the decision (> 0: latched,
-then only the latched GP is evaluated) and the GP: ``n·d`` kernel terms for the mean (shared
-with the standard deviation), an ``n × n`` product for the standard deviation
-(``with_std``).
+then only the latched GP is evaluated) and the GP: ``n·d`` kernel terms for the mean and,
+for the standard deviation (``with_std``), ``m·d`` kernel terms on the GP's std points and a
+triangular ``m × m`` product (m ≤ 300 by default: ``LocalGPRegressor.max_std_points``).
 """
 
 from __future__ import annotations
@@ -82,22 +82,14 @@ class GPSpec:
     ``mean(x) = y_mean + Σ_i weights_i · κ(r_i²)``, ``r_i² = Σ_j ((z_j − points_ij) /
     length_scales_j)²``, ``z = (x − x_mean) / x_scale``; ``κ(r²) = (1 + r²/2α)^(−α)``
     (``"rq"``) or ``exp(−r²/2)`` (``"rbf"``). Standard deviation (latent, noise excluded):
-    ``y_scale · sqrt(max(s² − q, 0))``, ``q = kᵀ K⁻¹ k``, ``k = s²κ``, ``s² = signal_var``.
+    ``y_scale · sqrt(max(s² − vᵀv, 0))``, ``v = L⁻¹ k``, ``k_i = s² κ(r_i²)`` with ``r_i``
+    taken to ``std_points`` (default ``points``), ``s² = signal_var``, ``L`` the Cholesky
+    factor of the std GP's kernel matrix (noise included).
 
-    **Fast standard deviation** (``std_level`` > 0): ``q`` costs n² per step, too much for
-    a few thousand bins. Rows ``i`` whose kernel profile ``κ_i ≤ std_level`` are left out
-    of ``q = Σ_i k_i (K⁻¹k)_i`` (each kept row costs n). The error of that is bounded at
-    every step: ``|Δq| ≤ B = max_j k_j · Σ_{i dropped} k_i c_i`` with ``c_i = Σ_j |K⁻¹_ij|``
-    (since ``|(K⁻¹k)_i| ≤ c_i max_j k_j``), computed in O(n); when ``B`` exceeds
-    ``(std_tol / y_scale)²`` the step falls back to the full product. As
-    ``|√a − √b| ≤ √|a − b|``, the standard deviation is then always within ``std_tol``
-    (bar) of the exact one — in exact arithmetic: ``K⁻¹`` in floating point adds a rounding
-    error of order cond(K)·ε·s² to ``q`` on both paths (the in-process model solves with
-    the Cholesky factor instead; on the ill-conditioned GPs of the default stand, cond(K)
-    ~1e7–1e10, the two differ by up to ~2e-4 bar). How much the fast path saves depends
-    on how local the kernel is: :meth:`with_fast_std` picks the level on the GP's own
-    points; a broad kernel (long length scales, or a rational quadratic with small α)
-    leaves nothing to skip and costs the full n² per step.
+    ``LocalGPRegressor`` computes its std from a GP on coarser bins than its mean (at most
+    ``max_std_points``, 300 by default), so that the std costs m²/2 multiply-adds per step
+    (the lower triangle of ``L⁻¹``) instead of n² and fits a 1 kHz step; the FMU evaluates
+    the same formula on the same bins as the in-process model.
 
     Attributes
     ----------
@@ -109,7 +101,7 @@ class GPSpec:
     alpha : float
         Scale mixture α of the RQ kernel (ignored for RBF).
     points : ndarray (n, d)
-        Training (bin) points, standardized.
+        Training (bin) points of the mean, standardized.
     weights : ndarray (n,)
         ``K⁻¹y · s² · y_scale``: mean weights in target units (bar).
     y_mean : float
@@ -118,13 +110,11 @@ class GPSpec:
         s² in normalized target units (for the std).
     y_scale : float
         Target scale (bar).
-    k_inv : ndarray (n, n) or None
-        ``K⁻¹`` in normalized units (noise included); None: no std output.
-    std_level : float
-        Kernel-profile level (0–1) below which rows of the std's quadratic form are left
-        out; 0 (default): the full product.
-    std_tol : float
-        Guaranteed bound on the std error of the fast path, bar.
+    l_inv : ndarray (m, m) or None
+        ``L⁻¹``, lower triangular, normalized units (its upper triangle is ignored); None:
+        no std output.
+    std_points : ndarray (m, d) or None
+        Bin points of the std's GP, standardized; None: ``points``.
     """
 
     kernel: str
@@ -137,9 +127,8 @@ class GPSpec:
     y_mean: float
     signal_var: float = 1.0
     y_scale: float = 1.0
-    k_inv: np.ndarray | None = None
-    std_level: float = 0.0
-    std_tol: float = 0.0
+    l_inv: np.ndarray | None = None
+    std_points: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n, d = np.shape(self.points)
@@ -151,12 +140,13 @@ class GPSpec:
                 problems.append(f"{name} must have shape ({d},)")
         if np.shape(self.weights) != (n,):
             problems.append(f"weights must have shape ({n},)")
-        if self.k_inv is not None and np.shape(self.k_inv) != (n, n):
-            problems.append(f"k_inv must have shape ({n}, {n})")
-        if not (0.0 <= self.std_level < 1.0 and self.std_tol >= 0.0):
-            problems.append("std_level must be in [0, 1) and std_tol >= 0")
-        if self.std_level > 0 and not self.std_tol > 0:
-            problems.append("a std_level > 0 needs a std_tol > 0 (bar)")
+        m = n
+        if self.std_points is not None:
+            m = np.shape(self.std_points)[0]
+            if np.shape(self.std_points) != (m, d):
+                problems.append(f"std_points must have shape (m, {d})")
+        if self.l_inv is not None and np.shape(self.l_inv) != (m, m):
+            problems.append(f"l_inv must have shape ({m}, {m}) (one row per std point)")
         if problems:
             raise ModelError("invalid GPSpec: " + "; ".join(problems))
 
@@ -165,7 +155,7 @@ class GPSpec:
         """Number of input features d."""
         return int(np.shape(self.points)[1])
 
-    def _profile(self, x: ca.MX, const: _Constants) -> ca.MX:
+    def _profile(self, x: ca.MX, const: _Constants, points: np.ndarray) -> ca.MX:
         """Kernel profile κ(r_i²) of every point (1 × n), a serial map (a loop in C)."""
         d = self.n_features
         z = ((x - const(self.x_mean).T) / const(self.x_scale).T).T
@@ -176,104 +166,48 @@ class GPSpec:
         else:
             prof = ca.exp(-self.alpha * ca.log1p(r2 / (2.0 * self.alpha)))
         kern = ca.Function("kernel", [zs, pt], [prof])
-        n = self.points.shape[0]
-        return kern.map(n, "serial")(z, const(np.ascontiguousarray(self.points.T)))
+        n = points.shape[0]
+        return kern.map(n, "serial")(z, const(np.ascontiguousarray(points.T)))
+
+    @functools.cached_property
+    def _l_inv_packed(self) -> np.ndarray:
+        """Lower triangle of ``l_inv``, column by column (CasADi's column-major nonzeros)."""
+        li = np.asarray(self.l_inv, dtype=float)
+        return np.concatenate([li[j:, j] for j in range(li.shape[0])])
 
     def mean(self, x: ca.MX, const: _Constants = _INLINE) -> ca.MX:
         """Predictive mean (bar) at the row vector of features ``x`` (1 × d)."""
         return self.mean_std(x, const, False)[0]
 
     def std(self, x: ca.MX, const: _Constants = _INLINE) -> ca.MX:
-        """Predictive standard deviation (bar) at ``x``; requires ``k_inv``."""
+        """Predictive standard deviation (bar) at ``x``; requires ``l_inv``."""
         return self.mean_std(x, const, True)[1]
 
     def mean_std(
         self, x: ca.MX, const: _Constants = _INLINE, with_std: bool = True
     ) -> tuple[ca.MX, ca.MX | None]:
-        """Predictive mean and standard deviation (bar) at ``x`` from one kernel profile.
+        """Predictive mean and standard deviation (bar) at ``x``.
 
         Raises
         ------
         ModelError
-            If ``with_std`` and the spec has no ``k_inv``.
+            If ``with_std`` and the spec has no ``l_inv``.
         """
-        if with_std and self.k_inv is None:
-            raise ModelError("this GPSpec has no k_inv: no standard deviation")
-        prof = self._profile(x, const)
+        if with_std and self.l_inv is None:
+            raise ModelError("this GPSpec has no l_inv: no standard deviation")
+        prof = self._profile(x, const, self.points)
         mean = self.y_mean + ca.mtimes(prof, const(self.weights))
         if not with_std:
             return mean, None
-        ks = self.signal_var * prof.T
-        k_inv = const(self.k_inv)
-        full = ca.dot(ks, ca.mtimes(k_inv, ks))
-        if self.std_level > 0:
-            n = self.points.shape[0]
-            ki, col, kk = ca.MX.sym("ki"), ca.MX.sym("col", n), ca.MX.sym("k", n)
-            row = ca.if_else(ki > self.signal_var * self.std_level, ki * ca.dot(col, kk), 0, True)
-            rows = ca.Function("std_row", [ki, col, kk], [row]).map(n, "serial")
-            dropped = ks * (prof.T <= self.std_level)
-            bound = ca.mmax(ks) * ca.dot(dropped, const(self._row_abs))
-            fast = ca.sum2(rows(ks.T, k_inv, ks))
-            tol_var = (self.std_tol / self.y_scale) ** 2
-            q = ca.if_else(bound <= tol_var, fast, full, True)
-        else:
-            q = full
+        if self.std_points is not None:
+            prof = self._profile(x, const, self.std_points)
+        m = prof.shape[1]
+        packed = const(self._l_inv_packed)  # the same array object: one constant per GP
+        lower = ca.Sparsity.lower(m)
+        l_inv = ca.MX(ca.DM(lower, packed)) if isinstance(packed, ca.DM) else ca.MX(lower, packed)
+        v = ca.mtimes(l_inv, self.signal_var * prof.T)
+        q = ca.sumsqr(v)
         return mean, self.y_scale * ca.sqrt(ca.fmax(self.signal_var - q, 0.0))
-
-    @functools.cached_property
-    def _row_abs(self) -> np.ndarray:
-        """``c_i = Σ_j |K⁻¹_ij|`` (the fast std's error bound)."""
-        return np.abs(np.asarray(self.k_inv)).sum(axis=1)
-
-    def with_fast_std(self, std_tol: float, probe: np.ndarray | None = None) -> GPSpec:
-        """This spec with the fast standard deviation (see the class docstring).
-
-        The level is the largest power of ten at which the certified bound ``B`` holds at
-        every probe point (so the fast path is taken there); elsewhere the FMU falls back
-        to the full product, never exceeding ``std_tol``.
-
-        Parameters
-        ----------
-        std_tol : float
-            Bound on the std error, bar (> 0).
-        probe : ndarray (m, d), optional
-            Standardized points where the fast path should hold (default the GP's own
-            points, i.e. its training data).
-
-        Returns
-        -------
-        GPSpec
-            With ``std_level`` and ``std_tol`` set (``std_level`` 0 when no level holds).
-        """
-        if self.k_inv is None:
-            raise ModelError("this GPSpec has no k_inv: no standard deviation")
-        if not std_tol > 0:
-            raise ModelError(f"std_tol must be > 0 bar, got {std_tol!r}")
-        z = self.points if probe is None else np.asarray(probe, dtype=float)
-        tol_var = (std_tol / self.y_scale) ** 2
-        candidates = 10.0 ** -np.arange(1, 17)  # descending
-        level = float(candidates[0])
-        for start in range(0, z.shape[0], 256):
-            pz = _np_profile(self, z[start : start + 256])
-            ks = self.signal_var * pz
-            kmax = ks.max(axis=1)
-            for cand in candidates[candidates <= level]:
-                if np.all(kmax * ((ks * (pz <= cand)) @ self._row_abs) <= tol_var):
-                    level = float(cand)
-                    break
-            else:
-                level = 0.0
-                break
-        fields = {k: getattr(self, k) for k in self.__dataclass_fields__}
-        return GPSpec(**{**fields, "std_level": level, "std_tol": float(std_tol)})
-
-
-def _np_profile(spec: GPSpec, z: np.ndarray) -> np.ndarray:
-    """Kernel profile of standardized points ``z`` (m × d) against the spec's points."""
-    d2 = (((z[:, None, :] - spec.points[None]) / spec.length_scales) ** 2).sum(-1)
-    if spec.kernel == "rbf":
-        return np.exp(-0.5 * d2)
-    return (1.0 + d2 / (2.0 * spec.alpha)) ** (-spec.alpha)
 
 
 @dataclass(frozen=True)
@@ -421,7 +355,7 @@ def ml_program(
         Physics program (command drive) under a residual GP: hybrid. The output
         ``clutch_pressure_bar`` is then physics + residual; the physics outputs remain.
     with_std : bool
-        Output ``clutch_pressure_std_bar`` (the GPs need ``k_inv``).
+        Output ``clutch_pressure_std_bar`` (the GPs need ``l_inv``).
     name, description : str
         Model identifier and description.
     lag : LagSpec, optional
@@ -447,8 +381,8 @@ def ml_program(
         problems.append("a hybrid needs the command-drive physics program")
     if any(g.n_features != len(features) for g in gps.values()):
         problems.append(f"every GP must take the {len(features)} features {features}")
-    if with_std and any(g.k_inv is None for g in gps.values()):
-        problems.append("with_std needs k_inv in every GPSpec")
+    if with_std and any(g.l_inv is None for g in gps.values()):
+        problems.append("with_std needs l_inv in every GPSpec")
     if problems:
         raise ModelError("cannot build the ML program:\n  - " + "\n  - ".join(problems))
 
@@ -557,7 +491,11 @@ def ml_program(
     ]
     if with_std:
         outs.append(
-            FmuVariable("clutch_pressure_std_bar", "bar", "predictive std of the GP (latent)")
+            FmuVariable(
+                "clutch_pressure_std_bar",
+                "bar",
+                "predictive std of the GP (latent), given its coarse std bins",
+            )
         )
     if decision is not None:
         outs.append(FmuVariable("latch_state", "-", "latch classifier: 1 latched, 0 not"))
