@@ -243,11 +243,12 @@ def main() -> None:
     if 4 in only:
         t0 = time.perf_counter()
         no_pilot = tuple(f for f in HYBRID_FEATURES if f != "physics_pilot_bar")
+        with_pilot = (*no_pilot, "physics_pilot_bar")
         scores = {
             f"residual features {'with' if 'physics_pilot_bar' in f else 'without'} pilot": loeo(
                 HybridModel(physics=cached, residual=SVCPartitionedGP(features=f)), traces, folds
             )
-            for f in (HYBRID_FEATURES, no_pilot)
+            for f in (with_pilot, no_pilot)
         }
         report(
             f"4. hybrid residual features, physics {'fitted' if args.physics else 'datasheet'}"
