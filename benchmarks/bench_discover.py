@@ -7,7 +7,8 @@ the winner and the runner-up, the RMSE of the dither-period-mean pressure before
 on the training ramps and on the unseen medium ramp, and the wall time. The same cases
 are asserted by ``tests/test_discover_effects.py`` (``pytest -m slow``).
 
-Usage: ``python benchmarks/bench_discover.py [--effects a,b] [--default-strength] [--json OUT]``
+Usage: ``python benchmarks/bench_discover.py [--effects a,b] [--default-strength]
+[--set NAME=VALUE ...] [--n-settings N] [--json OUT]``
 """
 
 from __future__ import annotations
@@ -16,40 +17,17 @@ import argparse
 import json
 import os
 import platform
-import time
 
 from clutchlab.physics.fit import FitSettings
-from clutchlab.physics.stand import run_stand
-from clutchlab.validation.discover import DiscoverySettings, discover
-from clutchlab.validation.discover.scenarios import MUST_SHOW_CASES, discovery_stand
+from clutchlab.validation.discover import DiscoverySettings
+from clutchlab.validation.discover.scenarios import MUST_SHOW_CASES, run_must_show
 
 
 def run_case(effect: str, n_settings: int, overrides: dict, max_iter: int) -> dict:
-    t0 = time.perf_counter()
-    config = discovery_stand((effect,), n_settings=n_settings, overrides=overrides)
-    dataset = run_stand(config, progress=False).dataset
-    settings = DiscoverySettings(
-        fit=FitSettings(progress=False, max_iter=max_iter), max_effects=1, progress=False
-    )
-    res = discover(dataset, settings=settings)
-    it = res.iterations[0]
-    cands = it.candidates
-    row = {
-        "effect": effect,
-        "overrides": overrides,
-        "n_settings": n_settings,
-        "named_first": it.effect,
-        "winner": [cands[0].effect, cands[0].statistic, cands[0].share] if cands else None,
-        "runner_up": [cands[1].effect, cands[1].statistic, cands[1].share]
-        if len(cands) > 1
-        else None,
-        "delta_bic": it.delta_bic,
-        "train_rmse_bar": [it.before.train["rmse_bar"], it.after.train["rmse_bar"]],
-        "test_rmse_bar": [it.before.test["rmse_bar"], it.after.test["rmse_bar"]],
-        "wall_s": time.perf_counter() - t0,
-    }
-    before, after = row["test_rmse_bar"]
-    row["test_drop_pct"] = 100.0 * (1.0 - after / before)
+    """Measured row of one case (see ``scenarios.must_show_row``)."""
+    settings = DiscoverySettings(fit=FitSettings(progress=False, max_iter=max_iter), progress=False)
+    _, row = run_must_show(effect, overrides, n_settings=n_settings, settings=settings)
+    row["n_settings"] = n_settings
     return row
 
 
@@ -61,7 +39,15 @@ def main() -> None:
         action="store_true",
         help="the stand's default effect strengths instead of the cases' overrides",
     )
-    ap.add_argument("--max-iter", type=int, default=30, help="solver iterations per fit")
+    ap.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="truth value (engineering units) instead of the cases' overrides; repeatable",
+    )
+    ap.add_argument("--n-settings", type=int, help="dither settings (1 or 3) for every case")
+    ap.add_argument("--max-iter", type=int, default=50, help="solver iterations per fit")
     ap.add_argument("--json", help="write the rows here")
     args = ap.parse_args()
     wanted = [e for e in args.effects.split(",") if e] or list(MUST_SHOW_CASES)
@@ -76,11 +62,17 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|---|")
     rows = []
     for effect in wanted:
-        n_settings, overrides = MUST_SHOW_CASES[effect]
+        n_settings, overrides = MUST_SHOW_CASES.get(effect, (1, {}))
         if args.default_strength:
             overrides = {}
+        if args.set:
+            overrides = {k: float(v) for k, v in (s.split("=", 1) for s in args.set)}
+        n_settings = args.n_settings or n_settings
         row = run_case(effect, n_settings, overrides, args.max_iter)
         rows.append(row)
+        if args.json:
+            with open(args.json, "w", encoding="utf-8") as f:
+                json.dump(rows, f, indent=2)
         truth = ", ".join(f"{k} = {v:g}" for k, v in overrides.items()) or "default"
         w, r = row["winner"], row["runner_up"]
         print(
@@ -92,9 +84,6 @@ def main() -> None:
             f"{row['test_drop_pct']:.0f} % | {row['wall_s']:.0f} |",
             flush=True,
         )
-    if args.json:
-        with open(args.json, "w", encoding="utf-8") as f:
-            json.dump(rows, f, indent=2)
 
 
 if __name__ == "__main__":

@@ -23,11 +23,12 @@ from clutchlab.physics.fit import FitSettings
 from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, write_stand
 from clutchlab.validation.discover import (
     DiscoverySettings,
+    ResidualSet,
     discover,
     residual_problem,
     residual_set,
 )
-from clutchlab.validation.discover.residuals import effective_size, integrated_time
+from clutchlab.validation.discover.residuals import effective_size, integrated_time, loeo_rss
 from clutchlab.validation.discover.scoring import Projector, score_effect
 
 TINY_RAMPS = (
@@ -206,3 +207,49 @@ def test_a_candidate_whose_refit_fails_is_not_added(tiny, monkeypatch):
     assert cand.significant  # so it was refitted
     assert cand.refit["status"].startswith("failed: the model diverges")
     assert it.decision == "information criterion did not improve"
+
+
+def test_loeo_rss_equals_the_exact_held_out_error_of_a_linear_model():
+    """For a residual linear in the parameters the block-deletion step is the exact refit."""
+    rng = np.random.default_rng(4)
+    x = rng.standard_normal((300, 3))
+    y = x @ np.array([1.0, -2.0, 0.5]) + 0.1 * rng.standard_normal(300)
+    theta0 = np.array([0.3, 0.1, -0.2])
+    slices = [(0, 100), (100, 220), (220, 300)]
+    res = ResidualSet(
+        r=x @ theta0 - y,
+        experiments=["a", "b", "c"],
+        slices=slices,
+        signals={},
+        time_s=np.zeros(300),
+        row_dt_s=0.01,
+        n_period=1.0,
+        keep=np.ones(300, dtype=bool),
+        jacobian=x,
+    )
+    expected = 0.0
+    for a, b in slices:
+        others = np.r_[0:a, b:300]
+        beta, *_ = np.linalg.lstsq(x[others], y[others], rcond=None)
+        e = x[a:b] @ beta - y[a:b]
+        expected += float(e @ e)
+    assert loeo_rss(res) == pytest.approx(expected, rel=1e-9)
+    one = ResidualSet(**{**res.__dict__, "slices": [(0, 300)], "experiments": ["a"]})
+    assert loeo_rss(one) is None
+
+
+def test_augmented_hybrid_factory_builds_an_unfitted_model():
+    from sklearn.exceptions import NotFittedError
+
+    from clutchlab.validation.discover.variant import AugmentedHybrid, AugmentedPhysics, _build
+    from clutchlab.validation.variants import VariantContext
+
+    fit = FitSettings(progress=False, max_iter=7)
+    model = _build(VariantContext(physics_settings=fit))
+    assert isinstance(model, AugmentedHybrid)
+    assert isinstance(model.physics, AugmentedPhysics)
+    assert model.physics.settings.fit.max_iter == 7
+    with pytest.raises(NotFittedError):
+        model.predict(None)
+    with pytest.raises(NotFittedError):
+        AugmentedPhysics().predict(None)

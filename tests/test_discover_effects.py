@@ -5,18 +5,19 @@ For each case of ``MUST_SHOW_CASES``: the short discovery stand with that effect
 (the only physics the base model lacks), the base model fitted on the fast and slow ramps,
 ``discover`` run with at most one effect. The effect named first must be the one on the
 stand, and the RMSE of the dither-period-mean pressure on the medium ramp — never used for
-any decision — must drop by at least half. Slow: a few minutes per effect on 2 quiet cores
-(``python benchmarks/bench_discover.py`` prints the same runs as a table).
+any decision — must drop by at least half. Slow: a few minutes per effect on 2 quiet cores.
+Each test prints its measured row as one ``MUST_SHOW_ROW {json}`` line (``pytest -s``);
+``python benchmarks/bench_discover.py`` runs the same cases and prints them as a table.
 """
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
-from clutchlab.physics.fit import FitSettings
-from clutchlab.physics.stand import run_stand
-from clutchlab.validation.discover import DiscoverySettings, discover
-from clutchlab.validation.discover.scenarios import MUST_SHOW_CASES, discovery_stand
+from clutchlab.validation.discover import DiscoverySettings
+from clutchlab.validation.discover.scenarios import MUST_SHOW_CASES, run_must_show
 
 pytestmark = pytest.mark.slow
 
@@ -26,17 +27,13 @@ MAX_ERROR_RATIO = 0.5
 
 @pytest.mark.parametrize("effect", sorted(MUST_SHOW_CASES))
 def test_discover_names_the_undeclared_effect_and_halves_the_test_error(effect):
-    n_settings, overrides = MUST_SHOW_CASES[effect]
-    config = discovery_stand((effect,), n_settings=n_settings, overrides=overrides)
-    dataset = run_stand(config, progress=False).dataset
-    settings = DiscoverySettings(
-        fit=FitSettings(progress=False, max_iter=30), max_effects=1, progress=False
-    )
-    res = discover(dataset, settings=settings)
+    res, row = run_must_show(effect, settings=DiscoverySettings(progress=False))
     print(res.table())
+    print("MUST_SHOW_ROW " + json.dumps(row))
     first = res.iterations[0]
     assert first.effect == effect, [(c.effect, c.statistic, c.share) for c in first.candidates]
     assert not any(name.startswith("medium") for name in res.train)
-    before, after = first.before.test["rmse_bar"], first.after.test["rmse_bar"]
+    assert res.test and all(name.startswith("medium") for name in res.test)
+    before, after = row["test_rmse_bar"]
     assert after <= MAX_ERROR_RATIO * before, (before, after)
     assert first.delta_bic < 0

@@ -22,7 +22,7 @@ from clutchlab.validation.discover.scenarios import discovery_stand
 
 pytestmark = pytest.mark.slow
 
-SETTINGS = DiscoverySettings(fit=FitSettings(progress=False, max_iter=30), progress=False)
+SETTINGS = DiscoverySettings(fit=FitSettings(progress=False), progress=False)
 
 
 def test_no_missing_effect_claims_no_effect():
@@ -31,6 +31,7 @@ def test_no_missing_effect_claims_no_effect():
     print(res.table())
     print(res.summary)
     assert res.added == []
+    assert not res.unexplained and res.signature == []
     (it,) = res.iterations
     assert it.effect is None
     assert not any(c.significant for c in it.candidates), [

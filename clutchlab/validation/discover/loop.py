@@ -1,9 +1,12 @@
 """Closing the loop: fit → residual → diagnostics → attribution → add effect → refit → repeat.
 
-DESIGN §6. The effect chosen in an iteration is the candidate whose confirmatory refit
-lowers the information criterion most, among the candidates the score test finds
-significant; the loop stops when none is significant, when no refit improves the
-criterion, or at the effect limit. The test ramp is only scored.
+DESIGN §6. Among the candidates the score test finds significant, the best few are
+refitted; a refit qualifies when both its information criterion and its linearized
+leave-one-experiment-out prediction error (DESIGN §5: selection by
+leave-one-experiment-out inside the training set) are lower than the current model's;
+the qualifying candidate with the lowest such error is added (with fewer than two training
+experiments there is no such error, and the lowest criterion decides). The loop stops when
+none is significant, none qualifies, or at the effect limit. The test ramp is only scored.
 
 Information criterion: ``BIC = n_eff · ln(RSS) + p · ln(n_eff)`` on the kept training
 residuals, ``n_eff`` the effective number of independent residuals of the augmented
@@ -139,26 +142,48 @@ def _with_jacobian(state: ModelState, train, test, settings) -> ModelState:
     return state
 
 
+#: Fractions of the one-step strength estimate tried as refit starts (besides the default):
+#: the estimate is a linear extrapolation, far off when the strength enters nonlinearly
+#: (a quadratic strength probed near zero overshoots by ``s_true / (2 s_probe)``).
+START_FRACTIONS = (1.0, 0.5, 0.25, 0.1)
+
+
 def _refit_start(
     cand: CircuitModel,
     values: dict[str, float],
     score: CandidateScore,
+    train: list[Trace],
     settings: DiscoverySettings,
 ) -> ParameterSet:
     """Start of a confirmatory refit: the current fit plus the effect.
 
-    A fitted strength starts at its one-step (score) estimate when that is clearly
-    non-zero, else at its default; fitted non-strength parameters (a lag's time
-    constant) at the grid value where the score was largest.
+    Fitted non-strength parameters (a lag's time constant) start at the grid value where
+    the score was largest. Fitted strengths start at the best — by the kept residual sum
+    of squares, one simulation each — of :data:`START_FRACTIONS` × the one-step (score)
+    estimate and the default strength.
     """
     cls = EFFECTS[score.effect]
     specs = {p.name: p for p in cand.parameters}
-    start = dict(values) | dict(score.nuisance)
-    for name, est in score.strength.items():
-        small = abs(est) < settings.probe_fraction * abs(specs[name].default)
-        if name in cls.fit_parameters() and not small:
-            start[name] = est
-    return cand.params(**start)
+    base = dict(values) | dict(score.nuisance)
+    fitted = [n for n in score.strength if n in cls.fit_parameters()]
+    if not fitted:
+        return cand.params(**base)
+    trials = [{n: f * score.strength[n] for n in fitted} for f in START_FRACTIONS]
+    trials.append({n: specs[n].default for n in fitted})
+    best, best_rss = cand.params(**base, **trials[-1]), math.inf
+    for trial in trials:
+        clipped = {n: min(max(v, specs[n].lower), specs[n].upper) for n, v in trial.items()}
+        params = cand.params(**base, **clipped)
+        problem = residual_problem(cand, params, tuple(fitted), train, settings.fit)
+        try:
+            rss = residual_set(problem, train, snap_guard_s=settings.snap_guard_s).kept_rss
+        except ClutchlabError:
+            continue
+        finally:
+            problem.close()
+        if math.isfinite(rss) and rss < best_rss:
+            best, best_rss = params, rss
+    return best
 
 
 def _reference(
@@ -216,7 +241,7 @@ def _confirm(
         cand = current.model.with_effects(score.effect)
         free = tuple(current.fit.free)
         free += tuple(n for n in cls.fit_parameters() if n not in free)
-        start = _refit_start(cand, current.fit.values, score, settings)
+        start = _refit_start(cand, current.fit.values, score, train, settings)
         fit = _run_fit(cand, train, settings, free, start)
         state = _state(fit, train, test, settings, jacobian=True)
     except (ClutchlabError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
@@ -396,9 +421,12 @@ def discover(
         current = record.after
     final_diag = diagnose(current.residual, settings.max_lag_s)
     last = iterations[-1]
+    # "Unexplained" needs structure that follows an examined signal: a residual that is
+    # not white but follows none of them (line-pressure wander, noise) names nothing.
     structured = not final_diag.whiteness.get("white", True)
-    unexplained = last.effect is None and bool(last.candidates) and structured
-    signature = final_diag.signature if structured else []
+    follows = bool(final_diag.signature)
+    unexplained = last.effect is None and bool(last.candidates) and structured and follows
+    signature = final_diag.signature if unexplained else []
     summary = _summary(iterations, unexplained, final_diag)
     return DiscoveryResult(
         iterations=iterations,
@@ -442,8 +470,13 @@ def _summary(iterations: list[IterationRecord], unexplained: bool, diag) -> str:
         )
     elif last.decision == "effect limit reached":
         parts.append("stopped at the effect limit; the remaining residual was not scored")
-    elif last.effect is None:
+    elif last.effect is None and diag.whiteness.get("white", True):
         parts.append(f"stopped: {last.decision}; the remaining residual is white")
+    elif last.effect is None:
+        parts.append(
+            f"stopped: {last.decision}; the remaining residual is not white but follows "
+            "none of the examined signals"
+        )
     if not added and not unexplained:
         parts.insert(0, "no missing effect found")
     return "; ".join(parts) + "."

@@ -171,10 +171,10 @@ class DiscoveryResult:
     final : ModelState
         The fitted model after the last effect added.
     unexplained : bool
-        True when the final residual is still structured (not white) and no library
-        effect explains a significant share of it.
+        True when the final residual is still structured (not white), follows at least
+        one examined signal, and no library effect explains a significant share of it.
     signature : list of str
-        Signals the final residual follows (empty when white).
+        Signals the unexplained residual follows (empty unless ``unexplained``).
     summary : str
         One paragraph for people.
     train, test : list of str

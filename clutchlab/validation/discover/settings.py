@@ -40,8 +40,10 @@ class DiscoverySettings:
         the free parameters), besides being significant: an effect must explain a
         *significant share*, not merely a statistically detectable sliver.
     confirm_top : int
-        At most this many significant candidates (best score first) are refitted
-        to confirm; the one with the lowest information criterion is added.
+        At most this many significant candidates (best score first) are refitted to
+        confirm. Of those whose refit lowers the information criterion and the
+        (linearized) leave-one-experiment-out prediction error, the one with the lowest
+        such error is added.
     confirm_ratio : float
         Runners-up are refitted only when their score statistic reaches this
         fraction of the best one.

@@ -1,0 +1,173 @@
+"""The ``augmented_hybrid`` variant (DESIGN §5): physics after closing the loop + residual GP.
+
+:class:`AugmentedPhysics` runs :func:`~.loop.discover` on the training experiments it is
+given (the protocol hands it nothing else) and predicts with the augmented, refitted model;
+:class:`AugmentedHybrid` puts the residual model of ``hybrid``
+(:class:`clutchlab.residual_ml.HybridModel`) on top of it. :func:`register` adds the
+variant to :mod:`clutchlab.validation.variants`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+from sklearn.base import BaseEstimator
+from sklearn.exceptions import NotFittedError
+
+from ...data import Trace
+from ..variants import VariantContext, VariantSpec, get_variant, register_variant
+from .loop import discover
+from .settings import DiscoverySettings
+
+__all__ = ["AugmentedHybrid", "AugmentedPhysics", "register"]
+
+
+def _check_fitted(model: Any, attr: str) -> None:
+    if not hasattr(model, attr):
+        raise NotFittedError(f"this {type(model).__name__} is not fitted yet; call fit(traces)")
+
+
+class AugmentedPhysics(BaseEstimator):
+    """Circuit model augmented by :func:`discover` on the training experiments, refitted.
+
+    Parameters
+    ----------
+    model : CircuitModel, optional
+        Starting structure (effects already declared); the base circuit by default.
+    settings : DiscoverySettings, optional
+        Discovery settings. Every experiment handed to :meth:`fit` is trained on:
+        ``fit.train_ramps`` is set to their ramp labels and ``test_ramps`` to none.
+
+    Attributes
+    ----------
+    result_ : DiscoveryResult
+        The discovery (evidence, effects added, errors before and after on training).
+    effects_ : list of str
+        Effects added.
+    model_, params_ : CircuitModel, ParameterSet
+        The augmented model and its fitted parameters (engineering units).
+    train_experiments_ : list of str
+        Names of the experiments fitted on.
+    """
+
+    def __init__(self, model: Any = None, settings: DiscoverySettings | None = None) -> None:
+        self.model = model
+        self.settings = settings
+
+    def fit(self, traces: Sequence[Trace]) -> AugmentedPhysics:
+        """Discover and add the missing effects on ``traces``; returns self.
+
+        Raises
+        ------
+        FitError
+            When the baseline model cannot be fitted at all.
+        """
+        traces = list(traces)
+        base = self.settings or DiscoverySettings(progress=False)
+        ramps = tuple(dict.fromkeys(str(t.ramp) for t in traces))
+        settings = replace(base, fit=replace(base.fit, train_ramps=ramps), test_ramps=())
+        self.result_ = discover(traces, self.model, settings)
+        self.effects_ = list(self.result_.added)
+        self.model_ = self.result_.best_model
+        self.params_ = self.result_.params
+        self.train_experiments_ = [t.name for t in traces]
+        return self
+
+    def predict_outputs(self, trace: Trace) -> dict[str, np.ndarray]:
+        """Every output of the augmented model on ``trace`` (name → per-sample array; bar)."""
+        from ...physics import simulate
+
+        _check_fitted(self, "model_")
+        res = simulate(self.model_, self.params_, trace)
+        return {k: np.asarray(v, dtype=float) for k, v in res.outputs.items()}
+
+    def predict(self, trace: Trace) -> np.ndarray:
+        """Clutch pressure (bar) of the augmented model on ``trace``."""
+        return self.predict_outputs(trace)["clutch_pressure_bar"]
+
+
+class AugmentedHybrid(BaseEstimator):
+    """``augmented_hybrid``: :class:`AugmentedPhysics` plus the hybrid's residual model.
+
+    Parameters
+    ----------
+    physics : AugmentedPhysics, optional
+        Unfitted augmented physics (default settings by default); fitted in :meth:`fit`.
+    residual : object, optional
+        Residual model of :class:`clutchlab.residual_ml.HybridModel` (its default when None).
+
+    Attributes
+    ----------
+    physics_ : AugmentedPhysics
+        The fitted augmented physics.
+    hybrid_ : HybridModel
+        Physics plus the residual model fitted on its training residual.
+    """
+
+    def __init__(self, physics: AugmentedPhysics | None = None, residual: Any = None) -> None:
+        self.physics = physics
+        self.residual = residual
+
+    def fit(self, traces: Sequence[Trace]) -> AugmentedHybrid:
+        """Close the loop on ``traces``, then fit the residual model; returns self."""
+        from ...residual_ml import HybridModel
+
+        traces = list(traces)
+        phys = self.physics if self.physics is not None else AugmentedPhysics()
+        self.physics_ = phys.fit(traces)
+        self.hybrid_ = HybridModel(physics=self.physics_, residual=self.residual).fit(traces)
+        self.train_experiments_ = [t.name for t in traces]
+        return self
+
+    def predict(self, trace: Trace, return_std: bool = False):
+        """Clutch pressure (bar) on ``trace``; with ``return_std`` also its std (bar)."""
+        _check_fitted(self, "hybrid_")
+        if return_std:
+            return self.hybrid_.predict(trace, return_std=True)
+        return self.hybrid_.predict(trace)
+
+
+def _build(ctx: VariantContext) -> AugmentedHybrid:
+    options = dict(ctx.options.get("augmented_hybrid", {}))
+    settings = options.pop("settings", None)
+    if settings is None:
+        fit = ctx.physics_settings
+        settings = DiscoverySettings(progress=ctx.progress)
+        if fit is not None:
+            settings = replace(settings, fit=fit)
+    physics = AugmentedPhysics(ctx.physics_model, settings)
+    return AugmentedHybrid(physics=physics, **options)
+
+
+def _available() -> str | None:
+    try:
+        reason = get_variant("hybrid").availability()
+    except KeyError:
+        return "the hybrid variant is not registered"
+    return None if reason is None else f"needs the hybrid's residual model: {reason}"
+
+
+def register(replace_existing: bool = False) -> VariantSpec:
+    """Register ``augmented_hybrid`` with :func:`clutchlab.validation.variants.register_variant`.
+
+    Parameters
+    ----------
+    replace_existing : bool
+        Replace an already registered ``augmented_hybrid``.
+
+    Returns
+    -------
+    VariantSpec
+    """
+    spec = VariantSpec(
+        "augmented_hybrid",
+        "physics after closing the loop (discover: effects added, refitted) "
+        "+ SVC-partitioned GP on its residual",
+        _build,
+        availability=_available,
+        layer="validation.discover",
+    )
+    return register_variant(spec, replace=replace_existing)
