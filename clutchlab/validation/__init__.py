@@ -146,3 +146,8 @@ __all__ = [
     "write_json",
     "write_report",
 ]
+
+# closing the loop's variant (DESIGN §5), run when asked for by name
+from .discover.variant import register as _register_augmented
+
+_register_augmented(replace_existing=True)

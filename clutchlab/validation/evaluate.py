@@ -94,7 +94,7 @@ def resolve_variants(
 
     order = _order(overrides)
     if requested is None:
-        wanted = set(available_variants())
+        wanted = {n for n in available_variants() if spec_of(n).on_request is None}
         wanted |= {n for n, sp in overrides.items() if sp.availability() is None}
     else:
         wanted = set(requested)
@@ -385,7 +385,16 @@ def evaluate(
         models={},
         fit_own_s={},
         failed={},
-        unavailable={n: r for n, r in missing.items() if variants is None or n in variants},
+        unavailable={n: r for n, r in missing.items() if variants is None or n in variants}
+        | (
+            {
+                n: f"not run by default: {get_variant(n).on_request}"
+                for n in available_variants()
+                if get_variant(n).on_request is not None and n not in names
+            }
+            if variants is None
+            else {}
+        ),
         command=command,
         created_utc=_dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
     )

@@ -105,6 +105,9 @@ class VariantSpec:
         reason it cannot (e.g. the layer providing it is not there yet).
     layer : str
         Where the model comes from (``physics``, ``residual_ml``, …), for the report.
+    on_request : str or None
+        When set, the variant runs only when asked for by name (not among "every available
+        variant"); the text says why (e.g. its fit is a whole discovery) for the report.
     """
 
     name: str
@@ -113,6 +116,7 @@ class VariantSpec:
     requires: tuple[str, ...] = ()
     availability: Callable[[], str | None] = lambda: None
     layer: str = "physics"
+    on_request: str | None = None
 
 
 _REGISTRY: dict[str, VariantSpec] = {}

@@ -169,5 +169,9 @@ def register(replace_existing: bool = False) -> VariantSpec:
         _build,
         availability=_available,
         layer="validation.discover",
+        on_request=(
+            "fitting it runs a whole closing-the-loop discovery (minutes to tens of minutes); "
+            "ask for it by name (clutchlab evaluate --variants ...,augmented_hybrid)"
+        ),
     )
     return register_variant(spec, replace=replace_existing)
