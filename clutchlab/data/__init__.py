@@ -19,7 +19,14 @@ from .demodulate import (
     nominal_current,
     nominal_didt,
 )
-from .derived import causal_didt, causal_window, didt, dither_period_mean, dither_period_samples
+from .derived import (
+    causal_didt,
+    causal_window,
+    didt,
+    dither_period_mean,
+    dither_period_samples,
+    first_order_lag,
+)
 from .formats import FORMATS, FileFormat
 from .io_csv import read_csv, write_csv
 from .io_dataset import DatasetScan, load_dataset, save_dataset, scan_dataset
@@ -62,6 +69,7 @@ __all__ = [
     "didt",
     "dither_period_mean",
     "dither_period_samples",
+    "first_order_lag",
     "load_channel_map",
     "load_dataset",
     "nominal_current",

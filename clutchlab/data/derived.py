@@ -15,7 +15,7 @@ from numpy.typing import ArrayLike
 
 from ..errors import DataError
 
-__all__ = ["causal_didt", "causal_window", "didt", "dither_period_mean"]
+__all__ = ["causal_didt", "causal_window", "didt", "dither_period_mean", "first_order_lag"]
 
 
 def _finite_1d(x: ArrayLike, name: str) -> np.ndarray:
@@ -186,6 +186,37 @@ def causal_didt(x: ArrayLike, sample_rate_Hz: float, n: float) -> np.ndarray:
     padded = np.concatenate([np.full(window - 1, arr[0]), arr])
     # slope[k] = Σ_j w_j x[k − j]: a correlation of the newest-first window with w
     return np.lib.stride_tricks.sliding_window_view(padded, window)[:, ::-1] @ w
+
+
+def first_order_lag(x: np.ndarray, tau_s: float, sample_rate_Hz: float) -> np.ndarray:
+    """Signal through a first-order lag ``τ dy/dt = x − y``, starting at rest at ``x[0]``.
+
+    Exact discretization for a signal held between samples: ``y[k] = a y[k−1] + (1 − a)
+    x[k]``, ``a = exp(−1 / (τ fs))``. Causal (past samples only). On a ramp of rate ``r``
+    the output trails the input by ``τ · r`` once the start transient (a few τ) has decayed.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        Uniformly sampled signal (e.g. nominal current, mA).
+    tau_s : float
+        Time constant τ, s (0: the signal itself).
+    sample_rate_Hz : float
+        Sample rate fs, Hz.
+
+    Returns
+    -------
+    numpy.ndarray
+        The lagged signal, in the units of ``x``.
+    """
+    from scipy.signal import lfilter
+
+    x = np.asarray(x, dtype=float)
+    if tau_s <= 0 or x.size == 0:
+        return x.copy()
+    a = np.exp(-1.0 / (tau_s * sample_rate_Hz))
+    y, _ = lfilter([1.0 - a], [1.0, -a], x, zi=[a * x[0]])
+    return y
 
 
 def dither_period_samples(trace) -> float:

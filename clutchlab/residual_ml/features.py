@@ -43,7 +43,6 @@ mistaken for a causal one. The physics features have no causal counterpart yet.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from types import MappingProxyType
 
@@ -56,6 +55,7 @@ from ..data import (
     didt,
     dither_period_mean,
     dither_period_samples,
+    first_order_lag,
 )
 from ..errors import DataError
 
@@ -283,37 +283,6 @@ class FeatureBuilder:
                 )
             cols[feat] = p
         return np.column_stack([cols[f] for f in self.features])
-
-
-def first_order_lag(x: np.ndarray, tau_s: float, sample_rate_Hz: float) -> np.ndarray:
-    """Signal through a first-order lag ``τ dy/dt = x − y``, starting at rest at ``x[0]``.
-
-    Exact discretization for a signal held between samples: ``y[k] = a y[k−1] + (1 − a)
-    x[k]``, ``a = exp(−1 / (τ fs))``. Causal (past samples only). On a ramp of rate ``r``
-    the output trails the input by ``τ · r`` once the start transient (a few τ) has decayed.
-
-    Parameters
-    ----------
-    x : numpy.ndarray
-        Uniformly sampled signal (e.g. nominal current, mA).
-    tau_s : float
-        Time constant τ, s (0: the signal itself).
-    sample_rate_Hz : float
-        Sample rate fs, Hz.
-
-    Returns
-    -------
-    numpy.ndarray
-        The lagged signal, in the units of ``x``.
-    """
-    from scipy.signal import lfilter
-
-    x = np.asarray(x, dtype=float)
-    if tau_s <= 0 or x.size == 0:
-        return x.copy()
-    a = math.exp(-1.0 / (tau_s * sample_rate_Hz))
-    y, _ = lfilter([1.0 - a], [1.0, -a], x, zi=[a * x[0]])
-    return y
 
 
 def direction_of_travel(didt_mA_s: np.ndarray, deadband_mA_s: float = 10.0) -> np.ndarray:

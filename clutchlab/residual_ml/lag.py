@@ -5,7 +5,7 @@ travel), so on a ramp of rate ``r`` the pressure at current ``I`` is roughly the
 pressure at ``I − τ r``. A GP on (I, dI/dt) has to learn that oblique dependence from the
 ramp rates it was trained on, and between two training rates it *blends* their curves
 (e.g. two half-height latch steps at the two rates' latch currents) instead of *moving* one
-curve. On the lagged current ``current_lag_mA`` (:func:`~.features.first_order_lag`) the
+curve. On the lagged current ``current_lag_mA`` (:func:`clutchlab.data.first_order_lag`) the
 curves of all ramp rates fall onto one, and a new rate is an interpolation in the other
 features only.
 
@@ -30,8 +30,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..data import Trace
-from .features import FeatureBuilder, first_order_lag, target_pressure
+from ..data import Trace, first_order_lag
+from .features import FeatureBuilder, target_pressure
 
 __all__ = ["LAG_GRID_S", "LagSelection", "select_lag"]
 

@@ -297,7 +297,7 @@ class LagSpec:
 
     ``y ← a·y + (1 − a)·I`` per sample, ``a = exp(−1 / (tau_s · fs))``, ``fs = 1 /
     sample_s``, starting at the initial current: the exact discretization
-    ``clutchlab.residual_ml.features.first_order_lag`` uses offline.
+    :func:`clutchlab.data.first_order_lag` uses offline.
     """
 
     tau_s: float
