@@ -20,6 +20,7 @@ __all__ = [
     "FALLING",
     "RISING",
     "HysteresisCurve",
+    "branch_arrays",
     "branch_direction",
     "current_bins",
     "hysteresis_curve",
@@ -97,6 +98,24 @@ def current_bins(current_mA: ArrayLike, bin_mA: float) -> tuple[int, int]:
     return int(np.floor(i.min() / bin_mA)), int(np.floor(i.max() / bin_mA))
 
 
+def branch_arrays(
+    current_mA: ArrayLike, pressure_bar: ArrayLike, direction: ArrayLike, line_bar: ArrayLike
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Current (mA), pressure (bar), branch code and line pressure (bar, broadcast) as arrays.
+
+    Raises
+    ------
+    ValueError
+        If current, pressure and direction are not 1-D of one length.
+    """
+    i = np.asarray(current_mA, dtype=float)
+    p = np.asarray(pressure_bar, dtype=float)
+    d = np.asarray(direction)
+    if not (i.shape == p.shape == d.shape) or i.ndim != 1:
+        raise ValueError(f"current {i.shape}, pressure {p.shape}, direction {d.shape} differ")
+    return i, p, d, np.broadcast_to(np.asarray(line_bar, dtype=float), i.shape)
+
+
 def _branch_values(
     x: np.ndarray, y: np.ndarray, k: np.ndarray, nbins: int, bin_mA: float, s: AnalysisSettings
 ) -> np.ndarray:
@@ -148,12 +167,7 @@ def hysteresis_curve(
     HysteresisCurve
     """
     s = settings or AnalysisSettings()
-    i = np.asarray(current_mA, dtype=float)
-    p = np.asarray(pressure_bar, dtype=float)
-    d = np.asarray(direction)
-    line = np.broadcast_to(np.asarray(line_bar, dtype=float), i.shape)
-    if not (i.shape == p.shape == d.shape) or i.ndim != 1:
-        raise ValueError(f"current {i.shape}, pressure {p.shape}, direction {d.shape} differ")
+    i, p, d, line = branch_arrays(current_mA, pressure_bar, direction, line_bar)
     k0, k1 = bins if bins is not None else current_bins(i, s.bin_mA)
     nbins = max(k1 - k0 + 1, 0)
     k_all = np.floor(i / s.bin_mA).astype(np.int64)

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .hysteresis import FALLING, RISING
+from .hysteresis import FALLING, RISING, branch_arrays
 from .settings import AnalysisSettings
 
 __all__ = ["LatchCurrents", "latch_currents", "latch_error"]
@@ -112,10 +112,7 @@ def latch_currents(
     LatchCurrents
     """
     s = settings or AnalysisSettings()
-    i = np.asarray(current_mA, dtype=float)
-    p = np.asarray(pressure_bar, dtype=float)
-    d = np.asarray(direction)
-    line = np.broadcast_to(np.asarray(line_bar, dtype=float), p.shape)
+    i, p, d, line = branch_arrays(current_mA, pressure_bar, direction, line_bar)
     found = {}
     for code in (RISING, FALLING):
         hits = [
