@@ -31,11 +31,13 @@ lower one, then the simpler / paper's option):
    0.1, 0.3, 1; tie (within 0.0005) → 1 (neutral).
 4. ``hybrid`` residual features with vs without the physics pilot pressure: LOEO;
    tie → without (fewer features).
+5. A diagnostic, not a choice: the three standalone variants with their defaults, LORO.
+   Nothing is decided on it; it shows what LOEO cannot (transfer to an unseen ramp rate).
 
 Usage::
 
     python studies/ml_model_choices.py --data STAND [--folds 6] [--physics FIT.json]
-        [--only 0,1,2,3,4] [--json OUT]
+        [--only 0,1,2,3,4,5] [--json OUT]
 
 ``--physics``: a fitted physics model (``clutchlab fit-physics``) for choice 4 (default: the
 datasheet physics). It was fitted on all training experiments, held-out ones included; the
@@ -255,6 +257,22 @@ def main() -> None:
             " (LOEO RMSE, bar)",
             scores,
             _decide(scores, "residual features without pilot"),
+            f" [{time.perf_counter() - t0:.0f} s]",
+        )
+    if 5 in only:
+        t0 = time.perf_counter()
+        scores = {
+            label: loro(cls(), traces)
+            for label, cls in (
+                ("gp_base", GPBaseline),
+                ("gp_didt", GPWithDerivative),
+                ("paper_svc_gp", SVCPartitionedGP),
+            )
+        }
+        report(
+            "5. diagnostic, no decision: ramp-rate transfer of the defaults (LORO RMSE, bar)",
+            scores,
+            "",
             f" [{time.perf_counter() - t0:.0f} s]",
         )
     if args.json:
