@@ -253,3 +253,16 @@ def test_augmented_hybrid_factory_builds_an_unfitted_model():
         model.predict(None)
     with pytest.raises(NotFittedError):
         AugmentedPhysics().predict(None)
+
+
+def test_a_transport_delay_fit_frees_its_pade_delay_and_scores_over_it():
+    from clutchlab.physics.effects import EFFECTS
+
+    cls = EFFECTS["transport_delay"]
+    assert cls.fit_parameters() == ("delay_d", "delay_d0")
+    model = CircuitModel().with_effects("transport_delay")
+    grid = scoring.nuisance_grid(model, "transport_delay")
+    d0 = sorted(g["delay_d0"] for g in grid)
+    spec = {p.name: p for p in model.parameters}["delay_d0"]
+    # a delay 10 x the default is representable: the filter's own delay reaches it
+    assert d0[0] < spec.default < d0[-1] and d0[-1] == pytest.approx(10 * spec.default)

@@ -33,6 +33,11 @@ class TransportDelay(Effect):
     ``H(s) = 1 / (1 + s d₀/2 + (s d₀)²/12)``; for ``d = d₀`` this is the (2,2) Padé
     approximant of the delay, for ``d → 0`` it vanishes exactly. The filter states
     are ``q = H·p`` (bar) and ``r = dq/dt`` (bar/s), so ``y = p − d·r``.
+
+    A fit frees both ``d`` and ``d₀``: with ``d₀`` held at its default, ``y`` is only the
+    first-order expansion ``p − d·dp/dt`` of a delay much longer than ``d₀`` and cannot
+    represent it. ``d₀`` has no effect at ``d = 0``; the score test of the effect treats it
+    as a nuisance parameter, like a lag's time constant.
     """
 
     name = "transport_delay"
@@ -43,6 +48,7 @@ class TransportDelay(Effect):
         param("delay", "d0", "ms", 3.0, 0.5, 30.0, "delay of the Padé filter"),
     )
     STRENGTH = ("delay_d",)
+    FIT = ("delay_d", "delay_d0")
 
     def apply(self, asm: Assembly) -> None:
         q = asm.state(StateSpec("q_delay", "bar", 0.5, "Padé-filtered pressure", self.name))
