@@ -9,6 +9,7 @@ strength) and short ramps; the fit frees two parameters. The slow tests in
 from __future__ import annotations
 
 import json
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -266,3 +267,56 @@ def test_a_transport_delay_fit_frees_its_pade_delay_and_scores_over_it():
     spec = {p.name: p for p in model.parameters}["delay_d0"]
     # a delay 10 x the default is representable: the filter's own delay reaches it
     assert d0[0] < spec.default < d0[-1] and d0[-1] == pytest.approx(10 * spec.default)
+
+
+def test_an_effect_linear_in_its_strength_scores_the_same_at_zero_and_default(tiny):
+    # the sensor lag's output is exactly linear in its strength κ: linearizing at κ = 0
+    # or at the default κ = 1 (from the residual there) must give the same estimate
+    train = list(tiny.select(ramps=["fast", "slow"]))
+    model = CircuitModel()
+    params = model.default_params()
+    fit = _settings().fit
+    base = residual_set(residual_problem(model, params, FREE, train, fit), train, True)
+    proj = Projector(base.jacobian[base.keep])
+    values = dict(params.values)
+    zero = score_effect("sensor_lag", model, values, train, base, proj, fit)
+    default = score_effect("sensor_lag", model, values, train, base, proj, fit, expansion="default")
+    assert zero.status == default.status == "scored"
+    assert (zero.probe, default.probe) == ("zero", "default")
+    assert zero.nuisance == default.nuisance
+    assert default.strength["slag_kappa"] == pytest.approx(zero.strength["slag_kappa"], abs=1e-6)
+    assert default.share == pytest.approx(zero.share, rel=1e-6)
+    assert zero.share > 0.0
+
+
+def test_a_second_expansion_keeps_the_larger_statistic_and_counts_both_tests(monkeypatch):
+    from clutchlab.validation.discover import CandidateScore, score_candidates
+
+    made = {
+        ("a", "default"): CandidateScore("a", 1, share=0.5, statistic=40.0, p_value=2e-10),
+        ("b", "default"): CandidateScore("b", 1, share=0.2, statistic=1.0, p_value=0.3),
+    }
+
+    def fake(name, *args):
+        return made[(name, args[-1])]
+
+    monkeypatch.setattr(scoring, "score_effect", fake)
+    previous = [
+        CandidateScore("a", 1, share=0.01, statistic=2.0, p_value=0.15, n_tests=4),
+        CandidateScore("b", 1, share=0.3, statistic=30.0, p_value=1e-7),
+    ]
+    out = score_candidates(
+        ["a", "b"],
+        CircuitModel(),
+        CircuitModel().default_params(),
+        [],
+        SimpleNamespace(jacobian=None),  # the fake scores need no residual
+        None,
+        expansion="default",
+        previous=previous,
+    )
+    by = {c.effect: c for c in out}
+    assert by["a"].statistic == 40.0 and by["a"].n_tests == 5
+    assert by["b"].statistic == 30.0 and by["b"].n_tests == 2
+    assert by["a"].significant and by["b"].significant
+    assert [c.effect for c in out] == ["a", "b"]

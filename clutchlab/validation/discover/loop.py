@@ -331,32 +331,66 @@ def _iteration(
         probe_fraction=settings.probe_fraction,
         progress=settings.progress,
     )
-    significant = [s for s in scores if s.significant]
-    if not significant:
-        return record(None, "no significant effect", scores, current)
-    best_stat = significant[0].statistic
-    confirm = [s for s in significant if s.statistic >= settings.confirm_ratio * best_stat]
-    confirm = confirm[: settings.confirm_top]
-    ref_res, ref_info = _reference(current, train, settings)
-    reference.update(ref_info)
-    rss_ref = ref_res.kept_rss
-    for s in confirm:
-        _say(settings, f"refitting with {s.effect} (score {s.statistic:.1f})")
-        state = _confirm(s, current, rss_ref, train, test, settings)
-        if state is not None:
-            states[s.effect] = state
-    cv_ref = loeo_rss(ref_res)
-    reference["loeo_rss_bar2"] = cv_ref
-    ok = [s for s in confirm if s.effect in states and s.refit["delta_bic"] < 0]
-    if not ok:
-        return record(None, "information criterion did not improve", scores, current)
-    if cv_ref is not None:
+    refits: dict[str, dict] = {}
+    ref: list = []
+
+    def attempt(scores: list[CandidateScore]) -> tuple[CandidateScore | None, str]:
+        """Refit the best significant candidates (each once); the one to add, or why none."""
+        significant = [s for s in scores if s.significant]
+        for s in significant:
+            if s.effect in refits:
+                s.refit = refits[s.effect]
+        fresh = [s for s in significant if s.effect not in refits]
+        if not fresh:
+            return None, "no significant effect" if not significant else "no new candidate"
+        best_stat = fresh[0].statistic
+        confirm = [s for s in fresh if s.statistic >= settings.confirm_ratio * best_stat]
+        confirm = confirm[: settings.confirm_top]
+        if not ref:
+            ref_res, ref_info = _reference(current, train, settings)
+            reference.update(ref_info)
+            reference["loeo_rss_bar2"] = loeo_rss(ref_res)
+            ref.append(ref_res)
+        rss_ref, cv_ref = ref[0].kept_rss, reference["loeo_rss_bar2"]
+        for s in confirm:
+            _say(settings, f"refitting with {s.effect} (score {s.statistic:.1f})")
+            state = _confirm(s, current, rss_ref, train, test, settings)
+            refits[s.effect] = s.refit
+            if state is not None:
+                states[s.effect] = state
+        ok = [s for s in significant if s.effect in states and s.refit["delta_bic"] < 0]
+        if not ok:
+            return None, "information criterion did not improve"
+        if cv_ref is None:
+            return min(ok, key=lambda s: s.refit["delta_bic"]), "added"
         ok = [s for s in ok if (s.refit["loeo_rss_bar2"] or math.inf) < cv_ref]
         if not ok:
-            return record(None, "no leave-one-experiment-out improvement", scores, current)
-        chosen = min(ok, key=lambda s: s.refit["loeo_rss_bar2"])
-    else:
-        chosen = min(ok, key=lambda s: s.refit["delta_bic"])
+            return None, "no leave-one-experiment-out improvement"
+        return min(ok, key=lambda s: s.refit["loeo_rss_bar2"]), "added"
+
+    chosen, decision = attempt(scores)
+    if chosen is None and not diag.whiteness.get("white", True) and diag.signature:
+        # about to leave a structured residual unexplained: look again, linearized at the
+        # candidates' default strengths (see the scoring module)
+        _say(settings, f"{decision} at zero strength; scoring at default strength")
+        scores = score_candidates(
+            names,
+            current.model,
+            current.params,
+            train,
+            res,
+            settings.fit,
+            alpha=settings.alpha,
+            min_share=settings.min_share,
+            probe_fraction=settings.probe_fraction,
+            progress=settings.progress,
+            expansion="default",
+            previous=scores,
+        )
+        chosen, again = attempt(scores)
+        decision = decision if again == "no new candidate" else again
+    if chosen is None:
+        return record(None, decision, scores, current)
     new = states[chosen.effect]
     _say(
         settings,
