@@ -84,3 +84,13 @@ def test_simulated_point_has_plausible_engineering_metrics():
     assert row["hysteresis_fast_bar"] < 0.0  # rising branch lags the falling one
     assert 0.0 < row["ripple_rms_bar"] < row["ripple_pp_bar"] < 2.0
     assert 0.0 < row["rise_10_90_s"] < row["settle_s"] < 0.5
+
+
+def test_first_crossing_is_interpolated_per_direction_and_nan_when_absent():
+    from clutchlab.data import first_crossing
+
+    x = np.array([0.0, 10.0, 20.0, 30.0, 40.0])
+    g = np.array([-2.0, -1.0, 1.0, 3.0, -1.0])
+    assert first_crossing(x, g, upward=True) == pytest.approx(15.0)
+    assert first_crossing(x, g, upward=False) == pytest.approx(37.5)
+    assert np.isnan(first_crossing(x, np.abs(g) + 0.1, upward=True))

@@ -25,6 +25,7 @@ from .derived import (
     didt,
     dither_period_mean,
     dither_period_samples,
+    first_crossing,
     first_order_lag,
 )
 from .formats import FORMATS, FileFormat
@@ -69,6 +70,7 @@ __all__ = [
     "didt",
     "dither_period_mean",
     "dither_period_samples",
+    "first_crossing",
     "first_order_lag",
     "load_channel_map",
     "load_dataset",

@@ -15,7 +15,14 @@ from numpy.typing import ArrayLike
 
 from ..errors import DataError
 
-__all__ = ["causal_didt", "causal_window", "didt", "dither_period_mean", "first_order_lag"]
+__all__ = [
+    "causal_didt",
+    "causal_window",
+    "didt",
+    "dither_period_mean",
+    "first_crossing",
+    "first_order_lag",
+]
 
 
 def _finite_1d(x: ArrayLike, name: str) -> np.ndarray:
@@ -230,3 +237,36 @@ def dither_period_samples(trace) -> float:
     else:
         f = float(trace.meta.get("dither_freq_Hz", 0.0) or 0.0)
     return max(1.0, trace.sample_rate_Hz / f) if f > 0 else 1.0
+
+
+def first_crossing(x: ArrayLike, g: ArrayLike, upward: bool) -> float:
+    """Where ``g`` first changes sign in one direction, linearly interpolated in ``x``.
+
+    The shared step of the latch-current analyses (validation report and design studies):
+    ``x`` is the nominal current (mA) of one ramp branch, ``g`` the clutch pressure minus a
+    threshold (bar).
+
+    Parameters
+    ----------
+    x : array_like
+        Abscissa per sample, e.g. current in mA.
+    g : array_like
+        Signed distance to the threshold per sample, same length (e.g. bar).
+    upward : bool
+        True: the first crossing from below (g < 0 to g ≥ 0); False: from above.
+
+    Returns
+    -------
+    float
+        ``x`` at the crossing (unit of ``x``); NaN when ``g`` never crosses that way.
+    """
+    i = np.asarray(x, dtype=float)
+    g = np.asarray(g, dtype=float)
+    above = g >= 0
+    hit = (above[1:] & ~above[:-1]) if upward else (~above[1:] & above[:-1])
+    k = np.flatnonzero(hit)
+    if k.size == 0:
+        return float("nan")
+    k = int(k[0])
+    frac = g[k] / (g[k] - g[k + 1]) if g[k] != g[k + 1] else 0.0
+    return float(i[k] + frac * (i[k + 1] - i[k]))

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..data import first_crossing
 from .hysteresis import FALLING, RISING, branch_arrays
 from .settings import AnalysisSettings
 
@@ -45,18 +46,6 @@ def _segments(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True))
 
 
-def _first_crossing(i: np.ndarray, g: np.ndarray, upward: bool) -> float:
-    """Current where ``g`` (pressure minus threshold) first changes sign, interpolated."""
-    above = g >= 0
-    hit = above[1:] & ~above[:-1] if upward else ~above[1:] & above[:-1]
-    k = np.flatnonzero(hit)
-    if k.size == 0:
-        return np.nan
-    k = int(k[0])
-    frac = g[k] / (g[k] - g[k + 1]) if g[k] != g[k + 1] else 0.0
-    return float(i[k] + frac * (i[k + 1] - i[k]))
-
-
 def _snap_current(
     i: np.ndarray, p: np.ndarray, line: np.ndarray, upward: bool, s: AnalysisSettings
 ) -> float:
@@ -68,7 +57,7 @@ def _snap_current(
     is centred for any symmetric smoothing of the step (the dither-period mean spreads a
     snap over one period).
     """
-    coarse = _first_crossing(i, p - (line - s.latch_margin_bar), upward)
+    coarse = first_crossing(i, p - (line - s.latch_margin_bar), upward)
     if not np.isfinite(coarse):
         return coarse
     near = (i >= coarse - 3 * s.bin_mA) & (i <= coarse - s.bin_mA)
@@ -76,7 +65,7 @@ def _snap_current(
         return coarse
     slope, offset = np.polyfit(i[near] - coarse, p[near], 1)
     regulated = offset + slope * (i - coarse)
-    fine = _first_crossing(i, p - 0.5 * (regulated + line), upward)
+    fine = first_crossing(i, p - 0.5 * (regulated + line), upward)
     return fine if np.isfinite(fine) and abs(fine - coarse) <= s.bin_mA else coarse
 
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...data import dither_period_mean
+from ...data import dither_period_mean, first_crossing
 
 __all__ = [
     "METRIC_UNITS",
@@ -90,18 +90,6 @@ def metric_names(ramp_labels: tuple[str, ...], step: bool = True) -> tuple[str, 
     return tuple(names)
 
 
-def _first_crossing(i: np.ndarray, g: np.ndarray, upward: bool) -> float:
-    """Current (mA) where ``g`` first changes sign in the given direction, interpolated."""
-    above = g >= 0
-    hit = (above[1:] & ~above[:-1]) if upward else (~above[1:] & above[:-1])
-    k = np.flatnonzero(hit)
-    if k.size == 0:
-        return float("nan")
-    k = int(k[0])
-    frac = g[k] / (g[k] - g[k + 1]) if g[k] != g[k + 1] else 0.0
-    return float(i[k] + frac * (i[k + 1] - i[k]))
-
-
 def latch_currents(
     current_mA: np.ndarray,
     pressure_bar: np.ndarray,
@@ -132,8 +120,8 @@ def latch_currents(
         the first downward crossing on the falling branch (mA); NaN if it never crosses.
     """
     g = pressure_bar - (line_bar - margin_bar)
-    on = _first_crossing(current_mA[rising], g[rising], upward=True)
-    off = _first_crossing(current_mA[falling], g[falling], upward=False)
+    on = first_crossing(current_mA[rising], g[rising], upward=True)
+    off = first_crossing(current_mA[falling], g[falling], upward=False)
     return on, off
 
 
