@@ -24,31 +24,15 @@ import argparse
 import json
 import os
 import platform
-import time
 
 from clutchlab.physics.effects import EFFECTS
 from clutchlab.validation.discover import DiscoverySettings
-from clutchlab.validation.discover.effect_size import calibrate_effect_size
-from clutchlab.validation.discover.scenarios import run_must_show
-
-#: The issue's bar: the medium-ramp RMSE after augmentation is at most half of before.
-MAX_ERROR_RATIO = 0.5
+from clutchlab.validation.discover.scenarios import run_sized_case
 
 
 def run_effect(effect: str) -> dict:
     """Calibrate ``effect``'s size, run the discovery case, return its measured row."""
-    t0 = time.perf_counter()
-    size = calibrate_effect_size(effect)
-    _, row = run_must_show(
-        effect,
-        size.overrides,
-        n_settings=size.n_settings,
-        settings=DiscoverySettings(progress=False),
-    )
-    before, after = row["test_rmse_bar"]
-    row["size"] = size.to_dict()
-    row["passes"] = bool(row["named_first"] == effect and after <= MAX_ERROR_RATIO * before)
-    row["wall_with_calibration_s"] = time.perf_counter() - t0
+    _, row = run_sized_case(effect, settings=DiscoverySettings(progress=False))
     return row
 
 

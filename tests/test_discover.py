@@ -98,6 +98,7 @@ def test_cli_writes_the_issue_json_and_a_report(cli_run):
         assert ITERATION_KEYS <= set(it)
         for key in ITERATION_KEYS - {"effect", "candidates"}:
             assert it[key] is None or it[key] >= 0.0
+        assert it["expansions"][0] == "zero" and set(it["expansions"]) <= {"zero", "default"}
     first = doc["iterations"][0]
     assert {c["effect"] for c in first["candidates"]} == set(CANDIDATES)
     for c in first["candidates"]:

@@ -296,6 +296,7 @@ def _iteration(
 
     reference: dict = {}
     states: dict[str, ModelState] = {}
+    expansions = ["zero"]
 
     def record(effect, decision, scores, after, delta=None) -> IterationRecord:
         return IterationRecord(
@@ -312,6 +313,7 @@ def _iteration(
             delta_bic=delta,
             threshold_p=level,
             wall_s=time.perf_counter() - t_it,
+            expansions=tuple(expansions),
         )
 
     if not names:
@@ -373,6 +375,7 @@ def _iteration(
         # about to leave a structured residual unexplained: look again, linearized at the
         # candidates' default strengths (see the scoring module)
         _say(settings, f"{decision} at zero strength; scoring at default strength")
+        expansions.append("default")
         scores = score_candidates(
             names,
             current.model,

@@ -113,6 +113,10 @@ class IterationRecord:
         obtained (the current fit, or its continuation when it had not converged).
     refits : dict
         Effect name -> :class:`ModelState` of every confirmatory refit that ran.
+    expansions : tuple of str
+        Strengths the candidates' outputs were linearized at: ``("zero",)``, or
+        ``("zero", "default")`` when the second look before leaving a structured
+        residual unexplained ran.
     """
 
     index: int
@@ -128,6 +132,7 @@ class IterationRecord:
     wall_s: float = 0.0
     reference: dict = field(default_factory=dict)
     refits: dict[str, ModelState] = field(default_factory=dict)
+    expansions: tuple[str, ...] = ("zero",)
 
     def to_dict(self) -> dict:
         """JSON-ready dict (the issue's keys first)."""
@@ -145,6 +150,7 @@ class IterationRecord:
             "decision": self.decision,
             "delta_bic": self.delta_bic,
             "threshold_p": self.threshold_p,
+            "expansions": list(self.expansions),
             "reference": self.reference,
             "effects_before": list(self.before.fit.effects),
             "effects_after": list(self.after.fit.effects),

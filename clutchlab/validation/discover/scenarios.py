@@ -33,6 +33,7 @@ __all__ = [
     "must_show_row",
     "representable_overrides",
     "run_must_show",
+    "run_sized_case",
 ]
 
 #: 0 → 1100 → 0 mA ramps of 2.5 / 5 / 10 s with 1 s holds (the stand's are 2.5 / 10 / 40 s):
@@ -135,7 +136,8 @@ def must_show_row(
     dict
         ``effect``, ``overrides``, ``named_first`` (effect added in iteration 0 or None),
         ``decision``, ``winner`` / ``runner_up`` (``[effect, statistic, share]`` of the
-        best two score tests), ``delta_bic``, ``train_rmse_bar`` / ``test_rmse_bar``
+        best two score tests), ``delta_bic``, ``expansions`` (strengths the scores were
+        linearized at), ``train_rmse_bar`` / ``test_rmse_bar``
         (``[before, after]``, bar, dither-period mean), ``test_drop_pct`` (%),
         ``wall_s`` (s).
     """
@@ -154,6 +156,7 @@ def must_show_row(
         "winner": brief(0),
         "runner_up": brief(1),
         "delta_bic": it.delta_bic,
+        "expansions": list(it.expansions),
         "train_rmse_bar": [it.before.train["rmse_bar"], it.after.train["rmse_bar"]],
         "test_rmse_bar": [before, after],
         "test_drop_pct": 100.0 * (1.0 - after / before),
@@ -199,3 +202,37 @@ def run_must_show(
     settings = replace(settings or DiscoverySettings(progress=False), max_effects=1)
     res = discover(dataset, settings=settings)
     return res, must_show_row(res, effect, overrides, time.perf_counter() - t0)
+
+
+def run_sized_case(
+    effect: str, *, settings: DiscoverySettings | None = None
+) -> tuple[DiscoveryResult, dict]:
+    """:func:`run_must_show` at the effect's outcome-blind size.
+
+    The strength is fixed by :func:`~.effect_size.calibrate_effect_size` from the
+    stand's truth alone (0.10 bar RMS change of the training ramps' period-mean
+    pressure, or the bound) before discovery runs; the row gains ``size`` (its
+    :class:`~.effect_size.EffectSize` as a dict) and ``passes`` (named first and the
+    medium-ramp RMSE at most half of before).
+
+    Parameters
+    ----------
+    effect : str
+        Library effect switched on at the stand.
+    settings : DiscoverySettings, optional
+        Discovery settings; ``max_effects`` is set to 1.
+
+    Returns
+    -------
+    (DiscoveryResult, dict)
+    """
+    from .effect_size import calibrate_effect_size
+
+    t0 = time.perf_counter()
+    size = calibrate_effect_size(effect)
+    res, row = run_must_show(effect, size.overrides, n_settings=size.n_settings, settings=settings)
+    before, after = row["test_rmse_bar"]
+    row["size"] = size.to_dict()
+    row["passes"] = bool(row["named_first"] == effect and after <= 0.5 * before)
+    row["wall_with_calibration_s"] = time.perf_counter() - t0
+    return res, row
