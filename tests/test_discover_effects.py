@@ -8,6 +8,11 @@ stand, and the RMSE of the dither-period-mean pressure on the medium ramp — ne
 any decision — must drop by at least half. Slow: a few minutes per effect on 2 quiet cores.
 Each test prints its measured row as one ``MUST_SHOW_ROW {json}`` line (``pytest -s``);
 ``python benchmarks/bench_discover.py`` runs the same cases and prints them as a table.
+
+The second test runs the effects that pass at the one outcome-blind size of every library
+effect (``effect_size.calibrate_effect_size``: 0.10 bar RMS change of the training pressure,
+fixed from the stand's truth before any discovery); ``python studies/discover_effect_size.py``
+runs all 13 and prints every row, pass or fail.
 """
 
 from __future__ import annotations
@@ -17,12 +22,20 @@ import json
 import pytest
 
 from clutchlab.validation.discover import DiscoverySettings
-from clutchlab.validation.discover.scenarios import MUST_SHOW_CASES, run_must_show
+from clutchlab.validation.discover.scenarios import MUST_SHOW_CASES, run_must_show, run_sized_case
 
 pytestmark = pytest.mark.slow
 
 #: The issue's bar: the medium-ramp RMSE after augmentation is at most half of before.
 MAX_ERROR_RATIO = 0.5
+#: The effects that passed at the outcome-blind size of ``effect_size.calibrate_effect_size``
+#: in ``studies/discover_effect_size.py`` (4 of 13; every row is in BENCHMARKS.md).
+SIZED_PASSING = (
+    "accumulator_spring_nonlinearity",
+    "sensor_lag",
+    "spool_leakage",
+    "supply_droop",
+)
 
 
 @pytest.mark.parametrize("effect", sorted(MUST_SHOW_CASES))
@@ -37,3 +50,13 @@ def test_discover_names_the_undeclared_effect_and_halves_the_test_error(effect):
     before, after = row["test_rmse_bar"]
     assert after <= MAX_ERROR_RATIO * before, (before, after)
     assert first.delta_bic < 0
+
+
+@pytest.mark.parametrize("effect", SIZED_PASSING)
+def test_at_the_outcome_blind_size_the_effect_is_named_and_the_test_error_halved(effect):
+    res, row = run_sized_case(effect, settings=DiscoverySettings(progress=False))
+    print(res.table())
+    print("SIZED_ROW " + json.dumps(row))
+    assert row["size"]["rms_bar"] == pytest.approx(0.10, rel=0.05)
+    assert res.iterations[0].effect == effect
+    assert row["passes"]

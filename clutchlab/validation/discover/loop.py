@@ -320,19 +320,25 @@ def _iteration(
         return record(None, "no candidates left", [], current)
     if n_added >= settings.max_effects:
         return record(None, "effect limit reached", [], current)
+
+    def score(expansion: str = "zero", previous=None) -> list[CandidateScore]:
+        return score_candidates(
+            names,
+            current.model,
+            current.params,
+            train,
+            res,
+            settings.fit,
+            alpha=settings.alpha,
+            min_share=settings.min_share,
+            probe_fraction=settings.probe_fraction,
+            progress=settings.progress,
+            expansion=expansion,
+            previous=previous,
+        )
+
     _say(settings, f"scoring {len(names)} candidate effects")
-    scores = score_candidates(
-        names,
-        current.model,
-        current.params,
-        train,
-        res,
-        settings.fit,
-        alpha=settings.alpha,
-        min_share=settings.min_share,
-        probe_fraction=settings.probe_fraction,
-        progress=settings.progress,
-    )
+    scores = score()
     refits: dict[str, dict] = {}
     ref: list = []
 
@@ -376,20 +382,7 @@ def _iteration(
         # candidates' default strengths (see the scoring module)
         _say(settings, f"{decision} at zero strength; scoring at default strength")
         expansions.append("default")
-        scores = score_candidates(
-            names,
-            current.model,
-            current.params,
-            train,
-            res,
-            settings.fit,
-            alpha=settings.alpha,
-            min_share=settings.min_share,
-            probe_fraction=settings.probe_fraction,
-            progress=settings.progress,
-            expansion="default",
-            previous=scores,
-        )
+        scores = score("default", previous=scores)
         chosen, again = attempt(scores)
         decision = decision if again == "no new candidate" else again
     if chosen is None:
