@@ -68,6 +68,13 @@ from clutchlab.residual_ml import classifiers as clf_mod
 from clutchlab.residual_ml.compare import compare_classifiers
 from clutchlab.residual_ml.features import LAG_DIDT_FEATURES
 
+#: The three standalone variants of the paper's ablation: (report name, estimator class).
+STANDALONE = (
+    ("gp_base", GPBaseline),
+    ("gp_didt", GPWithDerivative),
+    ("paper_svc_gp", SVCPartitionedGP),
+)
+
 
 def _pooled_rmse(model, held) -> float:
     sse, n = 0.0, 0
@@ -176,11 +183,7 @@ def main() -> None:
                     block_assignment=mode, **kw
                 )
                 total = 0.0
-                variants = [
-                    ("gp_base", GPBaseline),
-                    ("gp_didt", GPWithDerivative),
-                    ("paper_svc_gp", SVCPartitionedGP),
-                ]
+                variants = list(STANDALONE)
                 if args.physics:
                     variants.append(("hybrid", lambda: HybridModel(physics=cached)))
                 for label, cls in variants:
@@ -197,13 +200,11 @@ def main() -> None:
             f" [{time.perf_counter() - t0:.0f} s]",
         )
     if 1 in only:
-        for label, make in (
-            ("gp_base", lambda kern: GPBaseline(kernel=kern)),
-            ("gp_didt", lambda kern: GPWithDerivative(kernel=kern)),
-            ("paper_svc_gp", lambda kern: SVCPartitionedGP(kernel=kern)),
-        ):
+        for label, cls in STANDALONE:
             t0 = time.perf_counter()
-            scores = {f"{label} {kern}": loeo(make(kern), traces, folds) for kern in ("rbf", "rq")}
+            scores = {
+                f"{label} {kern}": loeo(cls(kernel=kern), traces, folds) for kern in ("rbf", "rq")
+            }
             report(
                 f"1. kernel of {label} (LOEO RMSE, bar)",
                 scores,
@@ -261,14 +262,7 @@ def main() -> None:
         )
     if 5 in only:
         t0 = time.perf_counter()
-        scores = {
-            label: loro(cls(), traces)
-            for label, cls in (
-                ("gp_base", GPBaseline),
-                ("gp_didt", GPWithDerivative),
-                ("paper_svc_gp", SVCPartitionedGP),
-            )
-        }
+        scores = {label: loro(cls(), traces) for label, cls in STANDALONE}
         report(
             "5. diagnostic, no decision: ramp-rate transfer of the defaults (LORO RMSE, bar)",
             scores,

@@ -134,7 +134,7 @@ def _overrides(effect: str, m: float) -> dict[str, float]:
 
 
 def _training_means(effect: str | None, n_settings: int, overrides: dict, seed: int):
-    # local import: scenarios imports this module for its case table
+    # local import: scenarios imports this module (run_sized_case)
     from .scenarios import discovery_stand
 
     effects = (effect,) if effect else ()

@@ -231,7 +231,6 @@ def score_effect(
     try:
         cand = model.with_effects(name)
         grid = nuisance_grid(cand, name)
-        out.n_tests = len(grid)
         rp = projector(base.r[base.keep])
         rss0 = float(np.dot(rp, rp))
         best = None
