@@ -30,7 +30,7 @@ from clutchlab.validation.discover import (
     residual_set,
 )
 from clutchlab.validation.discover.residuals import effective_size, integrated_time, loeo_rss
-from clutchlab.validation.discover.scoring import Projector, score_effect
+from clutchlab.validation.discover.scoring import Projector, profile_points, score_effect
 
 TINY_RAMPS = (
     RampProfile("fast", 1.5, 0.3),
@@ -98,7 +98,7 @@ def test_cli_writes_the_issue_json_and_a_report(cli_run):
         assert ITERATION_KEYS <= set(it)
         for key in ITERATION_KEYS - {"effect", "candidates"}:
             assert it[key] is None or it[key] >= 0.0
-        assert it["expansions"][0] == "zero" and set(it["expansions"]) <= {"zero", "default"}
+        assert it["expansions"][0] == "zero" and set(it["expansions"]) <= {"zero", "profile"}
     first = doc["iterations"][0]
     assert {c["effect"] for c in first["candidates"]} == set(CANDIDATES)
     for c in first["candidates"]:
@@ -290,20 +290,64 @@ def test_an_effect_linear_in_its_strength_scores_the_same_at_zero_and_default(ti
     assert zero.share > 0.0
 
 
+def test_profile_points_scale_every_strength_along_its_default_within_the_bounds():
+    mhys = CircuitModel().with_effects("vfs_magnetic_hysteresis")
+    h = [p["mhys_H"] for p in profile_points(mhys, "vfs_magnetic_hysteresis")]
+    assert h == pytest.approx([0.3, 0.9, 3.0])  # 10 × 0.3 N clipped to the 3 N bound
+    lag = CircuitModel().with_effects("sensor_lag")
+    assert profile_points(lag, "sensor_lag") == [{"slag_kappa": 1.0}]  # κ = 1 is its bound
+    drift = CircuitModel().with_effects("latch_threshold_drift")
+    pts = profile_points(drift, "latch_threshold_drift")
+    assert pts[-1] == {"ldrift_dp_on": 3.0, "ldrift_dp_off": -3.0}
+    assert pts[1] == pytest.approx({"ldrift_dp_on": 1.5, "ldrift_dp_off": -1.2})
+
+
+def test_the_profile_look_linearizes_at_its_best_point_and_counts_each_point(tiny):
+    # magnetic hysteresis: three profile points, one Gauss–Newton step from the best; the
+    # statistic can only improve on the best point's (the step may stay put)
+    train = list(tiny.select(ramps=["fast", "slow"]))
+    model = CircuitModel()
+    params = model.default_params()
+    fit = _settings().fit
+    base = residual_set(residual_problem(model, params, FREE, train, fit), train, True)
+    proj = Projector(base.jacobian[base.keep])
+    values = dict(params.values)
+    name = "vfs_magnetic_hysteresis"
+    prof = score_effect(name, model, values, train, base, proj, fit, expansion="profile")
+    assert prof.status == "scored" and prof.probe == "profile"
+    assert prof.n_tests == 3
+    assert 0.0 <= prof.strength["mhys_H"] <= 3.0
+    best = scoring._profile_best(
+        model.with_effects(name), name, values, train, base.keep, proj, fit
+    )
+    r0 = proj(base.r[base.keep])
+    cand = model.with_effects(name)
+    problem = residual_problem(cand, cand.params(**values, **best), ("mhys_H",), train, fit)
+    try:
+        e = proj(problem.evaluate(np.zeros(problem.n_z), False)["r"][base.keep])
+    finally:
+        problem.close()
+    at_best = max(1.0 - float(e @ e) / float(r0 @ r0), 0.0)
+    assert prof.share >= at_best - 1e-9
+
+
 def test_a_second_expansion_keeps_the_larger_statistic_and_counts_both_tests(monkeypatch):
     from clutchlab.validation.discover import CandidateScore, score_candidates
 
     made = {
-        ("a", "default"): CandidateScore("a", 1, share=0.5, statistic=40.0, p_value=2e-10),
-        ("b", "default"): CandidateScore("b", 1, share=0.2, statistic=1.0, p_value=0.3),
+        ("a", "profile"): CandidateScore("a", 1, share=0.5, statistic=40.0, p_value=2e-10),
+        ("b", "profile"): CandidateScore("b", 1, share=0.2, statistic=1.0, p_value=0.3),
     }
 
+    hints = {}
+
     def fake(name, *args):
-        return made[(name, args[-1])]
+        hints[name] = args[-1]
+        return made[(name, args[-2])]
 
     monkeypatch.setattr(scoring, "score_effect", fake)
     previous = [
-        CandidateScore("a", 1, share=0.01, statistic=2.0, p_value=0.15, n_tests=4),
+        CandidateScore("a", 1, 0.01, 2.0, 0.15, nuisance={"eddy_tau": 9.0}, n_tests=4),
         CandidateScore("b", 1, share=0.3, statistic=30.0, p_value=1e-7),
     ]
     out = score_candidates(
@@ -313,10 +357,12 @@ def test_a_second_expansion_keeps_the_larger_statistic_and_counts_both_tests(mon
         [],
         SimpleNamespace(jacobian=None),  # the fake scores need no residual
         None,
-        expansion="default",
+        expansion="profile",
         previous=previous,
     )
     by = {c.effect: c for c in out}
+    # the profile look scores at the nuisance values of the first look
+    assert hints == {"a": {"eddy_tau": 9.0}, "b": {}}
     assert by["a"].statistic == 40.0 and by["a"].n_tests == 5
     assert by["b"].statistic == 30.0 and by["b"].n_tests == 2
     assert by["a"].significant and by["b"].significant

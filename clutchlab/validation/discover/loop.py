@@ -377,12 +377,15 @@ def _iteration(
         return min(ok, key=lambda s: s.refit["loeo_rss_bar2"]), "added"
 
     chosen, decision = attempt(scores)
-    if chosen is None and not diag.whiteness.get("white", True) and diag.signature:
-        # about to leave a structured residual unexplained: look again, linearized at the
-        # candidates' default strengths (see the scoring module)
-        _say(settings, f"{decision} at zero strength; scoring at default strength")
-        expansions.append("default")
-        scores = score("default", previous=scores)
+    if chosen is None and not diag.whiteness.get("white", True):
+        # about to leave a structured (non-white) residual unexplained: look again, with
+        # each candidate's strength profiled over multiples of its default (see the
+        # scoring module). Not gated on the signature: a smooth residual has few
+        # effective samples, and its bias-corrected η² can stay below the signature
+        # threshold even where it follows dI/dt with r = 0.5.
+        _say(settings, f"{decision} at zero strength; profiling the strengths")
+        expansions.append("profile")
+        scores = score("profile", previous=scores)
         chosen, again = attempt(scores)
         decision = decision if again == "no new candidate" else again
     if chosen is None:

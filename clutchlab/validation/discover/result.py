@@ -115,8 +115,8 @@ class IterationRecord:
         Effect name -> :class:`ModelState` of every confirmatory refit that ran.
     expansions : tuple of str
         Strengths the candidates' outputs were linearized at: ``("zero",)``, or
-        ``("zero", "default")`` when the second look before leaving a structured
-        residual unexplained ran.
+        ``("zero", "profile")`` when the second look (strengths profiled over multiples
+        of their defaults) before leaving a structured residual unexplained ran.
     """
 
     index: int

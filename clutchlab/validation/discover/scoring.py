@@ -28,11 +28,17 @@ best point, and the largest statistic kept (a sup-score test: the significance l
 divided by the number of values scored).
 
 The linearization at zero strength misses an effect whose output is far from linear in
-its strength over the range that matters (a viscosity ``exp(−b ΔT)`` over 30 K). Before a
-structured residual is called unexplained, :func:`~.loop.discover` therefore scores the
-candidates a second time, linearized at their default strength from the residual there
-(a Gauss–Newton step from a typical strength); each keeps the larger statistic, and the
-significance level is divided by the number of expansion points as well.
+its strength over the range that matters (a viscosity ``exp(−b ΔT)`` over 30 K; a magnetic
+hysteresis whose small play only shifts the spool's friction stick-slip, so that 0.3 N
+makes the fit worse and 2.5 N explains nine tenths of the residual). Before a structured
+residual is left unexplained, :func:`~.loop.discover` therefore takes a second look, the
+*profile* (``expansion="profile"``): the effect's strengths are set along their defaults at
+:data:`PROFILE_MULTIPLIERS` × the default (clipped to the bounds), the projected residual
+sum of squares is computed there by simulation (the free parameters enter to first order,
+through the projection), and from the best of these points one Gauss–Newton step is taken
+(linearized there, inside the bounds). It is a likelihood-ratio statistic profiled over a
+grid of strengths: each candidate keeps the larger statistic of the two looks, and the
+significance level is divided by all the points scored.
 """
 
 from __future__ import annotations
@@ -54,7 +60,7 @@ from ...physics.parameters import ParameterSet
 from .residuals import ResidualSet, effective_size, residual_problem
 from .warm import warm_sensitivities
 
-__all__ = ["CandidateScore", "Projector", "score_candidates", "score_effect"]
+__all__ = ["CandidateScore", "Projector", "profile_points", "score_candidates", "score_effect"]
 
 #: Relative singular-value cut-off of the free parameters' sensitivity basis.
 RANK_TOL = 1e-8
@@ -66,6 +72,10 @@ NUISANCE_FACTORS = (0.3, 1.0, 3.0, 10.0)
 #: Factor around the best nuisance grid value scored once more (see
 #: :func:`nuisance_refinements`): the geometric mid-point of the grid's spacing.
 REFINE_FACTOR = 3.0**0.5
+#: Multiples of the default strength the profile look simulates at (clipped to the
+#: bounds, duplicates dropped): the default and up to two factors of about 3 beyond it,
+#: which reach the upper bound of most library strengths.
+PROFILE_MULTIPLIERS = (1.0, 3.0, 10.0)
 
 
 @dataclass
@@ -95,7 +105,9 @@ class CandidateScore:
     n_tests : int
         Number of nuisance values scored (the significance level is divided by it).
     probe : str
-        ``"zero"`` (sensitivity at zero strength) or ``"probe"`` (at a small strength).
+        Where the output was linearized: ``"zero"`` (zero strength), ``"probe"`` (a small
+        strength), ``"default"`` (the default strength) or ``"profile"`` (the best point of
+        the profile over :data:`PROFILE_MULTIPLIERS` × the default).
     significant : bool
         ``p_value < α/(m·n_tests)`` and ``share ≥ min_share``.
     status : str
@@ -195,6 +207,7 @@ def score_effect(
     fit: FitSettings,
     probe_fraction: float = 0.1,
     expansion: str = "zero",
+    nuisance: dict[str, float] | None = None,
 ) -> CandidateScore:
     """Score test of one library effect ``name`` against the fitted ``model``.
 
@@ -216,8 +229,12 @@ def score_effect(
         Residual operator (substeps, decimation, settle time, workers).
     probe_fraction : float
         Fraction of the default strength used when the zero-strength sensitivity vanishes.
-    expansion : {"zero", "default"}
+    expansion : {"zero", "default", "profile"}
         Where the effect's output is linearized (see :func:`_score_at`).
+    nuisance : dict, optional
+        Fixed values of the effect's fitted non-strength parameters (a lag's time
+        constant, engineering units), scored at instead of the nuisance grid; the profile
+        look takes those of the first look.
 
     Returns
     -------
@@ -230,19 +247,19 @@ def score_effect(
     out = CandidateScore(effect=name, k=len(strength), signature=cls.signature)
     try:
         cand = model.with_effects(name)
-        grid = nuisance_grid(cand, name)
+        grid = [dict(nuisance)] if nuisance is not None else nuisance_grid(cand, name)
         rp = projector(base.r[base.keep])
         rss0 = float(np.dot(rp, rp))
         best = None
         tried: list[dict[str, float]] = []
 
-        def trial_at(nuisance: dict[str, float]) -> None:
+        def trial_at(point: dict[str, float]) -> None:
             nonlocal best
-            tried.append(nuisance)
+            tried.append(point)
             trial = _score_at(
                 cand,
                 name,
-                values | nuisance,
+                values | point,
                 traces,
                 base,
                 projector,
@@ -251,16 +268,18 @@ def score_effect(
                 probe_fraction,
                 expansion,
             )
-            trial.nuisance = nuisance
+            trial.nuisance = point
             if best is None or trial.statistic > best.statistic:
                 best = trial
 
-        for nuisance in grid:
-            trial_at(nuisance)
-        for nuisance in nuisance_refinements(cand, best.nuisance):
-            if nuisance not in tried:
-                trial_at(nuisance)
-        out.n_tests = len(tried)
+        for point in grid:
+            trial_at(point)
+        if nuisance is None:
+            for point in nuisance_refinements(cand, best.nuisance):
+                if point not in tried:
+                    trial_at(point)
+        per_point = len(profile_points(cand, name)) if expansion == "profile" else 1
+        out.n_tests = len(tried) * per_point
         for key in ("share", "statistic", "p_value", "n_eff", "novelty", "strength", "probe"):
             setattr(out, key, getattr(best, key))
         out.nuisance, out.status = best.nuisance, best.status
@@ -329,7 +348,8 @@ def _score_at(
     ``expansion="zero"``: linearized at zero strength, where the model is the fitted one
     (the score test). ``"default"``: linearized at the effect's default strength, from
     the residual there — a one-step (Gauss–Newton) look at an effect whose output is
-    far from linear in its strength over the range that matters.
+    far from linear in its strength over the range that matters. ``"profile"``: the same
+    from the best point of :func:`profile_points` (see :func:`_profile_best`).
     """
     cls = EFFECTS[name]
     strength = tuple(cls.STRENGTH)
@@ -341,12 +361,15 @@ def _score_at(
         return {s: min(max(x, specs[s].lower), specs[s].upper) for s, x in v.items()}
 
     rss0 = float(np.dot(rp, rp))
-    if expansion == "default":
-        # linearized at the default strength: the residual there, not the fitted model's
-        probe = clipped(1.0)
+    if expansion in ("default", "profile"):
+        # linearized at a non-zero strength: the residual there, not the fitted model's
+        if expansion == "default":
+            probe = clipped(1.0)
+        else:
+            probe = _profile_best(cand, name, values, traces, base.keep, projector, fit)
         x, (lo, hi), r_at = _sensitivity(cand, values, strength, probe, traces, fit, base.keep)
         start = projector(r_at)
-        out.probe = "default"
+        out.probe = expansion
     else:
         probe = {s: 0.0 for s in strength}
         x, (lo, hi), _ = _sensitivity(cand, values, strength, probe, traces, fit, base.keep)
@@ -371,6 +394,59 @@ def _score_at(
     steps = zip(strength, sol.x, strict=True)
     out.strength = {s: float(probe[s] + specs[s].scale * b) for s, b in steps}
     return out
+
+
+def profile_points(cand: CircuitModel, name: str) -> list[dict[str, float]]:
+    """Strengths of the profile look: :data:`PROFILE_MULTIPLIERS` × the defaults.
+
+    Every strength parameter of the effect is scaled together along its default (its
+    scale where the default is 0), clipped to its bounds; repeated points are dropped
+    (a lag strength κ defaults to its upper bound 1 and gives one point).
+    """
+    specs = {p.name: p for p in cand.parameters}
+    points: list[dict[str, float]] = []
+    for m in PROFILE_MULTIPLIERS:
+        point = {}
+        for s in EFFECTS[name].STRENGTH:
+            spec = specs[s]
+            point[s] = min(max(m * (spec.default or spec.scale), spec.lower), spec.upper)
+        if point not in points:
+            points.append(point)
+    return points
+
+
+def _profile_best(
+    cand: CircuitModel,
+    name: str,
+    values: dict[str, float],
+    traces: list[Trace],
+    keep: np.ndarray,
+    projector: Projector,
+    fit: FitSettings,
+) -> dict[str, float]:
+    """The point of :func:`profile_points` with the smallest projected residual sum of squares.
+
+    One simulation per point (no sensitivities); the free parameters enter through the
+    projection, i.e. to first order. Raises ``ClutchlabError`` when the model diverges at
+    every point.
+    """
+    strength = tuple(EFFECTS[name].STRENGTH)
+    best, best_rss = None, np.inf
+    for point in profile_points(cand, name):
+        problem = residual_problem(cand, cand.params(**values, **point), strength, traces, fit)
+        try:
+            ev = problem.evaluate(np.zeros(problem.n_z), False)
+        finally:
+            problem.close()
+        if not ev["ok"]:
+            continue
+        e = projector(np.asarray(ev["r"], dtype=float)[keep])
+        rss = float(np.dot(e, e))
+        if np.isfinite(rss) and rss < best_rss:
+            best, best_rss = point, rss
+    if best is None:
+        raise ClutchlabError("the model with the effect diverges at every profile strength")
+    return best
 
 
 def score_candidates(
@@ -410,12 +486,13 @@ def score_candidates(
         See :func:`score_effect`.
     progress : bool
         Progress bar.
-    expansion : {"zero", "default"}
+    expansion : {"zero", "default", "profile"}
         Where each effect is linearized (see :func:`score_effect`).
     previous : list of CandidateScore, optional
         Scores of the same candidates at another expansion point: each candidate keeps
         the larger statistic of the two, and its number of tests is the sum (the
         significance level is divided by it — a sup-score over the expansion points).
+        The profile look scores at their nuisance values (a lag's time constant).
 
     Returns
     -------
@@ -427,10 +504,11 @@ def score_candidates(
     scores = []
     desc = "score effects" if expansion == "zero" else f"score effects at {expansion} strength"
     for name in tqdm(candidates, desc=desc, unit="effect", disable=not progress):
-        new = score_effect(
-            name, model, values, traces, base, projector, fit, probe_fraction, expansion
-        )
         old = before.get(name)
+        hint = old.nuisance if old is not None and expansion == "profile" else None
+        new = score_effect(
+            name, model, values, traces, base, projector, fit, probe_fraction, expansion, hint
+        )
         if old is not None:
             n_tests = old.n_tests + new.n_tests
             keep_new = new.status == "scored" and (
