@@ -367,3 +367,31 @@ def test_a_second_expansion_keeps_the_larger_statistic_and_counts_both_tests(mon
     assert by["b"].statistic == 30.0 and by["b"].n_tests == 2
     assert by["a"].significant and by["b"].significant
     assert [c.effect for c in out] == ["a", "b"]
+
+
+def test_a_candidate_already_refitted_keeps_its_score_in_the_second_look(monkeypatch):
+    from clutchlab.validation.discover import CandidateScore, score_candidates
+
+    def fake(name, *args):
+        assert name == "b", "a refitted candidate must not be scored again"
+        return CandidateScore("b", 1, share=0.2, statistic=25.0, p_value=5e-7)
+
+    monkeypatch.setattr(scoring, "score_effect", fake)
+    old_a = CandidateScore("a", 1, share=0.3, statistic=30.0, p_value=1e-7, n_tests=6)
+    previous = [old_a, CandidateScore("b", 1, share=0.01, statistic=2.0, p_value=0.15)]
+    out = score_candidates(
+        ["a", "b"],
+        CircuitModel(),
+        CircuitModel().default_params(),
+        [],
+        SimpleNamespace(jacobian=None),
+        None,
+        expansion="profile",
+        previous=previous,
+        keep=frozenset({"a"}),
+    )
+    by = {c.effect: c for c in out}
+    assert by["a"] is old_a and by["a"].n_tests == 6
+    assert by["b"].statistic == 25.0 and by["b"].n_tests == 2
+    # the family is still both candidates: level α/2 = 0.005, each divided by its tests
+    assert by["a"].significant and by["b"].significant

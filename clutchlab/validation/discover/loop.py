@@ -322,6 +322,7 @@ def _iteration(
         return record(None, "effect limit reached", [], current)
 
     def score(expansion: str = "zero", previous=None) -> list[CandidateScore]:
+        # candidates refitted already keep their score: they would not be refitted again
         return score_candidates(
             names,
             current.model,
@@ -335,12 +336,13 @@ def _iteration(
             progress=settings.progress,
             expansion=expansion,
             previous=previous,
+            keep=frozenset(refits),
         )
 
-    _say(settings, f"scoring {len(names)} candidate effects")
-    scores = score()
     refits: dict[str, dict] = {}
     ref: list = []
+    _say(settings, f"scoring {len(names)} candidate effects")
+    scores = score()
 
     def attempt(scores: list[CandidateScore]) -> tuple[CandidateScore | None, str]:
         """Refit the best significant candidates (each once); the one to add, or why none."""

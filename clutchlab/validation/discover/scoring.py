@@ -463,6 +463,7 @@ def score_candidates(
     progress: bool = False,
     expansion: str = "zero",
     previous: list[CandidateScore] | None = None,
+    keep: frozenset[str] = frozenset(),
 ) -> list[CandidateScore]:
     """Score every candidate; flag the significant ones; best statistic first.
 
@@ -493,6 +494,9 @@ def score_candidates(
         the larger statistic of the two, and its number of tests is the sum (the
         significance level is divided by it — a sup-score over the expansion points).
         The profile look scores at their nuisance values (a lag's time constant).
+    keep : frozenset of str
+        Candidates whose ``previous`` score is kept as it is, not scored again (those
+        already refitted in the iteration: a larger statistic would not refit them again).
 
     Returns
     -------
@@ -505,6 +509,9 @@ def score_candidates(
     desc = "score effects" if expansion == "zero" else f"score effects at {expansion} strength"
     for name in tqdm(candidates, desc=desc, unit="effect", disable=not progress):
         old = before.get(name)
+        if old is not None and name in keep:
+            scores.append(old)
+            continue
         hint = old.nuisance if old is not None and expansion == "profile" else None
         new = score_effect(
             name, model, values, traces, base, projector, fit, probe_fraction, expansion, hint
