@@ -315,9 +315,9 @@ def test_the_profile_look_linearizes_at_its_best_point_and_counts_each_point(tin
     name = "vfs_magnetic_hysteresis"
     prof = score_effect(name, model, values, train, base, proj, fit, expansion="profile")
     assert prof.status == "scored" and prof.probe == "profile"
-    assert prof.n_tests == 3
+    assert prof.n_tests == 3 and prof.statistic >= 0.0
     assert 0.0 <= prof.strength["mhys_H"] <= 3.0
-    best = scoring._profile_best(
+    best, rss_best = scoring._profile_best(
         model.with_effects(name), name, values, train, base.keep, proj, fit
     )
     r0 = proj(base.r[base.keep])
@@ -327,8 +327,39 @@ def test_the_profile_look_linearizes_at_its_best_point_and_counts_each_point(tin
         e = proj(problem.evaluate(np.zeros(problem.n_z), False)["r"][base.keep])
     finally:
         problem.close()
-    at_best = max(1.0 - float(e @ e) / float(r0 @ r0), 0.0)
+    assert float(e @ e) == pytest.approx(rss_best, rel=1e-9)
+    at_best = max(1.0 - rss_best / float(r0 @ r0), 0.0)
     assert prof.share >= at_best - 1e-9
+
+
+def test_no_step_is_taken_from_a_profile_point_worse_than_the_fitted_model(tiny, monkeypatch):
+    train = list(tiny.select(ramps=["fast", "slow"]))
+    model = CircuitModel()
+    params = model.default_params()
+    fit = _settings().fit
+    base = residual_set(residual_problem(model, params, FREE, train, fit), train, True)
+    proj = Projector(base.jacobian[base.keep])
+    rp = proj(base.r[base.keep])
+    worse = float(rp @ rp) * 1.5
+    monkeypatch.setattr(scoring, "_profile_best", lambda *a: ({"mhys_H": 3.0}, worse))
+
+    def no_sensitivity(*a, **k):
+        raise AssertionError("no sensitivity at a point worse than the fitted model")
+
+    monkeypatch.setattr(scoring, "_sensitivity", no_sensitivity)
+    out = score_effect(
+        "vfs_magnetic_hysteresis",
+        model,
+        dict(params.values),
+        train,
+        base,
+        proj,
+        fit,
+        expansion="profile",
+    )
+    assert out.status == "scored" and out.probe == "profile"
+    assert out.statistic == 0.0 and out.share == 0.0 and out.p_value == 1.0
+    assert not out.significant
 
 
 def test_a_second_expansion_keeps_the_larger_statistic_and_counts_both_tests(monkeypatch):

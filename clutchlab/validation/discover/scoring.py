@@ -366,7 +366,12 @@ def _score_at(
         if expansion == "default":
             probe = clipped(1.0)
         else:
-            probe = _profile_best(cand, name, values, traces, base.keep, projector, fit)
+            probe, rss_at = _profile_best(cand, name, values, traces, base.keep, projector, fit)
+            if rss_at >= rss0:
+                # no profile point explains any of the residual: no step from a point
+                # that is worse than the fitted model (and no sensitivity to pay for)
+                out.probe, out.strength = expansion, dict(probe)
+                return out
         x, (lo, hi), r_at = _sensitivity(cand, values, strength, probe, traces, fit, base.keep)
         start = projector(r_at)
         out.probe = expansion
@@ -389,7 +394,9 @@ def _score_at(
     out.share = float(max(1.0 - rss1 / rss0, 0.0))
     n_eff, _ = effective_size(e1, base.kept_slices)
     out.n_eff = n_eff
-    out.statistic = float(n_eff * np.log(rss0 / max(rss1, 1e-300)))
+    # linearized away from zero strength, the best step can still predict more than the
+    # fitted model's residual (the linear model of a far point): no evidence, not negative
+    out.statistic = float(max(n_eff * np.log(rss0 / max(rss1, 1e-300)), 0.0))
     out.p_value = float(chi2.sf(out.statistic, len(strength)))
     steps = zip(strength, sol.x, strict=True)
     out.strength = {s: float(probe[s] + specs[s].scale * b) for s, b in steps}
@@ -423,18 +430,20 @@ def _profile_best(
     keep: np.ndarray,
     projector: Projector,
     fit: FitSettings,
-) -> dict[str, float]:
+) -> tuple[dict[str, float], float]:
     """The point of :func:`profile_points` with the smallest projected residual sum of squares.
 
-    One simulation per point (no sensitivities); the free parameters enter through the
-    projection, i.e. to first order. Raises ``ClutchlabError`` when the model diverges at
-    every point.
+    One simulation per point (no sensitivities; experiments shared among ``fit.workers``
+    processes); the free parameters enter through the projection, i.e. to first order.
+    Returns the point and its projected sum of squares (bar²). Raises ``ClutchlabError``
+    when the model diverges at every point.
     """
     strength = tuple(EFFECTS[name].STRENGTH)
     best, best_rss = None, np.inf
     for point in profile_points(cand, name):
         problem = residual_problem(cand, cand.params(**values, **point), strength, traces, fit)
         try:
+            problem.start_workers(traces, fit.workers)
             ev = problem.evaluate(np.zeros(problem.n_z), False)
         finally:
             problem.close()
@@ -446,7 +455,7 @@ def _profile_best(
             best, best_rss = point, rss
     if best is None:
         raise ClutchlabError("the model with the effect diverges at every profile strength")
-    return best
+    return best, best_rss
 
 
 def score_candidates(
