@@ -73,9 +73,9 @@ NUISANCE_FACTORS = (0.3, 1.0, 3.0, 10.0)
 #: :func:`nuisance_refinements`): the geometric mid-point of the grid's spacing.
 REFINE_FACTOR = 3.0**0.5
 #: Multiples of the default strength the profile look simulates at (clipped to the
-#: bounds, duplicates dropped): the default and up to two factors of about 3 beyond it,
-#: which reach the upper bound of most library strengths.
-PROFILE_MULTIPLIERS = (1.0, 3.0, 10.0)
+#: bounds, duplicates dropped): beyond the default, where the linearization at zero does
+#: not reach; 10 × reaches the upper bound of most library strengths.
+PROFILE_MULTIPLIERS = (3.0, 10.0)
 
 
 @dataclass
@@ -433,26 +433,32 @@ def _profile_best(
 ) -> tuple[dict[str, float], float]:
     """The point of :func:`profile_points` with the smallest projected residual sum of squares.
 
-    One simulation per point (no sensitivities; experiments shared among ``fit.workers``
-    processes); the free parameters enter through the projection, i.e. to first order.
-    Returns the point and its projected sum of squares (bar²). Raises ``ClutchlabError``
-    when the model diverges at every point.
+    One simulation per point (no sensitivities), all in one residual problem whose
+    experiments are shared among ``fit.workers`` processes; the free parameters enter
+    through the projection, i.e. to first order. Returns the point and its projected sum
+    of squares (bar²). Raises ``ClutchlabError`` when the model diverges at every point.
     """
     strength = tuple(EFFECTS[name].STRENGTH)
+    specs = {p.name: p for p in cand.parameters}
+    points = profile_points(cand, name)
     best, best_rss = None, np.inf
-    for point in profile_points(cand, name):
-        problem = residual_problem(cand, cand.params(**values, **point), strength, traces, fit)
-        try:
-            problem.start_workers(traces, fit.workers)
-            ev = problem.evaluate(np.zeros(problem.n_z), False)
-        finally:
-            problem.close()
-        if not ev["ok"]:
-            continue
-        e = projector(np.asarray(ev["r"], dtype=float)[keep])
-        rss = float(np.dot(e, e))
-        if np.isfinite(rss) and rss < best_rss:
-            best, best_rss = point, rss
+    problem = residual_problem(cand, cand.params(**values, **points[0]), strength, traces, fit)
+    try:
+        problem.start_workers(traces, fit.workers)
+        for point in points:
+            # strengths have linear transforms (their lower bound is 0): z = Δθ / scale
+            z = np.zeros(problem.n_z)
+            for k, s in enumerate(problem.shared):
+                z[k] = (point[s] - points[0][s]) / specs[s].scale
+            ev = problem.evaluate(z, False)
+            if not ev["ok"]:
+                continue
+            e = projector(np.asarray(ev["r"], dtype=float)[keep])
+            rss = float(np.dot(e, e))
+            if np.isfinite(rss) and rss < best_rss:
+                best, best_rss = point, rss
+    finally:
+        problem.close()
     if best is None:
         raise ClutchlabError("the model with the effect diverges at every profile strength")
     return best, best_rss
