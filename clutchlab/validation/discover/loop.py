@@ -32,7 +32,13 @@ from ...physics.effects import EFFECTS
 from ...physics.fit import FitResult, PhysicsFitter, resolve_free
 from ...physics.parameters import ParameterSet
 from .diagnostics import diagnose
-from .residuals import ResidualSet, loeo_rss, residual_problem, residual_set
+from .residuals import (
+    ResidualSet,
+    loeo_rss,
+    point_sums_of_squares,
+    residual_problem,
+    residual_set,
+)
 from .result import DiscoveryResult, IterationRecord, ModelState
 from .scoring import CandidateScore, score_candidates
 from .settings import DiscoverySettings
@@ -154,6 +160,7 @@ def _refit_start(
     score: CandidateScore,
     train: list[Trace],
     settings: DiscoverySettings,
+    keep: np.ndarray,
 ) -> ParameterSet:
     """Start of a confirmatory refit: the current fit plus the effect.
 
@@ -170,20 +177,16 @@ def _refit_start(
         return cand.params(**base)
     trials = [{n: f * score.strength[n] for n in fitted} for f in START_FRACTIONS]
     trials.append({n: specs[n].default for n in fitted})
-    best, best_rss = cand.params(**base, **trials[-1]), math.inf
-    for trial in trials:
-        clipped = {n: min(max(v, specs[n].lower), specs[n].upper) for n, v in trial.items()}
-        params = cand.params(**base, **clipped)
-        problem = residual_problem(cand, params, tuple(fitted), train, settings.fit)
-        try:
-            rss = residual_set(problem, train, snap_guard_s=settings.snap_guard_s).kept_rss
-        except ClutchlabError:
-            continue
-        finally:
-            problem.close()
-        if math.isfinite(rss) and rss < best_rss:
-            best, best_rss = params, rss
-    return best
+    clipped = [
+        {n: min(max(v, specs[n].lower), specs[n].upper) for n, v in trial.items()}
+        for trial in trials
+    ]
+    try:
+        rss = point_sums_of_squares(cand, base, clipped, train, settings.fit, keep)
+    except ClutchlabError:
+        rss = [math.inf] * len(clipped)
+    k = int(np.argmin(rss)) if np.any(np.isfinite(rss)) else len(clipped) - 1
+    return cand.params(**base, **clipped[k])
 
 
 def _reference(
@@ -241,7 +244,8 @@ def _confirm(
         cand = current.model.with_effects(score.effect)
         free = tuple(current.fit.free)
         free += tuple(n for n in cls.fit_parameters() if n not in free)
-        start = _refit_start(cand, current.fit.values, score, train, settings)
+        keep = current.residual.keep
+        start = _refit_start(cand, current.fit.values, score, train, settings, keep)
         fit = _run_fit(cand, train, settings, free, start)
         state = _state(fit, train, test, settings, jacobian=True)
     except (ClutchlabError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:

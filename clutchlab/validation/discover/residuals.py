@@ -10,6 +10,7 @@ the significance threshold and the information criterion for that.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -26,6 +27,7 @@ __all__ = [
     "effective_size",
     "integrated_time",
     "loeo_rss",
+    "point_sums_of_squares",
     "residual_problem",
     "residual_set",
 ]
@@ -285,6 +287,63 @@ def residual_set(
         keep=np.concatenate(keep),
         jacobian=jac,
     )
+
+
+def point_sums_of_squares(
+    model: CircuitModel,
+    values: dict[str, float],
+    points: list[dict[str, float]],
+    traces: list[Trace],
+    fit: FitSettings,
+    keep: np.ndarray,
+    transform=None,
+) -> list[float]:
+    """Sum of squares of the kept residuals at each of ``points`` (bar²; inf where it diverges).
+
+    All points share one residual problem and its worker processes: the parameters named
+    in the points are its free parameters, started at the first point, and every point is
+    a shift of ``z`` (they must have linear transforms, as effect strengths do).
+
+    Parameters
+    ----------
+    model : CircuitModel
+        Model structure.
+    values : dict
+        The other parameter values (engineering units).
+    points : list of dict
+        Values of the same parameters at each point (engineering units).
+    traces : list of Trace
+        Training experiments.
+    fit : FitSettings
+        Residual operator and number of workers.
+    keep : numpy.ndarray of bool
+        Residuals kept (:attr:`ResidualSet.keep`).
+    transform : callable, optional
+        Applied to the kept residuals before squaring (a projection).
+    """
+    names = tuple(points[0])
+    specs = {p.name: p for p in model.parameters}
+    if any(specs[n].transform != "linear" for n in names):
+        raise ValueError(f"point_sums_of_squares needs linear transforms: {names}")
+    problem = residual_problem(model, model.params(**values, **points[0]), names, traces, fit)
+    out = []
+    try:
+        problem.start_workers(traces, fit.workers)
+        for point in points:
+            z = np.zeros(problem.n_z)
+            for k, n in enumerate(problem.shared):
+                z[k] = (point[n] - points[0][n]) / specs[n].scale
+            ev = problem.evaluate(z, False)
+            if not ev["ok"]:
+                out.append(math.inf)
+                continue
+            e = np.asarray(ev["r"], dtype=float)[keep]
+            e = transform(e) if transform is not None else e
+            rss = float(np.dot(e, e))
+            out.append(rss if np.isfinite(rss) else math.inf)
+    finally:
+        problem.close()
+    return out
 
 
 def loeo_rss(res: ResidualSet, rcond: float = 3e-2) -> float | None:

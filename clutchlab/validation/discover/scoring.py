@@ -57,7 +57,7 @@ from ...physics import CircuitModel
 from ...physics.effects import EFFECTS
 from ...physics.fit import FitSettings
 from ...physics.parameters import ParameterSet
-from .residuals import ResidualSet, effective_size, residual_problem
+from .residuals import ResidualSet, effective_size, point_sums_of_squares, residual_problem
 from .warm import warm_sensitivities
 
 __all__ = ["CandidateScore", "Projector", "profile_points", "score_candidates", "score_effect"]
@@ -438,27 +438,10 @@ def _profile_best(
     through the projection, i.e. to first order. Returns the point and its projected sum
     of squares (bar²). Raises ``ClutchlabError`` when the model diverges at every point.
     """
-    strength = tuple(EFFECTS[name].STRENGTH)
-    specs = {p.name: p for p in cand.parameters}
     points = profile_points(cand, name)
-    best, best_rss = None, np.inf
-    problem = residual_problem(cand, cand.params(**values, **points[0]), strength, traces, fit)
-    try:
-        problem.start_workers(traces, fit.workers)
-        for point in points:
-            # strengths have linear transforms (their lower bound is 0): z = Δθ / scale
-            z = np.zeros(problem.n_z)
-            for k, s in enumerate(problem.shared):
-                z[k] = (point[s] - points[0][s]) / specs[s].scale
-            ev = problem.evaluate(z, False)
-            if not ev["ok"]:
-                continue
-            e = projector(np.asarray(ev["r"], dtype=float)[keep])
-            rss = float(np.dot(e, e))
-            if np.isfinite(rss) and rss < best_rss:
-                best, best_rss = point, rss
-    finally:
-        problem.close()
+    rss = point_sums_of_squares(cand, values, points, traces, fit, keep, projector)
+    k = int(np.argmin(rss))
+    best, best_rss = (points[k], rss[k]) if np.isfinite(rss[k]) else (None, np.inf)
     if best is None:
         raise ClutchlabError("the model with the effect diverges at every profile strength")
     return best, best_rss
