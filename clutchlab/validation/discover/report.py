@@ -120,6 +120,7 @@ def _candidate_rows(it: IterationRecord) -> list[list[str]]:
                 _fmt(c.p_value, ".2g"),
                 _fmt(c.share, ".3f"),
                 _fmt(c.novelty, ".2f"),
+                f"{c.probe} ({c.n_tests})",
                 "yes" if c.significant else "no",
                 _fmt(refit.get("delta_bic"), ".1f") if refit else "",
                 c.status,
@@ -128,7 +129,19 @@ def _candidate_rows(it: IterationRecord) -> list[list[str]]:
     return rows
 
 
-_CAND_HEAD = ["effect", "statistic", "p", "share", "novelty", "significant", "ΔBIC", "status"]
+#: "linearized at": zero strength, a small probe strength, or the profile's best point;
+#: in brackets the number of points scored (the significance level is divided by it).
+_CAND_HEAD = [
+    "effect",
+    "statistic",
+    "p",
+    "share",
+    "novelty",
+    "linearized at (tests)",
+    "significant",
+    "ΔBIC",
+    "status",
+]
 
 
 def _md_table(head: list[str], rows: list[list[str]]) -> str:
