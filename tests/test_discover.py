@@ -270,15 +270,24 @@ def test_a_transport_delay_fit_frees_its_pade_delay_and_scores_over_it():
     assert d0[0] < spec.default < d0[-1] and d0[-1] == pytest.approx(10 * spec.default)
 
 
-def test_an_effect_linear_in_its_strength_scores_the_same_at_zero_and_default(tiny):
-    # the sensor lag's output is exactly linear in its strength κ: linearizing at κ = 0
-    # or at the default κ = 1 (from the residual there) must give the same estimate
+@pytest.fixture(scope="module")
+def scored(tiny):
+    """The base model at its defaults on the tiny stand's training ramps, ready to score:
+    training traces, model, parameters, fit settings, residual set, projector."""
     train = list(tiny.select(ramps=["fast", "slow"]))
     model = CircuitModel()
     params = model.default_params()
     fit = _settings().fit
     base = residual_set(residual_problem(model, params, FREE, train, fit), train, True)
     proj = Projector(base.jacobian[base.keep])
+    return SimpleNamespace(train=train, model=model, params=params, fit=fit, base=base, proj=proj)
+
+
+def test_an_effect_linear_in_its_strength_scores_the_same_at_zero_and_default(scored):
+    # the sensor lag's output is exactly linear in its strength κ: linearizing at κ = 0
+    # or at the default κ = 1 (from the residual there) must give the same estimate
+    train, model, params, fit = scored.train, scored.model, scored.params, scored.fit
+    base, proj = scored.base, scored.proj
     values = dict(params.values)
     zero = score_effect("sensor_lag", model, values, train, base, proj, fit)
     default = score_effect("sensor_lag", model, values, train, base, proj, fit, expansion="default")
@@ -302,15 +311,11 @@ def test_profile_points_scale_every_strength_along_its_default_within_the_bounds
     assert pts[0] == pytest.approx({"ldrift_dp_on": 1.5, "ldrift_dp_off": -1.2})
 
 
-def test_the_profile_look_linearizes_at_its_best_point_and_counts_each_point(tiny):
+def test_the_profile_look_linearizes_at_its_best_point_and_counts_each_point(scored):
     # magnetic hysteresis: two profile points, one Gauss–Newton step from the best; the
     # statistic can only improve on the best point's (the step may stay put)
-    train = list(tiny.select(ramps=["fast", "slow"]))
-    model = CircuitModel()
-    params = model.default_params()
-    fit = _settings().fit
-    base = residual_set(residual_problem(model, params, FREE, train, fit), train, True)
-    proj = Projector(base.jacobian[base.keep])
+    train, model, params, fit = scored.train, scored.model, scored.params, scored.fit
+    base, proj = scored.base, scored.proj
     values = dict(params.values)
     name = "vfs_magnetic_hysteresis"
     prof = score_effect(name, model, values, train, base, proj, fit, expansion="profile")
@@ -332,13 +337,9 @@ def test_the_profile_look_linearizes_at_its_best_point_and_counts_each_point(tin
     assert prof.share >= at_best - 1e-9
 
 
-def test_no_step_is_taken_from_a_profile_point_worse_than_the_fitted_model(tiny, monkeypatch):
-    train = list(tiny.select(ramps=["fast", "slow"]))
-    model = CircuitModel()
-    params = model.default_params()
-    fit = _settings().fit
-    base = residual_set(residual_problem(model, params, FREE, train, fit), train, True)
-    proj = Projector(base.jacobian[base.keep])
+def test_no_step_is_taken_from_a_profile_point_worse_than_the_fitted_model(scored, monkeypatch):
+    train, model, params, fit = scored.train, scored.model, scored.params, scored.fit
+    base, proj = scored.base, scored.proj
     rp = proj(base.r[base.keep])
     worse = float(rp @ rp) * 1.5
     monkeypatch.setattr(scoring, "_profile_best", lambda *a: ({"mhys_H": 3.0}, worse))
