@@ -325,6 +325,9 @@ def _iteration(
     if n_added >= settings.max_effects:
         return record(None, "effect limit reached", [], current)
 
+    refits: dict[str, dict] = {}
+    ref: list = []
+
     def score(expansion: str = "zero", previous=None) -> list[CandidateScore]:
         # candidates refitted already keep their score: they would not be refitted again
         return score_candidates(
@@ -343,8 +346,6 @@ def _iteration(
             keep=frozenset(refits),
         )
 
-    refits: dict[str, dict] = {}
-    ref: list = []
     _say(settings, f"scoring {len(names)} candidate effects")
     scores = score()
 

@@ -357,8 +357,7 @@ def _score_at(
     specs = {p.name: p for p in cand.parameters}
 
     def clipped(fraction: float) -> dict[str, float]:
-        v = {s: fraction * (specs[s].default or specs[s].scale) for s in strength}
-        return {s: min(max(x, specs[s].lower), specs[s].upper) for s, x in v.items()}
+        return _along_defaults(specs, strength, fraction)
 
     rss0 = float(np.dot(rp, rp))
     if expansion in ("default", "profile"):
@@ -413,13 +412,20 @@ def profile_points(cand: CircuitModel, name: str) -> list[dict[str, float]]:
     specs = {p.name: p for p in cand.parameters}
     points: list[dict[str, float]] = []
     for m in PROFILE_MULTIPLIERS:
-        point = {}
-        for s in EFFECTS[name].STRENGTH:
-            spec = specs[s]
-            point[s] = min(max(m * (spec.default or spec.scale), spec.lower), spec.upper)
+        point = _along_defaults(specs, EFFECTS[name].STRENGTH, m)
         if point not in points:
             points.append(point)
     return points
+
+
+def _along_defaults(specs: dict, strength, fraction: float) -> dict[str, float]:
+    """``fraction`` × each strength's default (its scale where the default is 0), clipped
+    to its bounds (engineering units)."""
+    out = {}
+    for s in strength:
+        spec = specs[s]
+        out[s] = min(max(fraction * (spec.default or spec.scale), spec.lower), spec.upper)
+    return out
 
 
 def _profile_best(
@@ -504,7 +510,9 @@ def score_candidates(
     values = dict(params.values)
     before = {c.effect: c for c in previous or []}
     scores = []
-    desc = "score effects" if expansion == "zero" else f"score effects at {expansion} strength"
+    desc = {"zero": "score effects", "profile": "profile effect strengths"}.get(
+        expansion, f"score effects at {expansion} strength"
+    )
     for name in tqdm(candidates, desc=desc, unit="effect", disable=not progress):
         old = before.get(name)
         if old is not None and name in keep:
