@@ -45,7 +45,8 @@ def _cmd_stand(args: argparse.Namespace) -> int:
     )
     print(f"truth (effects, parameters) beside it: {truth_path(out)}")
     if args.json:
-        Path(args.json).write_text(
+        write_json_output(
+            args.json,
             json.dumps(
                 {
                     "dataset": str(out),
@@ -53,8 +54,7 @@ def _cmd_stand(args: argparse.Namespace) -> int:
                     "truth": str(truth_path(out)),
                 },
                 indent=2,
-            )
-            + "\n"
+            ),
         )
     return 0
 
@@ -64,9 +64,7 @@ def _cmd_effects(args: argparse.Namespace) -> int:
 
     table = effect_table()
     if args.json:
-        Path(args.json).write_text(
-            json.dumps(table, indent=2, ensure_ascii=False) + "\n", encoding="utf-8"
-        )
+        write_json_output(args.json, json.dumps(table, indent=2, ensure_ascii=False))
     for row in table:
         print(f"{row['name']:32s} {row['description']}")
         print(f"{'':32s}   residual signature: {row['signature']}")
@@ -80,9 +78,7 @@ def _cmd_params(args: argparse.Namespace) -> int:
     model = CircuitModel().with_effects(*_csv_list(args.effects))
     rows = [p.to_dict() for p in model.parameters]
     if args.json:
-        Path(args.json).write_text(
-            json.dumps(rows, indent=2, ensure_ascii=False) + "\n", encoding="utf-8"
-        )
+        write_json_output(args.json, json.dumps(rows, indent=2, ensure_ascii=False))
     for p in model.parameters:
         print(
             f"{p.name:18s} {p.default:10.4g} {p.unit:14s} [{p.lower:g}, {p.upper:g}]  "
@@ -108,9 +104,7 @@ def _cmd_data_check(args: argparse.Namespace) -> int:
 
     result = check_path(args.path, args.map, options=_read_options(args))
     if args.json:
-        Path(args.json).write_text(
-            json.dumps(result.to_dict(), indent=2, ensure_ascii=False) + "\n", encoding="utf-8"
-        )
+        write_json_output(args.json, json.dumps(result.to_dict(), indent=2, ensure_ascii=False))
     print(result.table())
     return 0 if result.ok else 1
 
@@ -184,7 +178,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--variants", default="", help="comma separated (default: every available)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--json", help="also write metrics.json here")
-    p.set_defaults(func=_cmd_demo)
+    p.set_defaults(func=_cmd_demo, report_out=True)
 
     p = sub.add_parser("data", help="test-stand data: check and convert logs and datasets")
     data = p.add_subparsers(dest="data_command", required=True)
@@ -216,10 +210,32 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def check_outputs(args: argparse.Namespace) -> None:
+    """Check ``--json`` and a report command's ``--out`` before any work is done.
+
+    A report folder (``evaluate``, ``demo``, ``discover``) may exist: what clutchlab wrote
+    there is replaced and every other file is kept (see :mod:`clutchlab.data.output`).
+    """
+    from .data.output import check_output
+
+    if getattr(args, "json", None):
+        check_output(args.json, kind="file", overwrite=True, what="--json")
+    if getattr(args, "report_out", False) and getattr(args, "out", None):
+        check_output(args.out, kind="folder", overwrite=True, what="--out")
+
+
+def write_json_output(path: str | Path, text: str) -> Path:
+    """Write a command's ``--json`` file atomically (replacing an earlier one)."""
+    from .data.output import write_file_atomic
+
+    return write_file_atomic(path, text.rstrip("\n").encode("utf-8") + b"\n", overwrite=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``clutchlab`` console script."""
     args = build_parser().parse_args(argv)
     try:
+        check_outputs(args)
         return int(args.func(args) or 0)
     except ClutchlabError as exc:
         command = " ".join(filter(None, [args.command, getattr(args, "data_command", None)]))

@@ -44,7 +44,9 @@ def _cmd_discover(args: argparse.Namespace) -> int:
     print(result.summary)
     print(f"report: {report}")
     if args.json:
-        result.to_json(args.json)
+        from .cli import write_json_output
+
+        write_json_output(args.json, result.to_json())
     return 0
 
 
@@ -78,4 +80,4 @@ def register(sub) -> None:
     p.add_argument("--max-iter", type=int, default=50, help="solver iterations per fit (50)")
     p.add_argument("--time-limit", type=float, default=900.0, help="wall limit per fit (s)")
     p.add_argument("--quiet", action="store_true", help="no progress display")
-    p.set_defaults(func=_cmd_discover)
+    p.set_defaults(func=_cmd_discover, report_out=True)

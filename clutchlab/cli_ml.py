@@ -48,7 +48,9 @@ def _cmd_classifiers(args: argparse.Namespace) -> int:
     print(result.table())
     print(f"table: {out / 'classifiers.csv'}; figure: {out / 'classifiers.png'}")
     if args.json:
-        Path(args.json).write_text(json.dumps(result.to_dict(), indent=2) + "\n", encoding="utf-8")
+        from .cli import write_json_output
+
+        write_json_output(args.json, json.dumps(result.to_dict(), indent=2))
     return 0
 
 
@@ -135,7 +137,9 @@ def _cmd_train(args: argparse.Namespace) -> int:
             "training": {"overall": o, "per_experiment": per},
             "model": str(out / "model.json"),
         }
-        Path(args.json).write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+        from .cli import write_json_output
+
+        write_json_output(args.json, json.dumps(doc, indent=2))
     return 0
 
 

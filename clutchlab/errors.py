@@ -11,6 +11,7 @@ __all__ = [
     "DataError",
     "FitError",
     "ModelError",
+    "OutputError",
     "ProblemListError",
     "SimulationError",
 ]
@@ -53,6 +54,11 @@ class DataError(ProblemListError, ValueError):
 
 class ModelError(ClutchlabError, ValueError):
     """Bad model specification: unknown effect or parameter, value out of bounds."""
+
+
+class OutputError(ClutchlabError, OSError):
+    """An output that may not or cannot be written: it exists, is in the way of a file
+    clutchlab did not write, or lies in a folder that cannot be written."""
 
 
 class SimulationError(ClutchlabError, RuntimeError):

@@ -20,7 +20,7 @@ from clutchlab.data import (
     write_csv,
 )
 from clutchlab.data.io_csv import decode_csv
-from clutchlab.errors import DataError
+from clutchlab.errors import DataError, OutputError
 
 HEADER = "time_s,current_mA,clutch_pressure_bar"
 
@@ -179,6 +179,7 @@ def test_dataset_round_trip(tmp_path):
     ds = make_dataset()
     root = save_dataset(ds, tmp_path / "ds")
     assert sorted(p.name for p in root.iterdir()) == [
+        ".clutchlab-owned.json",
         "fast_30Hz_A.csv",
         "manifest.json",
         "medium_50Hz_B.csv",
@@ -210,11 +211,12 @@ def test_save_refuses_non_empty_folder_and_overwrites_dataset(tmp_path):
     target = tmp_path / "ds"
     target.mkdir()
     (target / "notes.txt").write_text("keep me")
-    with pytest.raises(DataError, match="not empty"):
+    with pytest.raises(OutputError, match="not empty"):
         save_dataset(ds, target)
-    with pytest.raises(DataError, match="not a dataset folder"):
-        save_dataset(ds, target, overwrite=True)
+    # with overwrite the dataset is written beside the user's file, which is kept
+    save_dataset(ds, target, overwrite=True)
     assert (target / "notes.txt").read_text() == "keep me"
+    assert load_dataset(target).names == ds.names
 
     other = tmp_path / "other"
     save_dataset(ds, other)

@@ -35,6 +35,7 @@ from .io_mf4 import read_mf4, write_mf4
 from .io_parquet import read_parquet, write_parquet
 from .metrics import pressure_metrics
 from .options import ReadOptions
+from .output import OWNED_NAME, check_output, owned_files, write_file_atomic, write_folder_atomic
 from .reading import check_log, read_log
 from .report import LoadReport
 from .signals import CANONICAL_ORDER, SIGNALS, SignalSpec, unit_of
@@ -46,6 +47,7 @@ from .validate import validate_trace
 __all__ = [
     "CANONICAL_ORDER",
     "FORMATS",
+    "OWNED_NAME",
     "SIGNALS",
     "ChannelMap",
     "ChannelSpec",
@@ -62,6 +64,7 @@ __all__ = [
     "causal_didt",
     "causal_window",
     "check_log",
+    "check_output",
     "check_path",
     "convert",
     "convert_units",
@@ -76,6 +79,7 @@ __all__ = [
     "load_dataset",
     "nominal_current",
     "nominal_didt",
+    "owned_files",
     "parse_unit",
     "pressure_metrics",
     "read_csv",
@@ -87,6 +91,8 @@ __all__ = [
     "unit_of",
     "validate_trace",
     "write_csv",
+    "write_file_atomic",
+    "write_folder_atomic",
     "write_mf4",
     "write_parquet",
 ]

@@ -1,13 +1,13 @@
 """Convert a dataset folder or a single log to canonical names and units in another format.
 
-Everything is read and validated first; only then is anything written, atomically (a
-temporary sibling renamed into place), so a failed conversion leaves no partial output.
+Everything is read and validated first; only then is anything written, atomically (see
+:mod:`clutchlab.data.output`), so a failed or killed conversion leaves no partial output and
+no file clutchlab did not write is replaced or deleted. A destination overlapping the source
+folder is refused.
 """
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 from ..errors import DataError
@@ -16,26 +16,10 @@ from .formats import FORMATS, suffix_of
 from .io_dataset import load_dataset, save_dataset
 from .manifest import MANIFEST_NAME
 from .options import ReadOptions
+from .output import check_output, write_file_atomic
 from .reading import read_log
-from .trace import Trace
 
 __all__ = ["convert"]
-
-
-def _write_file_atomically(trace: Trace, dst: Path, suffix: str) -> None:
-    dst.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{dst.name}.", suffix=".tmp", dir=dst.parent)
-    os.close(fd)
-    tmp = Path(tmp_name)
-    try:
-        FORMATS[suffix].write(trace, tmp)
-        mask = os.umask(0)
-        os.umask(mask)
-        os.chmod(tmp, 0o666 & ~mask)
-        os.replace(tmp, dst)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 def convert(
@@ -63,7 +47,8 @@ def convert(
     options : ReadOptions, optional
         Gap interpolation, resampling, jitter tolerance.
     overwrite : bool, optional
-        Replace an existing destination (a dataset folder with a manifest, or a file).
+        Replace an existing file, or write into an existing non-empty folder (what clutchlab
+        wrote there is replaced; every other file is kept, and one in the way is an error).
 
     Returns
     -------
@@ -74,7 +59,10 @@ def convert(
     ------
     DataError
         Listing every problem of the input (nothing is written then), an unsupported format,
-        or a destination that exists (without ``overwrite``).
+        or a destination overlapping the source.
+    OutputError
+        A destination that exists (without ``overwrite``), has a user's file in the way, or
+        cannot be written.
     """
     src, dst = Path(src), Path(dst)
     if src.is_file() and src.name != MANIFEST_NAME:
@@ -89,12 +77,20 @@ def convert(
                 f"{dst}: the suffix does not match the format {FORMATS[suffix].name!r} "
                 f"(expected {suffix})"
             )
-        if dst.exists() and (dst.is_dir() or not overwrite):
-            raise DataError(f"{dst}: exists (pass overwrite=True to replace a file)")
         if dst.resolve() == src.resolve():
             raise DataError(f"{dst}: is the source file")
+        check_output(dst, kind="file", overwrite=overwrite, what="destination")
         trace = read_log(src, channel_map=channel_map, options=options)[0]
-        _write_file_atomically(trace, dst, suffix)
-        return dst
+        return write_file_atomic(
+            dst, lambda tmp: FORMATS[suffix].write(trace, tmp), overwrite=overwrite
+        )
+    folder = (src.parent if src.name == MANIFEST_NAME else src).resolve()
+    target = dst.resolve()
+    if target == folder or folder in target.parents or target in folder.parents:
+        raise DataError(
+            f"{dst}: the destination overlaps the source dataset folder {src}; convert into "
+            "a separate folder (nothing was written)"
+        )
+    check_output(dst, kind="folder", overwrite=overwrite, what="destination")
     dataset = load_dataset(src, channel_map, options=options)
     return save_dataset(dataset, dst, format or "csv", overwrite=overwrite)

@@ -8,10 +8,8 @@ registry (CSV, Parquet, MF4), so new formats are added by registering a
 from __future__ import annotations
 
 import json
-import os
 import re
-import shutil
-import tempfile
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -22,6 +20,7 @@ from .formats import FORMATS, suffix_of
 from .manifest import MANIFEST_NAME, Manifest, read_manifest
 from .meta_json import json_default
 from .options import ReadOptions
+from .output import Content, write_folder_atomic
 from .reading import check_log
 from .report import LoadReport
 from .trace import Trace
@@ -71,24 +70,20 @@ def _manifest_text(dataset: Dataset, suffix: str) -> str:
     )
 
 
-def _chmod_like_mkdir(folder: Path) -> None:
-    """Give a ``mkdtemp`` folder (mode 0700) the permissions ``mkdir`` would (0777 & ~umask)."""
-    mask = os.umask(0)
-    os.umask(mask)
-    os.chmod(folder, 0o777 & ~mask)
-
-
 def save_dataset(
     dataset: Dataset,
     path: str | Path,
     format: str = "csv",
     *,
     overwrite: bool = False,
+    extra: Mapping[str, Content] | None = None,
 ) -> Path:
     """Write a dataset folder atomically: ``manifest.json`` plus ``<name>.<format>`` files.
 
-    Everything is written into a temporary sibling folder that is renamed into place only
-    once complete, so a failure leaves nothing half-written (and an existing folder intact).
+    Everything is written into a temporary sibling folder that is swapped into place only
+    once complete (:func:`~clutchlab.data.output.write_folder_atomic`), so a failure or a kill
+    leaves nothing half-written (and an existing folder intact). Files in the destination that
+    clutchlab did not write are kept; one standing where a dataset file would go is refused.
 
     Parameters
     ----------
@@ -101,8 +96,12 @@ def save_dataset(
         Experiment file format: ``"csv"`` (9 significant digits), ``"parquet"`` (float64,
         units in the field metadata) or ``"mf4"`` (MDF 4.10, float64, channel units).
     overwrite : bool, optional
-        Replace an existing dataset folder (one containing ``manifest.json``) once the new one
-        is complete. A non-empty folder without a manifest is never replaced.
+        Write into an existing non-empty folder. Files clutchlab wrote there before are
+        replaced (or removed when no longer written); every other file is kept, and one in the
+        way of a new file is an error.
+    extra : mapping of str to bytes or callable, optional
+        Further files written into the folder in the same atomic step (e.g. an overview
+        figure): relative name → bytes or ``f(path)``.
 
     Returns
     -------
@@ -113,49 +112,26 @@ def save_dataset(
     ------
     DataError
         Unsupported format, experiments without ramp label or with unusable names,
-        metadata that is not JSON, or a destination that may not be replaced.
+        metadata that is not JSON.
+    OutputError
+        A destination that may not be written (exists without ``overwrite``, a file of the
+        user's in the way, a read-only folder).
     """
     if not isinstance(dataset, Dataset):
         raise TypeError(f"save_dataset expects a Dataset, got {type(dataset)!r}")
     suffix = suffix_of(format)
     writer = FORMATS[suffix].write
     text = _manifest_text(dataset, suffix)
-
     path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise DataError(f"{path}: exists and is not a folder")
-    existing = path.is_dir() and any(path.iterdir())
-    if existing and not overwrite:
-        raise DataError(f"{path}: folder exists and is not empty (pass overwrite=True)")
-    if existing and not (path / MANIFEST_NAME).is_file():
-        raise DataError(
-            f"{path}: not a dataset folder (no {MANIFEST_NAME}); refusing to replace it"
-        )
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
-    _chmod_like_mkdir(tmp)
-    try:
-        for trace in dataset:
-            writer(trace, tmp / f"{trace.name}{suffix}")
-        (tmp / MANIFEST_NAME).write_text(text, encoding="utf-8")
-        if existing:
-            backup = tmp.with_name(tmp.name + ".old")
-            os.replace(path, backup)
-            try:
-                os.replace(tmp, path)
-            except BaseException:
-                os.replace(backup, path)
-                raise
-            shutil.rmtree(backup, ignore_errors=True)
-        else:
-            if path.is_dir():
-                path.rmdir()  # empty: replaced by the complete new folder
-            os.replace(tmp, path)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    return path
+    files: dict[str, Content] = {
+        f"{trace.name}{suffix}": (lambda p, tr=trace: writer(tr, p)) for trace in dataset
+    }
+    files[MANIFEST_NAME] = text.encode("utf-8")
+    for name, content in (extra or {}).items():
+        if name in files:
+            raise DataError(f"{path}: extra file {name!r} collides with a dataset file")
+        files[name] = content
+    return write_folder_atomic(path, files, overwrite=overwrite, what="dataset folder")
 
 
 def _resolve_map(

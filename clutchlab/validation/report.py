@@ -19,15 +19,13 @@ import html
 import io
 import json
 import math
-import os
-import shutil
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..data.output import write_file_atomic, write_folder_atomic
 from .figures import FigureSpec, report_figures
 from .metrics import ACCURACY_KEYS, METRIC_KEYS
 
@@ -519,12 +517,6 @@ def _json_text(doc: dict[str, Any]) -> str:
     return json.dumps(doc, indent=2, ensure_ascii=False, allow_nan=False) + "\n"
 
 
-def _atomic_write(path: Path, data: bytes) -> None:
-    tmp = path.with_name(f".{path.name}.part")
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
-
-
 def write_json(doc: dict[str, Any], path: str | Path) -> Path:
     """Write a report document as strict JSON, atomically.
 
@@ -539,10 +531,7 @@ def write_json(doc: dict[str, Any], path: str | Path) -> Path:
     -------
     Path
     """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    _atomic_write(path, _json_text(doc).encode("utf-8"))
-    return path
+    return write_file_atomic(path, _json_text(doc).encode("utf-8"), overwrite=True)
 
 
 # ---- writing ----------------------------------------------------------------------------------
@@ -585,8 +574,9 @@ def write_report(ev: Evaluation, out: str | Path) -> ReportFiles:
     ev : Evaluation
         The scored variants.
     out : path
-        Report folder (created; existing report files in it are replaced, other files such
-        as cached stand data are left alone).
+        Report folder (created). Written in one atomic step: the files of an earlier report
+        are replaced, every file clutchlab did not write (cached stand data, notes) is kept,
+        and one in the way of a report file is an error (``OutputError``, nothing written).
 
     Returns
     -------
@@ -605,23 +595,10 @@ def write_report(ev: Evaluation, out: str | Path) -> ReportFiles:
     files["report.md"] = render_markdown(doc, rel).encode("utf-8")
     files["report.html"] = render_html(doc, pngs).encode("utf-8")
     files["metrics.json"] = _json_text(doc).encode("utf-8")  # last: its presence = complete
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent))
-    try:
-        (tmp / "figures").mkdir()
-        for name, data in files.items():
-            (tmp / name).write_bytes(data)
-        mode = 0o777 & ~_umask()
-        if not out.exists():
-            os.chmod(tmp, mode)
-            os.chmod(tmp / "figures", mode)
-            os.replace(tmp, out)
-        else:
-            (out / "figures").mkdir(exist_ok=True)
-            for name in files:
-                os.replace(tmp / name, out / name)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+    # One atomic swap of the whole folder: a kill leaves the old report or the new one; a
+    # user's file in the way is refused, every other file (cached stand data) is kept, and
+    # figures of an earlier report that this one does not draw go.
+    write_folder_atomic(out, files, overwrite=True, what="report folder")
     return ReportFiles(
         folder=out,
         html=out / "report.html",
@@ -631,9 +608,3 @@ def write_report(ev: Evaluation, out: str | Path) -> ReportFiles:
         figures=tuple(out / name for name in files if name.startswith("figures/")),
         doc=doc,
     )
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask

@@ -18,6 +18,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from ...data import Dataset, Trace, save_dataset
+from ...data.output import check_output, write_file_atomic
 from ...errors import ModelError
 from ..assembly import MODEL_INPUTS
 from ..effects import make_effect
@@ -277,15 +278,17 @@ def write_stand(
     -------
     StandRun
     """
-    run = run_stand(config, progress=progress)
     out = Path(out)
-    save_dataset(run.dataset, out, overwrite=overwrite)
-    truth_path(out).write_text(
-        json.dumps(run.truth(), indent=2, ensure_ascii=False) + "\n", encoding="utf-8"
-    )
+    check_output(out, kind="folder", overwrite=overwrite, what="dataset folder")
+    check_output(truth_path(out), kind="file", overwrite=overwrite, what="truth file")
+    run = run_stand(config, progress=progress)
+    extra = {}
     if figure:
         from .overview import plot_pressure_vs_current
 
         fig = plot_pressure_vs_current(run.dataset)
-        fig.savefig(out / "pressure_vs_current.png", dpi=120)
+        extra["pressure_vs_current.png"] = lambda path: fig.savefig(path, dpi=120, format="png")
+    save_dataset(run.dataset, out, overwrite=overwrite, extra=extra)
+    truth = json.dumps(run.truth(), indent=2, ensure_ascii=False) + "\n"
+    write_file_atomic(truth_path(out), truth.encode("utf-8"), overwrite=True)
     return run

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
+from ...data.output import write_folder_atomic
 from .result import DiscoveryResult, IterationRecord, ModelState
 
 __all__ = ["plot_diagnostics", "plot_evidence", "plot_residuals", "write_report"]
@@ -97,12 +98,12 @@ def plot_diagnostics(it: IterationRecord) -> Figure:
     return fig
 
 
-def _png(fig: Figure, path: Path) -> str:
-    """Write ``fig`` to ``path`` (PNG) and return the same image base64-encoded."""
+def _png(fig: Figure, files: dict[str, bytes], name: str) -> str:
+    """Render ``fig`` as PNG into ``files[name]``; return the same image base64-encoded."""
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=100)
-    path.write_bytes(buf.getvalue())
-    return base64.b64encode(buf.getvalue()).decode()
+    files[name] = buf.getvalue()
+    return base64.b64encode(files[name]).decode()
 
 
 def _fmt(x, spec=".4f") -> str:
@@ -164,7 +165,7 @@ def write_report(result: DiscoveryResult, out: str | Path, command: str = "") ->
     result : DiscoveryResult
         What :func:`~clutchlab.validation.discover.discover` returned.
     out : path
-        Folder (created).
+        Folder (created; written atomically, see :func:`clutchlab.data.write_folder_atomic`).
     command : str
         Command line recorded in the report.
 
@@ -173,8 +174,7 @@ def write_report(result: DiscoveryResult, out: str | Path, command: str = "") ->
     Path of ``report.html``.
     """
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    result.to_json(out / "discovery.json")
+    files: dict[str, bytes] = {}
     md = [
         "# clutchlab discover — closing the loop",
         "",
@@ -218,7 +218,7 @@ def write_report(result: DiscoveryResult, out: str | Path, command: str = "") ->
             "evidence": plot_evidence(it),
             "diagnostics": plot_diagnostics(it),
         }
-        pngs = {k: _png(f, out / f"iteration{it.index}_{k}.png") for k, f in figs.items()}
+        pngs = {k: _png(f, files, f"iteration{it.index}_{k}.png") for k, f in figs.items()}
         md += [
             f"## {title}",
             "",
@@ -257,13 +257,15 @@ def write_report(result: DiscoveryResult, out: str | Path, command: str = "") ->
                 for p in pngs.values()
             ),
         ]
-    (out / "report.md").write_text("\n".join(md) + "\n", encoding="utf-8")
+    files["report.md"] = ("\n".join(md) + "\n").encode("utf-8")
     page = (
         "<!doctype html><html><head><meta charset='utf-8'><title>clutchlab discover</title>"
         "</head><body style='font-family:sans-serif;max-width:1000px'>"
         + "".join(parts_html)
         + "</body></html>"
     )
-    report = out / "report.html"
-    report.write_text(page, encoding="utf-8")
-    return report
+    files["report.html"] = page.encode("utf-8")
+    files["discovery.json"] = (result.to_json() + "\n").encode("utf-8")
+    # One atomic step: a kill leaves the old report or the new one, a user's file is kept.
+    write_folder_atomic(out, files, overwrite=True, what="report folder")
+    return out / "report.html"
