@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from ...data.output import write_file_atomic
 from ...physics import CircuitModel
 from ...physics.fit import FitResult
 from ...physics.parameters import ParameterSet
@@ -251,10 +252,7 @@ class DiscoveryResult:
         """JSON text (written to ``path`` when given, atomically)."""
         text = json.dumps(self.to_dict(), indent=2, ensure_ascii=False)
         if path is not None:
-            path = Path(path)
-            tmp = path.with_suffix(path.suffix + ".part")
-            tmp.write_text(text + "\n", encoding="utf-8")
-            tmp.replace(path)
+            write_file_atomic(path, (text + "\n").encode("utf-8"), overwrite=True)
         return text
 
     def table(self) -> str:
