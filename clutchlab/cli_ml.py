@@ -26,7 +26,7 @@ def _training(dataset, ramps: tuple[str, ...]):
 
 
 def _cmd_classifiers(args: argparse.Namespace) -> int:
-    from .data import load_dataset
+    from .data import load_dataset, write_folder_atomic
     from .errors import ModelError
     from .residual_ml import CLASSIFIERS, compare_classifiers
 
@@ -38,9 +38,12 @@ def _cmd_classifiers(args: argparse.Namespace) -> int:
         raise ModelError(f"unknown classifier(s) {unknown}; known: {', '.join(CLASSIFIERS)}")
     result = compare_classifiers(list(train), names=names, progress=not args.quiet)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    result.to_csv(out / "classifiers.csv")
-    result.figure().savefig(out / "classifiers.png", dpi=120)
+    fig = result.figure()
+    files = {
+        "classifiers.csv": result.csv_text().encode("utf-8"),
+        "classifiers.png": lambda path: fig.savefig(path, dpi=120, format="png"),
+    }
+    write_folder_atomic(out, files, overwrite=True, what="--out")
     print(
         f"latch classifiers, leave-one-experiment-out over {len(train)} training experiments "
         f"({', '.join(_csv(args.train))}); features: {', '.join(result.feature_names)}"

@@ -11,6 +11,7 @@ from typing import Literal
 
 import numpy as np
 
+from ..data.output import write_file_atomic
 from ..errors import ModelError
 from .units import SI_FACTOR
 
@@ -188,7 +189,7 @@ class ParameterSet(Mapping[str, float]):
         }
         text = json.dumps(doc, indent=2, ensure_ascii=False)
         if path is not None:
-            Path(path).write_text(text + "\n", encoding="utf-8")
+            write_file_atomic(path, (text + "\n").encode("utf-8"), overwrite=True)
         return text
 
     @classmethod

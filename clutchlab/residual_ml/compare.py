@@ -10,6 +10,7 @@ fraction of correctly classified held-out samples, pooled over all experiments.
 from __future__ import annotations
 
 import csv
+import io
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -18,7 +19,7 @@ from pathlib import Path
 import numpy as np
 from tqdm.auto import tqdm
 
-from ..data import Trace
+from ..data import Trace, write_file_atomic
 from ..errors import DataError
 from .classifiers import CLASSIFIERS, make_classifier
 from .features import DIDT_FEATURES, FeatureBuilder
@@ -62,14 +63,19 @@ class ClassifierComparison:
             )
         return "\n".join(lines)
 
-    def to_csv(self, path: str | Path) -> None:
-        """Write the table (name, label, accuracy, min_accuracy, fit_s, n_train_points)."""
+    def csv_text(self) -> str:
+        """The table as CSV (name, label, accuracy, min_accuracy, fit_s, n_train_points)."""
         keys = ["name", "label", "accuracy", "min_accuracy", "fit_s", "n_train_points"]
-        with open(path, "w", newline="", encoding="utf-8") as fh:
-            w = csv.DictWriter(fh, fieldnames=keys)
-            w.writeheader()
-            for r in self.rows:
-                w.writerow({k: r[k] for k in keys})
+        buf = io.StringIO(newline="")
+        w = csv.DictWriter(buf, fieldnames=keys)
+        w.writeheader()
+        for r in self.rows:
+            w.writerow({k: r[k] for k in keys})
+        return buf.getvalue()
+
+    def to_csv(self, path: str | Path) -> None:
+        """Write :meth:`csv_text` to ``path`` (atomically, replacing an earlier file)."""
+        write_file_atomic(path, self.csv_text().encode("utf-8"), overwrite=True)
 
     def to_dict(self) -> dict:
         """JSON-ready result."""

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..data import Trace
+from ..data import Trace, write_file_atomic
 from ..errors import ModelError
 from ..physics import CircuitModel, SimulationSettings, simulate
 
@@ -117,7 +117,8 @@ class PhysicsPredictor:
 
     def save(self, path: str | Path) -> None:
         """Write :meth:`to_dict` as JSON to ``path``."""
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
+        text = json.dumps(self.to_dict(), indent=2) + "\n"
+        write_file_atomic(path, text.encode("utf-8"), overwrite=True)
 
     @classmethod
     def load(cls, path: str | Path) -> PhysicsPredictor:
