@@ -197,7 +197,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("dst", help="destination folder (dataset) or file (single log)")
     q.add_argument(
         "--format",
-        choices=("csv", "parquet", "mf4"),
+        choices=("csv", "parquet", "mf4", "mat"),
         help="output format (default csv for a dataset, the suffix of DST for a file)",
     )
     q.add_argument("--overwrite", action="store_true", help="replace an existing destination")

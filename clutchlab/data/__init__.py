@@ -31,6 +31,7 @@ from .derived import (
 from .formats import FORMATS, FileFormat
 from .io_csv import read_csv, write_csv
 from .io_dataset import DatasetScan, load_dataset, save_dataset, scan_dataset
+from .io_mat import write_mat, write_mat73
 from .io_mf4 import read_mf4, write_mf4
 from .io_parquet import read_parquet, write_parquet
 from .metrics import pressure_metrics
@@ -93,6 +94,8 @@ __all__ = [
     "write_csv",
     "write_file_atomic",
     "write_folder_atomic",
+    "write_mat",
+    "write_mat73",
     "write_mf4",
     "write_parquet",
 ]

@@ -8,6 +8,7 @@ from typing import Any, NamedTuple
 
 from ..errors import DataError
 from .io_csv import decode_csv, write_csv
+from .io_mat import decode_mat, write_mat
 from .io_mf4 import decode_mf4, write_mf4
 from .io_parquet import decode_parquet, write_parquet
 from .rawlog import RawLog
@@ -40,6 +41,7 @@ FORMATS: dict[str, FileFormat] = {
     ".csv": FileFormat("csv", decode_csv, write_csv),
     ".parquet": FileFormat("parquet", decode_parquet, write_parquet),
     ".mf4": FileFormat("mf4", decode_mf4, write_mf4),
+    ".mat": FileFormat("mat", decode_mat, write_mat),
 }
 
 

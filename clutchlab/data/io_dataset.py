@@ -94,7 +94,8 @@ def save_dataset(
         Destination folder. It must not exist or be empty, unless ``overwrite`` is True.
     format : str, optional
         Experiment file format: ``"csv"`` (9 significant digits), ``"parquet"`` (float64,
-        units in the field metadata) or ``"mf4"`` (MDF 4.10, float64, channel units).
+        units in the field metadata), ``"mf4"`` (MDF 4.10, float64, channel units) or
+        ``"mat"`` (MATLAB v7, one column vector per signal, a ``units`` struct).
     overwrite : bool, optional
         Write into an existing non-empty folder. Files clutchlab wrote there before are
         replaced (or removed when no longer written); every other file is kept, and one in the
