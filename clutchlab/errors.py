@@ -11,6 +11,7 @@ __all__ = [
     "DataError",
     "FitError",
     "ModelError",
+    "ModelFileError",
     "ProblemListError",
     "SimulationError",
 ]
@@ -53,6 +54,19 @@ class DataError(ProblemListError, ValueError):
 
 class ModelError(ClutchlabError, ValueError):
     """Bad model specification: unknown effect or parameter, value out of bounds."""
+
+
+class ModelFileError(ProblemListError, ModelError):
+    """A saved model or fit result whose content is not valid, with every problem found.
+
+    Parameters
+    ----------
+    message : str
+        Summary line naming the file.
+    problems : list of str, optional
+        Every problem found, each naming the key (``state.gps.0.y_scale``) or the array
+        (``array 'gp0.x_scale' in m.npz``).
+    """
 
 
 class SimulationError(ClutchlabError, RuntimeError):
