@@ -10,6 +10,7 @@ __all__ = [
     "ClutchlabError",
     "DataError",
     "FitError",
+    "FitResultError",
     "ModelError",
     "ModelFileError",
     "ProblemListError",
@@ -75,3 +76,17 @@ class SimulationError(ClutchlabError, RuntimeError):
 
 class FitError(ClutchlabError, RuntimeError):
     """A parameter fit failed; carries the best iterate when there is one."""
+
+
+class FitResultError(ModelFileError, FitError):
+    """A fit-result file whose content is not valid (unknown effect or parameter, a value
+    not finite or outside its bounds, a missing key): every problem listed; both a
+    :class:`ModelError` and a :class:`FitError`.
+
+    Parameters
+    ----------
+    message : str
+        Summary line naming the file.
+    problems : list of str, optional
+        Every problem found, each naming its key.
+    """

@@ -334,7 +334,7 @@ class _Checker:
         try:
             LatchLabelRule.from_dict(rule)
         except ClutchlabError as exc:
-            self.add(w, str(exc).replace("\n", " "))
+            self.add(w, _one_line(exc))
 
     def physics(self, value, where: str, wrapped: bool = False) -> None:
         """A PhysicsPredictor description (``{"__physics__": {...}}`` if ``wrapped``)."""
@@ -357,7 +357,7 @@ class _Checker:
         try:
             PhysicsPredictor.from_dict(value)
         except ClutchlabError as exc:  # unknown effect or parameter, value out of bounds
-            self.add(where, str(exc).replace("\n  - ", "; ").replace("\n", " "))
+            self.add(where, _one_line(exc))
 
     def residual_param(self, value, where: str) -> None:
         if value is None:
@@ -543,6 +543,11 @@ class _Checker:
             a(names[2], (d,), positive=True)
 
 
+def _one_line(exc: Exception) -> str:
+    """An error's message, its problem list joined into one line."""
+    return str(exc).replace(":\n  - ", ": ").replace("\n  - ", "; ").replace("\n", " ")
+
+
 def _pair(value) -> str | None:
     if not isinstance(value, list | tuple) or len(value) != 2:
         return f"must be a list of two numbers, got {value!r}"
@@ -600,7 +605,7 @@ def _column_list(d: int | None):
 _RESIDUAL_CLASSES = tuple(n for n in MODEL_CLASSES if n != "HybridModel")
 
 
-def _bare_npz_name(value) -> str | None:
+def npz_name_problem(value) -> str | None:
     if not isinstance(value, str):
         return f"must be the NPZ file name, got {value!r}"
     bare = (
@@ -649,10 +654,9 @@ def check_model_document(
     c.key(doc, "version", "", _integer())
     version = doc.get("version")
     if _is_int(version) and version not in FORMAT_VERSIONS:
-        c.add(
-            "version", f"format version {version} is not one this release reads {FORMAT_VERSIONS}"
-        )
-    c.key(doc, "arrays", "", _bare_npz_name)
+        known = ", ".join(map(str, FORMAT_VERSIONS))
+        c.add("version", f"format version {version} is unknown (this release reads {known})")
+    c.key(doc, "arrays", "", npz_name_problem)
     name = c.key(doc, "class", "", _one_of(MODEL_CLASSES))
     params = c.key(doc, "params", "")
     state = c.key(doc, "state", "")

@@ -28,7 +28,13 @@ from .estimators import SVCPartitionedGP
 from .hybrid import HybridModel
 from .labels import LatchLabelRule
 from .local_gp import LocalGPRegressor
-from .model_check import FORMAT, FORMAT_VERSIONS, MODEL_CLASSES, check_model_document
+from .model_check import (
+    FORMAT,
+    FORMAT_VERSIONS,
+    MODEL_CLASSES,
+    check_model_document,
+    npz_name_problem,
+)
 from .physics import PhysicsPredictor
 
 __all__ = ["FORMAT", "load_model", "model_document", "save_model"]
@@ -258,34 +264,27 @@ def save_model(model, path: str | Path) -> Path:
     return npz
 
 
-def _read_arrays(npz: Path, source: Path) -> dict[str, np.ndarray]:
-    """Every array of ``npz``, read without pickle."""
-    try:
-        with np.load(npz, allow_pickle=False) as f:
-            if not isinstance(f, np.lib.npyio.NpzFile):
-                raise ModelFileError(f"{source}: array file {npz.name} is not an NPZ archive")
-            return {k: f[k] for k in f.files}
-    except _NPZ_ERRORS as exc:
-        raise ModelFileError(
-            f"{source}: cannot read array file {npz.name}: {type(exc).__name__}: {exc}"
-        ) from None
-
-
-def _array_file(path: Path, doc: dict) -> Path:
-    """The NPZ named by the document: a file beside ``path``, never outside its folder."""
-    npz = path.with_name(doc["arrays"])  # a bare file name: checked by the document check
-    folder = path.parent.resolve()
+def _read_arrays(path: Path, name: str) -> tuple[dict[str, np.ndarray] | None, str | None]:
+    """Every array of the NPZ ``name`` beside ``path``, read without pickle, and never
+    from outside the JSON's folder; ``(arrays, None)`` or ``(None, problem)``."""
+    npz = path.with_name(name)  # a bare file name: checked by the document check
+    where = f"array file {name}"
     try:
         real = npz.resolve(strict=True)
     except (OSError, RuntimeError):
-        raise ModelFileError(f"{path}: array file {npz.name} is missing") from None
-    if real.parent != folder:
-        raise ModelFileError(
-            f"{path}: array file {npz.name} links outside the model's folder ({real}); refused"
-        )
+        return None, f"{where}: missing"
+    if real.parent != path.parent.resolve():
+        return None, f"{where}: links outside the model's folder ({real}); refused"
     if not real.is_file():
-        raise ModelFileError(f"{path}: array file {npz.name} is not a regular file")
-    return npz
+        return None, f"{where}: not a regular file"
+    try:
+        f = np.load(real, allow_pickle=False)
+        if not isinstance(f, np.lib.npyio.NpzFile):
+            return None, f"{where}: not an NPZ archive"
+        with f:
+            return {k: f[k] for k in f.files}, None
+    except _NPZ_ERRORS as exc:
+        return None, f"{where}: cannot be read: {type(exc).__name__}: {exc}"
 
 
 def load_model(path: str | Path):
@@ -320,9 +319,18 @@ def load_model(path: str | Path):
         doc = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError, RecursionError) as exc:
         raise ModelError(f"cannot read model file {path}: {exc}") from None
-    check_model_document(doc, None, str(path))  # before the NPZ it names is opened
-    arrays = _read_arrays(_array_file(path, doc), path)
-    check_model_document(doc, arrays, str(path))
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise ModelError(f"{path} is not a clutchlab residual_ml model (format {FORMAT!r})")
+    arrays, problem = None, None
+    if npz_name_problem(doc.get("arrays")) is None:  # else the check names it; nothing is read
+        arrays, problem = _read_arrays(path, doc["arrays"])
+    problems = [problem] if problem else []
+    try:
+        check_model_document(doc, arrays, str(path))
+    except ModelFileError as exc:
+        problems += exc.problems
+    if problems:
+        raise ModelFileError(f"{path}: not a valid clutchlab model", problems)
     try:
         model = _CLASSES[doc["class"]](**_params_from(doc["params"]))
         _restore(model, doc["state"], arrays, "")
