@@ -158,7 +158,29 @@ def test_zero_and_negative_scales_are_refused(saved, tmp_path):
     assert "array 'gp0.x_scale' in m.npz: 1 value(s) not positive" in text
     assert "array 'gp0.w_bins' in m.npz: 1 value(s) not positive" in text
     assert "array 'clf.scale' in m.npz: 1 value(s) not positive" in text
-    assert "array 'gp0.theta' in m.npz: log-hyperparameter(s) at index [1]" in text
+    assert (
+        "array 'gp0.theta' in m.npz: log-hyperparameter(s) log_length_0 = [-10000.0] outside "
+        "the fit's bounds" in text
+    )
+
+
+def test_finite_values_no_fit_gives_are_refused(saved, tmp_path):
+    """Positive and finite, but the prediction would overflow to inf / NaN."""
+
+    def extreme(a):
+        a["gp.x_scale"][1] = 1e-320  # z = (x − mean) / scale = inf
+        a["gp.dual_coef"][0] = 1e308  # Σ weights · s² overflows
+        a["gp.w_bins"][2] = 1e-320  # bin noise σ² / w = inf
+        a["gp.X_bins"][3, 0] = 1e300  # 10³⁰⁰ standard deviations from the training data
+
+    err = refused(damaged(saved["gp"], tmp_path, arrays=extreme))
+    assert err.problems == [
+        "array 'gp.x_scale' in m.npz: value(s) at index [1] below 1e-12·max(1, |x_mean|) "
+        "(no fit gives them)",
+        "array 'gp.X_bins' in m.npz: standardized value(s) beyond 1e+06 standard deviations",
+        "array 'gp.w_bins' in m.npz: weight(s) so small that the bin noise σ²/w is infinite",
+        "array 'gp.dual_coef' in m.npz: weights so large that the predictive mean overflows",
+    ]
 
 
 def test_wrong_types_are_named(saved, tmp_path):

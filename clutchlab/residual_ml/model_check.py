@@ -37,6 +37,7 @@ from .features import FEATURES
 from .hybrid import HybridModel
 from .kernels import KERNELS, kernel_spec
 from .labels import LatchLabelRule
+from .local_gp import LocalGPRegressor
 from .physics import PhysicsPredictor
 
 __all__ = ["FORMAT", "FORMAT_VERSIONS", "MODEL_CLASSES", "check_model", "check_model_document"]
@@ -51,6 +52,12 @@ MODEL_CLASSES: dict[str, type] = {
 }
 #: Most ROS2 substeps per sample a saved physics may ask for.
 MAX_SUBSTEPS = 1000
+#: Largest standardized bin point (standard deviations of the training features): the
+#: weighted standardization of n samples bounds it by about √n, 10³ for 10⁶ samples.
+MAX_STANDARDIZED = 1e6
+#: Floor of a fitted scale relative to max(1, |mean|): the fit replaces a smaller standard
+#: deviation by 1 (``LocalGPRegressor.fit``).
+_SCALE_FLOOR = 1e-12
 
 _MISSING = object()
 _DECISIONS = {KernelDecision.kind: KernelDecision, LinearDecision.kind: LinearDecision}
@@ -495,7 +502,15 @@ class _Checker:
         a(prefix + "gamma", (1,), positive=True)
 
     def gp(self, meta, where: str, prefix: str, d: int | None) -> None:
-        """One LocalGPRegressor: its JSON part (``meta``) and its arrays."""
+        """One LocalGPRegressor: its JSON part (``meta``) and its arrays.
+
+        Beyond shapes and finiteness, the invariants every fit leaves: log-hyperparameters
+        inside the optimizer's bounds (:meth:`LocalGPRegressor._bounds`), scales above
+        ``1e-12·max(1, |mean|)`` (the floor the fit puts on them), standardized bin points
+        within :data:`MAX_STANDARDIZED` standard deviations, and bin noise ``σ²/w`` and the
+        mean's weights ``Σ|K⁻¹y|·s²·y_scale`` finite: then the mean and standard deviation
+        are finite for every finite input.
+        """
         meta = self.mapping(meta, where)
         if meta is None:
             self.claim(prefix)
@@ -508,39 +523,89 @@ class _Checker:
             n = self.key(meta, k, where, _integer(1))
             if n is not _MISSING and d is not None and n != d:
                 self.add(f"{where}.{k}", f"is {n}, but the model has {d} features")
-        self.key(meta, "y_mean", where, _number())
-        self.key(meta, "y_scale", where, _number(0.0, strict=True))
+        y_mean = self.key(meta, "y_mean", where, _number())
+        y_scale = self.key(meta, "y_scale", where, _number(0.0, strict=True))
+        if y_mean is not _MISSING and y_scale is not _MISSING:
+            if not float(y_scale) > _SCALE_FLOOR * max(1.0, abs(float(y_mean))):
+                self.add(
+                    f"{where}.y_scale",
+                    f"{y_scale!r} is below {_SCALE_FLOOR:g}·max(1, |y_mean|) (no fit gives it)",
+                )
         self.key(meta, "log_marginal_likelihood", where, _number(nan_ok=True))
         a = self.array
+        theta = None
         if kernel is not _MISSING and ard is not _MISSING and d is not None:
-            theta = a(prefix + "theta", (kernel_spec(kernel, d, ard).n_params + 1,))
+            spec = kernel_spec(kernel, d, ard)
+            theta = a(prefix + "theta", (spec.n_params + 1,))
             if theta is not None:
-                with np.errstate(over="ignore", under="ignore"):
-                    e = np.exp(theta)
-                bad = ~(np.isfinite(e) & (e > 0))
+                bounds = LocalGPRegressor()._bounds(spec)
+                tol = 1e-9 * np.maximum(1.0, np.abs(bounds))
+                bad = (theta < bounds[:, 0] - tol[:, 0]) | (theta > bounds[:, 1] + tol[:, 1])
                 if bad.any():
+                    names = [
+                        spec.param_names[i] if i < spec.n_params else "log_noise_var"
+                        for i in np.flatnonzero(bad)
+                    ]
                     self.add(
                         f"array {prefix + 'theta'!r} in {self.npz}",
-                        "log-hyperparameter(s) at index "
-                        f"{np.flatnonzero(bad).tolist()} give a zero or infinite variance or "
-                        f"length scale: {theta[bad].tolist()!r}",
+                        f"log-hyperparameter(s) {', '.join(names)} = "
+                        f"{theta[bad].tolist()!r} outside the fit's bounds "
+                        f"{bounds[bad].tolist()!r}",
                     )
+                    theta = None
         else:
             self.used.add(prefix + "theta")
-        a(prefix + "x_mean", (d,))
-        a(prefix + "x_scale", (d,), positive=True)
+        x_mean = a(prefix + "x_mean", (d,))
+        x_scale = a(prefix + "x_scale", (d,), positive=True)
+        if x_mean is not None and x_scale is not None:
+            low = ~(x_scale > _SCALE_FLOOR * np.maximum(1.0, np.abs(x_mean)))
+            if low.any():
+                self.add(
+                    f"array {prefix + 'x_scale'!r} in {self.npz}",
+                    f"value(s) at index {np.flatnonzero(low).tolist()} below "
+                    f"{_SCALE_FLOOR:g}·max(1, |x_mean|) (no fit gives them)",
+                )
         a(prefix + "bin_widths", (d,), positive=True)
-        pts = a(prefix + "X_bins", (None, d))
+        pts = self.standardized(prefix + "X_bins", d)
         n = pts.shape[0] if pts is not None else None
         a(prefix + "y_bins", (n,))
-        a(prefix + "w_bins", (n,), positive=True)
-        a(prefix + "dual_coef", (n,))
+        w = a(prefix + "w_bins", (n,), positive=True)
+        dual = a(prefix + "dual_coef", (n,))
         names = [prefix + k for k in ("X_std_bins", "w_std_bins", "std_bin_widths")]
         present = [k in self.arrays for k in names]
+        w_std = None
         if any(present[:2]) or present[2]:  # written since the std bins exist: all three
-            std = a(names[0], (None, d))
-            a(names[1], (std.shape[0] if std is not None else None,), positive=True)
+            std = self.standardized(names[0], d)
+            w_std = a(names[1], (std.shape[0] if std is not None else None,), positive=True)
             a(names[2], (d,), positive=True)
+        if theta is None:
+            return
+        with np.errstate(over="ignore", divide="ignore"):
+            noise, s2 = math.exp(theta[-1]), math.exp(theta[0])
+            for name, weights in ((prefix + "w_bins", w), (names[1], w_std)):
+                if weights is not None and not np.isfinite(noise / weights).all():
+                    self.add(
+                        f"array {name!r} in {self.npz}",
+                        "weight(s) so small that the bin noise σ²/w is infinite",
+                    )
+            if dual is not None and y_scale is not _MISSING and y_mean is not _MISSING:
+                total = abs(float(y_mean)) + np.sum(np.abs(dual)) * s2 * float(y_scale)
+                if not np.isfinite(total):
+                    self.add(
+                        f"array {prefix + 'dual_coef'!r} in {self.npz}",
+                        "weights so large that the predictive mean overflows",
+                    )
+
+    def standardized(self, name: str, d: int | None) -> np.ndarray | None:
+        """Bin points in standard deviations: n × d, within :data:`MAX_STANDARDIZED`."""
+        pts = self.array(name, (None, d))
+        if pts is not None and np.abs(pts).max() > MAX_STANDARDIZED:
+            self.add(
+                f"array {name!r} in {self.npz}",
+                f"standardized value(s) beyond {MAX_STANDARDIZED:g} standard deviations",
+            )
+            return None
+        return pts
 
 
 def _one_line(exc: Exception) -> str:

@@ -41,9 +41,20 @@ __all__ = ["FORMAT", "load_model", "model_document", "save_model"]
 
 _VERSION = FORMAT_VERSIONS[-1]
 _CLASSES = MODEL_CLASSES
-#: Errors numpy and zipfile raise on a damaged or hostile NPZ (truncated, not a zip, an
-#: object array that would need pickle, a bad header or compressed stream).
-_NPZ_ERRORS = (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, KeyError)
+#: Errors numpy and zipfile raise on a damaged or hostile NPZ: truncated, not a zip, an
+#: object array that would need pickle, a bad header or compressed stream, a zip member
+#: flagged encrypted (RuntimeError) or with an unsupported method or flag
+#: (NotImplementedError).
+_NPZ_ERRORS = (
+    OSError,
+    ValueError,
+    EOFError,
+    KeyError,
+    RuntimeError,
+    NotImplementedError,
+    zipfile.BadZipFile,
+    zlib.error,
+)
 
 
 def _param_to_json(value):
