@@ -225,6 +225,12 @@ def check_fit_document(doc, source: str = "fit result") -> None:
             f"{source}: not a clutchlab fit result (a JSON object is expected, got "
             f"{type(doc).__name__})"
         )
+    if not any(k in _FIELDS for k in doc):
+        keys = ", ".join(sorted(map(str, doc))[:8]) or "none"
+        raise FitResultError(
+            f"{source}: not a clutchlab fit result: it has none of the keys of one "
+            f"({', '.join(k for k in _FIELDS if k not in _OPTIONAL)}); its keys: {keys}"
+        )
     problems: list[str] = []
     unknown = sorted(str(k) for k in doc if k not in _FIELDS)
     if unknown:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ...errors import ClutchlabError, FitError
+from ...errors import ClutchlabError, FitError, FitResultError
 from ..model import CircuitModel
 from ..parameters import ParameterSet
 from ..settings import SimulationSettings
@@ -44,6 +44,10 @@ def physics_source(source) -> tuple[CircuitModel, ParameterSet]:
     if isinstance(source, str | Path):
         try:  # the content is checked as it is read (FitResult.from_json)
             result = FitResult.from_json(Path(source))
+        except FitResultError as exc:  # every problem of the content, one per line
+            raise FmuError(
+                f"{source}: not a fitted physics model", exc.problems or [str(exc)]
+            ) from exc
         except FitError as exc:
             raise FmuError(f"{source}: not a fitted physics model ({exc})") from exc
         try:
