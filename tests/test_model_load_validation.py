@@ -99,6 +99,15 @@ def test_valid_models_load_and_predict_as_saved(saved, trace):
         check_model(model)  # the in-memory check passes on a valid model
 
 
+def test_every_constructor_parameter_has_a_rule():
+    """A parameter added to an estimator must get a rule in the check, or files carrying
+    a bad value for it would load unchecked."""
+    from clutchlab.residual_ml.model_check import _PARAM_RULES, MODEL_CLASSES
+
+    for cls in MODEL_CLASSES.values():
+        assert set(cls._get_param_names()) <= set(_PARAM_RULES), cls.__name__
+
+
 def test_missing_keys_are_named(saved, tmp_path):
     def drop(d):
         del d["state"]["feature_names"]

@@ -154,7 +154,8 @@ def _lag(value) -> str | None:
     return None if problem is None else "must be 'auto' or " + problem.removeprefix("must be ")
 
 
-#: Rules of the constructor parameters (those handled by ``_nested`` are None).
+#: Rule of every constructor parameter of :data:`MODEL_CLASSES` (None: a nested object,
+#: checked by its own method of ``_Checker``: label rule, physics, residual estimator).
 _PARAM_RULES: dict[str, Callable | None] = {
     "features": _optional(_names(tuple(FEATURES))),
     "classifier_features": _optional(_names(tuple(FEATURES))),
