@@ -10,12 +10,13 @@ __all__ = ["register"]
 
 
 def _is_ml_model(path: str) -> bool:
-    """Whether ``path`` is a model saved by ``clutchlab.residual_ml.save_model``."""
+    """Whether ``path`` claims to be a model saved by ``clutchlab.residual_ml.save_model``
+    (a ``"format"`` key: a fit result has none); the loader then checks it."""
     try:
         doc = json.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return False
-    return isinstance(doc, dict) and "format" in doc and "class" in doc
+    return isinstance(doc, dict) and "format" in doc
 
 
 def _export(args: argparse.Namespace) -> Path:
@@ -23,10 +24,12 @@ def _export(args: argparse.Namespace) -> Path:
 
     if _is_ml_model(args.model):
         from .physics.fmu.adapters import ml_program_from
-        from .residual_ml import load_model
+        from .residual_ml import check_model, load_model
 
+        model = load_model(args.model)  # checked as it is read
+        check_model(model, args.model)  # the in-memory model the FMU is built from
         program = ml_program_from(
-            load_model(args.model),
+            model,
             with_std=not args.no_std,
             approximate_didt=args.approximate_didt,
             name=args.name,

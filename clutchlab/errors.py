@@ -10,7 +10,9 @@ __all__ = [
     "ClutchlabError",
     "DataError",
     "FitError",
+    "FitResultError",
     "ModelError",
+    "ModelFileError",
     "OutputError",
     "ProblemListError",
     "SimulationError",
@@ -61,9 +63,36 @@ class OutputError(ClutchlabError, OSError):
     clutchlab did not write, or lies in a folder that cannot be written."""
 
 
+class ModelFileError(ProblemListError, ModelError):
+    """A saved model or fit result whose content is not valid, with every problem found.
+
+    Parameters
+    ----------
+    message : str
+        Summary line naming the file.
+    problems : list of str, optional
+        Every problem found, each naming the key (``state.gps.0.y_scale``) or the array
+        (``array 'gp0.x_scale' in m.npz``).
+    """
+
+
 class SimulationError(ClutchlabError, RuntimeError):
     """The integrator failed (non-finite state, diverging solution)."""
 
 
 class FitError(ClutchlabError, RuntimeError):
     """A parameter fit failed; carries the best iterate when there is one."""
+
+
+class FitResultError(ModelFileError, FitError):
+    """A fit-result file whose content is not valid (unknown effect or parameter, a value
+    not finite or outside its bounds, a missing key): every problem listed; both a
+    :class:`ModelError` and a :class:`FitError`.
+
+    Parameters
+    ----------
+    message : str
+        Summary line naming the file.
+    problems : list of str, optional
+        Every problem found, each naming its key.
+    """

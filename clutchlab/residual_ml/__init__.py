@@ -42,6 +42,7 @@ from .kernels import KERNELS, KernelSpec, kernel_spec
 from .labels import EVENT, LATCHED, UNLATCHED, LatchLabelRule, latch_labels
 from .lag import LAG_GRID_S, LagSelection, select_lag
 from .local_gp import LocalGPRegressor, log_marginal_likelihood
+from .model_check import check_model, check_model_document
 from .persist import load_model, save_model
 from .physics import DefaultPhysics, PhysicsPredictor
 from .step import StepPredictor, step_predictor
@@ -79,6 +80,8 @@ __all__ = [
     "StepPredictor",
     "TraceEstimator",
     "as_traces",
+    "check_model",
+    "check_model_document",
     "compare_classifiers",
     "direction_of_travel",
     "grid_bins",

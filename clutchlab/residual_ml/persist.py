@@ -5,30 +5,56 @@ reads them back (``numpy.load(..., allow_pickle=False)``). A loaded model predic
 what the saved one did: the GP weights ``K⁻¹y`` and the classifier's support vectors and
 coefficients are stored, not refitted. A hybrid model's physics is stored as its model
 structure and parameter values (:class:`~clutchlab.residual_ml.physics.PhysicsPredictor`).
+
+Both directions go through one check (:func:`~clutchlab.residual_ml.model_check.
+check_model_document`): a file with a missing or mistyped key, an array of the wrong shape,
+a non-finite value or a zero scale is refused with every problem listed, and a model that
+would write such a file is not written. The array file is read only from beside the JSON.
 """
 
 from __future__ import annotations
 
 import json
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
 from sklearn.base import BaseEstimator
 
-from ..errors import ModelError
+from ..errors import ClutchlabError, ModelError, ModelFileError
 from .classifiers import KernelDecision, LinearDecision
-from .estimators import GPBaseline, GPWithDerivative, SVCPartitionedGP
+from .estimators import SVCPartitionedGP
 from .hybrid import HybridModel
 from .labels import LatchLabelRule
 from .local_gp import LocalGPRegressor
+from .model_check import (
+    FORMAT,
+    FORMAT_VERSIONS,
+    MODEL_CLASSES,
+    check_model_document,
+    npz_name_problem,
+)
 from .physics import PhysicsPredictor
 
-__all__ = ["FORMAT", "load_model", "save_model"]
+__all__ = ["FORMAT", "load_model", "model_document", "save_model"]
 
-#: Format tag written into every model JSON.
-FORMAT = "clutchlab.residual_ml"
-_VERSION = 1
-_CLASSES = {c.__name__: c for c in (GPBaseline, GPWithDerivative, SVCPartitionedGP, HybridModel)}
+_VERSION = FORMAT_VERSIONS[-1]
+_CLASSES = MODEL_CLASSES
+#: Errors numpy and zipfile raise on a damaged or hostile NPZ: truncated, not a zip, an
+#: object array that would need pickle, a bad header or compressed stream, a zip member
+#: flagged encrypted (RuntimeError) or with an unsupported method or flag
+#: (NotImplementedError).
+_NPZ_ERRORS = (
+    OSError,
+    ValueError,
+    EOFError,
+    KeyError,
+    RuntimeError,
+    NotImplementedError,
+    zipfile.BadZipFile,
+    zlib.error,
+)
 
 
 def _param_to_json(value):
@@ -92,7 +118,7 @@ def _put(arrays: dict, prefix: str, values: dict) -> None:
 
 def _get(arrays, prefix: str) -> dict:
     p = prefix + "."
-    return {k[len(p) :]: arrays[k] for k in arrays.files if k.startswith(p)}
+    return {k[len(p) :]: v for k, v in arrays.items() if k.startswith(p)}
 
 
 def _state(est, arrays: dict, prefix: str) -> dict:
@@ -168,8 +194,55 @@ def _restore(est, state: dict, arrays, prefix: str) -> None:
     est.gp_ = gp.set_state(state["gp"], _get(arrays, prefix + "gp"))
 
 
+def model_document(model, npz_name: str) -> tuple[dict, dict[str, np.ndarray]]:
+    """The JSON document and the arrays :func:`save_model` writes for ``model``.
+
+    Parameters
+    ----------
+    model : GPBaseline, GPWithDerivative, SVCPartitionedGP or HybridModel
+        Fitted estimator.
+    npz_name : str
+        File name of the NPZ, recorded in the document.
+
+    Returns
+    -------
+    doc : dict
+        JSON-ready document (format, version, class, parameters, learned state).
+    arrays : dict of str to numpy.ndarray
+        The arrays, by name.
+
+    Raises
+    ------
+    ModelError
+        If the model is of another class or holds a part that cannot be written without
+        pickle (e.g. a gradient-boosting classifier, an unknown physics object), or lacks
+        part of its fitted state.
+    """
+    if type(model).__name__ not in _CLASSES or not isinstance(model, BaseEstimator):
+        raise ModelError(f"cannot save a {type(model).__name__}; known: {', '.join(_CLASSES)}")
+    model._check_fitted()
+    arrays: dict[str, np.ndarray] = {}
+    try:
+        doc = {
+            "format": FORMAT,
+            "version": _VERSION,
+            "class": type(model).__name__,
+            "params": _params(model),
+            "state": _state(model, arrays, ""),
+            "arrays": npz_name,
+        }
+    except (AttributeError, KeyError, TypeError) as exc:  # a fitted attribute deleted or replaced
+        raise ModelError(
+            f"the {type(model).__name__} lacks part of its fitted state ({exc!r}); refit it"
+        ) from exc
+    return doc, arrays
+
+
 def save_model(model, path: str | Path) -> Path:
     """Write a fitted estimator to ``path`` (JSON) and ``path`` with suffix ``.npz``.
+
+    The model is checked first (:func:`~clutchlab.residual_ml.model_check.check_model`):
+    nothing is written for a model whose file would not load.
 
     Parameters
     ----------
@@ -188,29 +261,49 @@ def save_model(model, path: str | Path) -> Path:
     ModelError
         If the model is of another class or holds a part that cannot be written without
         pickle (e.g. a gradient-boosting classifier, an unknown physics object).
+    ModelFileError
+        If its state is not valid (non-finite arrays, zero scales, ...), listing every
+        problem.
     """
-    if type(model).__name__ not in _CLASSES:
-        raise ModelError(f"cannot save a {type(model).__name__}; known: {', '.join(_CLASSES)}")
-    model._check_fitted()
     path = Path(path)
     npz = path.with_suffix(".npz")
-    arrays: dict[str, np.ndarray] = {}
-    doc = {
-        "format": FORMAT,
-        "version": _VERSION,
-        "class": type(model).__name__,
-        "params": _params(model),
-        "state": _state(model, arrays, ""),
-        "arrays": npz.name,
-    }
+    doc, arrays = model_document(model, npz.name)
+    check_model_document(doc, arrays, f"{type(model).__name__} to be saved as {path}")
     text = json.dumps(doc, indent=2, allow_nan=True) + "\n"
     np.savez(npz, **arrays)
     path.write_text(text, encoding="utf-8")
     return npz
 
 
+def _read_arrays(path: Path, name: str) -> tuple[dict[str, np.ndarray] | None, str | None]:
+    """Every array of the NPZ ``name`` beside ``path``, read without pickle, and never
+    from outside the JSON's folder; ``(arrays, None)`` or ``(None, problem)``."""
+    npz = path.with_name(name)  # a bare file name: checked by the document check
+    where = f"array file {name}"
+    try:
+        real = npz.resolve(strict=True)
+    except (OSError, RuntimeError):
+        return None, f"{where}: missing"
+    if real.parent != path.parent.resolve():
+        return None, f"{where}: links outside the model's folder ({real}); refused"
+    if not real.is_file():
+        return None, f"{where}: not a regular file"
+    try:
+        f = np.load(real, allow_pickle=False)
+        if not isinstance(f, np.lib.npyio.NpzFile):
+            return None, f"{where}: not an NPZ archive"
+        with f:
+            return {k: f[k] for k in f.files}, None
+    except _NPZ_ERRORS as exc:
+        return None, f"{where}: cannot be read: {type(exc).__name__}: {exc}"
+
+
 def load_model(path: str | Path):
     """Read an estimator written by :func:`save_model`.
+
+    Nothing is built before the document and every array have passed
+    :func:`~clutchlab.residual_ml.model_check.check_model_document`; the NPZ is read
+    without pickle and only from the JSON's folder.
 
     Parameters
     ----------
@@ -225,21 +318,33 @@ def load_model(path: str | Path):
     Raises
     ------
     ModelError
-        If the file is not a clutchlab model or its arrays are missing.
+        If the file is not a clutchlab model.
+    ModelFileError
+        (a ModelError) If its content is not valid — missing or mistyped keys, arrays
+        missing, of inconsistent shapes, non-finite or zero scales, an unknown class or
+        format version, an array file outside the model's folder — listing every problem
+        with the file, key and array.
     """
     path = Path(path)
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, RecursionError) as exc:
         raise ModelError(f"cannot read model file {path}: {exc}") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise ModelError(f"{path} is not a clutchlab residual_ml model (format {FORMAT!r})")
-    if doc.get("class") not in _CLASSES:
-        raise ModelError(f"{path}: unknown model class {doc.get('class')!r}")
-    npz = path.with_name(doc["arrays"])
-    if not npz.exists():
-        raise ModelError(f"{path}: array file {npz} is missing")
-    model = _CLASSES[doc["class"]](**_params_from(doc["params"]))
-    with np.load(npz, allow_pickle=False) as arrays:
+    arrays, problem = None, None
+    if npz_name_problem(doc.get("arrays")) is None:  # else the check names it; nothing is read
+        arrays, problem = _read_arrays(path, doc["arrays"])
+    problems = [problem] if problem else []
+    try:
+        check_model_document(doc, arrays, str(path))
+    except ModelFileError as exc:
+        problems += exc.problems
+    if problems:
+        raise ModelFileError(f"{path}: not a valid clutchlab model", problems)
+    try:
+        model = _CLASSES[doc["class"]](**_params_from(doc["params"]))
         _restore(model, doc["state"], arrays, "")
+    except ClutchlabError as exc:
+        raise ModelFileError(f"{path}: not a valid clutchlab model", [str(exc)]) from exc
     return model

@@ -9,12 +9,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ...errors import FitError
-from ..effects import make_effect
+from ...errors import ClutchlabError, FitError, FitResultError
+from ..effects import EFFECTS, make_effect
 from ..model import CircuitModel
 from ..parameters import ParameterSet
 
-__all__ = ["FitResult", "identifiability"]
+__all__ = ["FitResult", "check_fit_document", "identifiability"]
 
 #: A parameter whose relative standard error exceeds this is reported unidentifiable.
 REL_SE_LIMIT = 0.5
@@ -140,15 +140,176 @@ class FitResult:
 
     @classmethod
     def from_json(cls, source: str | Path) -> FitResult:
-        """Read what :meth:`to_json` wrote (a path or the JSON text)."""
+        """Read what :meth:`to_json` wrote (a path or the JSON text).
+
+        The content is checked before anything is built (:func:`check_fit_document`).
+
+        Raises
+        ------
+        FitError
+            If the file cannot be read or is not JSON.
+        FitResultError
+            (a FitError and a ModelError) Listing every problem of the content: missing,
+            unknown or mistyped keys, unknown effects or parameter names, parameter values
+            not finite or outside their bounds, units other than the model's.
+        """
         text = str(source)
+        name = "fit result (JSON text)"
         if not text.lstrip().startswith("{"):
+            name = str(source)
             try:
                 text = Path(source).read_text(encoding="utf-8")
-            except OSError as exc:
+            except (OSError, ValueError) as exc:
                 raise FitError(f"cannot read fit result {source}: {exc}") from exc
         try:
             doc = json.loads(text)
-            return cls(**doc)
-        except (json.JSONDecodeError, TypeError) as exc:
-            raise FitError(f"not a clutchlab fit result: {exc}") from exc
+        except (json.JSONDecodeError, RecursionError) as exc:
+            raise FitError(f"not a clutchlab fit result: {name}: {exc}") from exc
+        check_fit_document(doc, name)
+        return cls(**doc)
+
+
+def _is_real(value) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _list_of(kind, value) -> bool:
+    return isinstance(value, list) and all(isinstance(v, kind) for v in value)
+
+
+#: Type rule of every key of a fit-result document: a description and a test.
+_FIELDS: dict[str, tuple[str, object]] = {
+    "effects": ("a list of effect names", lambda v: _list_of(str, v)),
+    "values": ("an object of numbers", lambda v: isinstance(v, dict)),
+    "units": ("an object of unit names", lambda v: isinstance(v, dict)),
+    "free": ("a list of parameter names", lambda v: _list_of(str, v)),
+    "std_errors": ("an object of numbers", lambda v: isinstance(v, dict)),
+    "correlation": ("a list of lists of numbers", lambda v: _list_of(list, v)),
+    "singular_values": ("a list of numbers", lambda v: isinstance(v, list)),
+    "unidentifiable": ("a list of parameter names", lambda v: _list_of(str, v)),
+    "weak_directions": ("a list of objects", lambda v: _list_of(dict, v)),
+    "per_experiment": ("an object of objects", lambda v: isinstance(v, dict)),
+    "per_experiment_values": ("an object of objects", lambda v: isinstance(v, dict)),
+    "cost_history": ("a list of numbers", lambda v: isinstance(v, list)),
+    "status": ("a string", lambda v: isinstance(v, str)),
+    "success": ("true or false", lambda v: isinstance(v, bool)),
+    "iterations": ("an integer", lambda v: isinstance(v, int) and not isinstance(v, bool)),
+    "wall_s": ("a number of seconds", _is_real),
+    "train": ("a list of experiment names", lambda v: _list_of(str, v)),
+    "settings": ("an object", lambda v: isinstance(v, dict)),
+}
+_OPTIONAL = ("settings",)
+
+
+def check_fit_document(doc, source: str = "fit result") -> None:
+    """Check a parsed fit-result JSON; raise one error listing every problem.
+
+    Parameters
+    ----------
+    doc : object
+        What ``json.loads`` gave for the file.
+    source : str
+        The file named in the error.
+
+    Raises
+    ------
+    FitResultError
+        Listing every problem, each naming its key: missing, unknown or mistyped keys;
+        unknown effects; unknown parameter names (in ``values``, ``units``, ``free``,
+        ``std_errors``, ``unidentifiable``, ``per_experiment_values``); parameter values
+        not finite or outside their bounds (engineering units); units other than the
+        model's; numbers that are not numbers.
+    """
+    if not isinstance(doc, dict):
+        raise FitResultError(
+            f"{source}: not a clutchlab fit result (a JSON object is expected, got "
+            f"{type(doc).__name__})"
+        )
+    if not any(k in _FIELDS for k in doc):
+        keys = ", ".join(sorted(map(str, doc))[:8]) or "none"
+        raise FitResultError(
+            f"{source}: not a clutchlab fit result: it has none of the keys of one "
+            f"({', '.join(k for k in _FIELDS if k not in _OPTIONAL)}); its keys: {keys}"
+        )
+    problems: list[str] = []
+    unknown = sorted(str(k) for k in doc if k not in _FIELDS)
+    if unknown:
+        problems.append(f"unknown key(s) {', '.join(unknown)}")
+    ok = {}
+    for key, (what, test) in _FIELDS.items():
+        if key not in doc:
+            if key not in _OPTIONAL:
+                problems.append(f"{key}: missing key")
+        elif not test(doc[key]):
+            problems.append(f"{key}: must be {what}, got {_short(doc[key])}")
+        else:
+            ok[key] = doc[key]
+    for key in ("singular_values", "cost_history"):
+        if key in ok and not all(_is_real(v) for v in ok[key]):
+            problems.append(f"{key}: must be a list of numbers")
+    if "correlation" in ok and not all(all(_is_real(x) for x in r) for r in ok["correlation"]):
+        problems.append("correlation: must be a list of lists of numbers")
+    specs = None
+    if "effects" in ok:
+        bad = [e for e in ok["effects"] if e.strip() not in EFFECTS]
+        dupes = sorted({e for e in ok["effects"] if ok["effects"].count(e) > 1})
+        if bad:
+            problems.append(f"effects: unknown effect(s) {bad!r}; known: {', '.join(EFFECTS)}")
+        if dupes:
+            problems.append(f"effects: switched on twice: {', '.join(dupes)}")
+        if not bad and not dupes:
+            try:
+                model = CircuitModel().with_effects(*(make_effect(e) for e in ok["effects"]))
+                specs = {p.name: p for p in model.parameters}
+            except ClutchlabError as exc:
+                problems.append(f"effects: {exc}")
+    if specs is not None:
+        _check_values(ok.get("values", {}), specs, "values", problems)
+        for exp, vals in ok.get("per_experiment_values", {}).items():
+            where = f"per_experiment_values.{exp}"
+            if isinstance(vals, dict):
+                _check_values(vals, specs, where, problems)
+            else:
+                problems.append(f"{where}: must be an object of numbers, got {_short(vals)}")
+        for name, unit in ok.get("units", {}).items():
+            if name not in specs:
+                problems.append(f"units.{name}: unknown parameter")
+            elif unit != specs[name].unit:
+                problems.append(
+                    f"units.{name}: {unit!r}, but the model's unit is {specs[name].unit!r}"
+                )
+        for key in ("free", "unidentifiable"):
+            bad = [n for n in ok.get(key, []) if n not in specs]
+            if bad:
+                problems.append(f"{key}: unknown parameter(s) {bad!r}")
+        for name, se in ok.get("std_errors", {}).items():
+            if name not in specs:
+                problems.append(f"std_errors.{name}: unknown parameter")
+            elif not _is_real(se) or se < 0:  # NaN / inf: a parameter the data do not fix
+                problems.append(f"std_errors.{name}: must be a number >= 0, got {_short(se)}")
+    for exp, metrics in ok.get("per_experiment", {}).items():
+        if not isinstance(metrics, dict) or not all(_is_real(v) for v in metrics.values()):
+            problems.append(f"per_experiment.{exp}: must be an object of numbers")
+    if problems:
+        raise FitResultError(f"{source}: not a clutchlab fit result, or a damaged one", problems)
+
+
+def _check_values(values: dict, specs: dict, where: str, problems: list[str]) -> None:
+    """Parameter values: known names, finite numbers inside the bounds."""
+    for name, value in values.items():
+        if name not in specs:
+            problems.append(f"{where}.{name}: unknown parameter")
+        elif not _is_real(value):
+            problems.append(f"{where}.{name}: must be a number, got {_short(value)}")
+        else:
+            try:
+                msg = specs[name].check(float(value))
+            except OverflowError:  # an integer beyond the float range
+                msg = f"{name} = {_short(value)} is not finite"
+            if msg:
+                problems.append(f"{where}.{name}: {msg}")
+
+
+def _short(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."

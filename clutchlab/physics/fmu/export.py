@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ...errors import FitError
+from ...errors import ClutchlabError, FitError, FitResultError
 from ..model import CircuitModel
 from ..parameters import ParameterSet
 from ..settings import SimulationSettings
@@ -42,13 +42,17 @@ def physics_source(source) -> tuple[CircuitModel, ParameterSet]:
     if isinstance(source, FitResult):
         return source.model(), source.params()
     if isinstance(source, str | Path):
-        try:
+        try:  # the content is checked as it is read (FitResult.from_json)
             result = FitResult.from_json(Path(source))
+        except FitResultError as exc:  # every problem of the content, one per line
+            raise FmuError(
+                f"{source}: not a fitted physics model", exc.problems or [str(exc)]
+            ) from exc
         except FitError as exc:
             raise FmuError(f"{source}: not a fitted physics model ({exc})") from exc
         try:
             return result.model(), result.params()
-        except Exception as exc:  # unknown effect or parameter in a hand-edited file
+        except ClutchlabError as exc:  # not expected after the check; named if it happens
             raise FmuError(f"{source}: the fitted model cannot be rebuilt: {exc}") from exc
     raise FmuError(
         f"cannot export {type(source).__name__}: expected a fit JSON path, FitResult, "

@@ -75,6 +75,31 @@ class _Constants:
 _INLINE = _Constants(inline_limit=np.iinfo(np.int64).max)
 
 
+def _number_problems(spec, finite=(), positive=(), positive_or_inf=()) -> list[str]:
+    """The fields of ``spec`` that are not finite numbers (``finite``), not finite and > 0
+    (``positive``) or not > 0 (``positive_or_inf``); None fields are skipped. An FMU built
+    from them would compute NaN from its first step."""
+    problems = []
+    for names, test, what in (
+        (finite, np.isfinite, "finite"),
+        (positive, lambda a: np.isfinite(a) & (a > 0), "finite and > 0"),
+        (positive_or_inf, lambda a: a > 0, "> 0"),
+    ):
+        for name in names:
+            value = getattr(spec, name)
+            if value is None:
+                continue
+            try:
+                arr = np.asarray(value, dtype=float)
+            except (TypeError, ValueError):
+                problems.append(f"{name} must hold numbers")
+                continue
+            bad = int(np.count_nonzero(~test(arr)))
+            if bad:
+                problems.append(f"{name} must be {what} ({bad} value(s) are not)")
+    return problems
+
+
 @dataclass(frozen=True)
 class GPSpec:
     """A fitted GP as arrays (the prediction of ``LocalGPRegressor``).
@@ -147,6 +172,11 @@ class GPSpec:
                 problems.append(f"std_points must have shape (m, {d})")
         if self.l_inv is not None and np.shape(self.l_inv) != (m, m):
             problems.append(f"l_inv must have shape ({m}, {m}) (one row per std point)")
+        problems += _number_problems(
+            self,
+            finite=("x_mean", "points", "weights", "y_mean", "l_inv", "std_points"),
+            positive=("x_scale", "length_scales", "alpha", "signal_var", "y_scale"),
+        )
         if problems:
             raise ModelError("invalid GPSpec: " + "; ".join(problems))
 
@@ -237,6 +267,14 @@ class DecisionSpec:
             raise ModelError(
                 "invalid DecisionSpec: kind 'rbf' needs support and coef, 'linear' needs weights"
             )
+        problems = _number_problems(
+            self,
+            finite=("mean", "intercept", "support", "coef", "weights"),
+            positive=("gamma",),
+            positive_or_inf=("scale",),  # inf: a feature the classifier weights 0
+        )
+        if problems:
+            raise ModelError("invalid DecisionSpec: " + "; ".join(problems))
 
     def __call__(self, x: ca.MX, const: _Constants = _INLINE) -> ca.MX:
         """Decision value at the row vector ``x`` (1 × d)."""
