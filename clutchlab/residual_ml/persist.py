@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 from sklearn.base import BaseEstimator
 
+from ..data.output import write_file_atomic
 from ..errors import ClutchlabError, ModelError, ModelFileError
 from .classifiers import KernelDecision, LinearDecision
 from .estimators import SVCPartitionedGP
@@ -270,9 +271,15 @@ def save_model(model, path: str | Path) -> Path:
     doc, arrays = model_document(model, npz.name)
     check_model_document(doc, arrays, f"{type(model).__name__} to be saved as {path}")
     text = json.dumps(doc, indent=2, allow_nan=True) + "\n"
-    np.savez(npz, **arrays)
-    path.write_text(text, encoding="utf-8")
+    # each file atomically, the JSON (which names the arrays) last
+    write_file_atomic(npz, lambda tmp: _savez(tmp, arrays), overwrite=True)
+    write_file_atomic(path, text.encode("utf-8"), overwrite=True)
     return npz
+
+
+def _savez(path: Path, arrays: dict[str, np.ndarray]) -> None:
+    with open(path, "wb") as fh:  # a file object: NumPy adds no ".npz" to the temporary name
+        np.savez(fh, **arrays)
 
 
 def _read_arrays(path: Path, name: str) -> tuple[dict[str, np.ndarray] | None, str | None]:
