@@ -15,6 +15,7 @@ from __future__ import annotations
 import copy
 import json
 import os
+import shutil
 import sys
 import tempfile
 from pathlib import Path
@@ -41,6 +42,14 @@ FUZZ = settings(
 
 ROOT = Path(tempfile.mkdtemp(prefix="clutchlab-model-fuzz-"))
 DECOY = ROOT / "outside"  # a valid model outside every fuzzed folder: never to be opened
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _remove_root():
+    """The fuzz writes hundreds of case folders: remove them all when the module is done."""
+    yield
+    shutil.rmtree(ROOT, ignore_errors=True)
+
 
 _OPENED: list[str] = []
 _RECORDING = [False]
