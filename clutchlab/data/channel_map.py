@@ -39,6 +39,7 @@ from types import MappingProxyType
 from typing import Any
 
 from ..errors import DataError
+from .paths import check_input_file
 from .signals import CANONICAL_ORDER, CURRENT_SIGNALS, SIGNALS
 from .units import parse_unit
 
@@ -276,9 +277,7 @@ def load_channel_map(source: str | Path | ChannelMap | Mapping[str, Any]) -> Cha
         return source
     if isinstance(source, Mapping):
         return ChannelMap.from_dict(source)
-    path = Path(source)
-    if not path.is_file():
-        raise DataError(f"{path}: channel map not found")
+    path = check_input_file(source, "channel map")
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
     except UnicodeDecodeError as exc:

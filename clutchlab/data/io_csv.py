@@ -11,15 +11,19 @@ unit in brackets (``P_clutch [kPa]``). Line numbers in messages are the file's l
 from __future__ import annotations
 
 import csv
+import os
 import re
 import warnings
+from collections import Counter
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..errors import DataError
+from .paths import check_input_file
 from .rawlog import RawChannel, RawLog
 from .signals import CANONICAL_ORDER
 from .trace import _MAX_ROWS_LISTED, Trace
@@ -83,17 +87,76 @@ def write_csv(trace: Trace, path: str | Path, *, float_format: str = _FLOAT_FORM
     return path
 
 
-def _read_header(path: Path) -> list[str]:
+@dataclass(frozen=True)
+class CsvLimits:
+    """Resource limits of the CSV reader (a hostile or broken file fails fast and small).
+
+    Attributes
+    ----------
+    max_columns : int
+        Most columns a header may have (``CLUTCHLAB_CSV_MAX_COLUMNS``; default 10 000).
+    max_header_bytes : int
+        Longest header line, bytes (``CLUTCHLAB_CSV_MAX_HEADER_BYTES``; default 1 MiB).
+    """
+
+    max_columns: int = 10_000
+    max_header_bytes: int = 1 << 20
+
+    @classmethod
+    def from_env(cls) -> CsvLimits:
+        """The limits, each raised by its environment variable when set."""
+        kw = {}
+        for field_, env in (
+            ("max_columns", "CLUTCHLAB_CSV_MAX_COLUMNS"),
+            ("max_header_bytes", "CLUTCHLAB_CSV_MAX_HEADER_BYTES"),
+        ):
+            if os.environ.get(env, "").strip().isdigit():
+                kw[field_] = int(os.environ[env])
+        return cls(**kw)
+
+
+def _nul_offset(path: Path) -> int | None:
+    """Byte offset of the first NUL byte in ``path`` (a binary file), or None."""
+    with path.open("rb") as fh:
+        offset = 0
+        while chunk := fh.read(1 << 20):
+            at = chunk.find(b"\0")
+            if at >= 0:
+                return offset + at
+            offset += len(chunk)
+    return None
+
+
+def _read_header(path: Path, limits: CsvLimits) -> list[str]:
     """First line of ``path`` as column names (BOM and surrounding whitespace stripped)."""
+    nul = _nul_offset(path)
+    if nul is not None:
+        with path.open("rb") as fh:
+            line = fh.read(nul).count(b"\n") + 1
+        raise DataError(
+            f"{path}: NUL byte at byte {nul} (line {line}): not a text CSV file (binary or damaged)"
+        )
+    with path.open("rb") as fh:
+        raw = fh.readline(limits.max_header_bytes + 1)
+    if len(raw) > limits.max_header_bytes and not raw.endswith(b"\n"):
+        raise DataError(
+            f"{path}: header line longer than {limits.max_header_bytes} bytes (raise the "
+            "limit with CLUTCHLAB_CSV_MAX_HEADER_BYTES if the file is right)"
+        )
     try:
-        with path.open("r", encoding="utf-8-sig", newline="") as fh:
-            row = next(csv.reader(fh), None)
+        text = raw.decode("utf-8-sig")
+        row = next(csv.reader([text]), None) if text.strip() else None
     except UnicodeDecodeError as exc:
         raise DataError(f"{path}: not a UTF-8 text CSV file ({exc})") from None
     except csv.Error as exc:
         raise DataError(f"{path}: malformed CSV header ({exc})") from None
     if row is None:
         raise DataError(f"{path}: empty file (no header, no data rows)")
+    if len(row) > limits.max_columns:
+        raise DataError(
+            f"{path}: {len(row)} columns in the header, more than the limit of "
+            f"{limits.max_columns} (raise it with CLUTCHLAB_CSV_MAX_COLUMNS if the file is right)"
+        )
     return [c.strip() for c in row]
 
 
@@ -140,17 +203,13 @@ def decode_csv(path: str | Path, wanted: Callable[[str], bool] | None = None) ->
         Missing, empty, non-UTF-8 or malformed file, duplicate or empty column names,
         a truncated last line; unparseable cells are listed in ``RawLog.problems``.
     """
-    path = Path(path)
-    if not path.exists():
-        raise DataError(f"{path}: file not found")
-    if not path.is_file():
-        raise DataError(f"{path}: not a file")
+    path = check_input_file(path)
 
-    header = _read_header(path)
+    header = _read_header(path, CsvLimits.from_env())
     problems: list[str] = []
     names_units = [_split_unit(h) for h in header]
     names = [n for n, _ in names_units]
-    dupes = sorted({c for c in names if names.count(c) > 1})
+    dupes = sorted(c for c, k in Counter(names).items() if k > 1)
     if dupes:
         problems.append(f"{path}: duplicate column(s) {', '.join(map(repr, dupes))}")
     empty = [i + 1 for i, c in enumerate(names) if not c]
@@ -161,9 +220,12 @@ def decode_csv(path: str | Path, wanted: Callable[[str], bool] | None = None) ->
     if problems:
         raise DataError(f"{path}: bad CSV header", problems)
 
-    columns, problems, unparseable = _parse_values(path, header)
-    n = next(iter(columns.values())).size
-    fields = len(next(csv.reader([_last_line(path)]), []))
+    try:
+        columns, problems, unparseable = _parse_values(path, header)
+        n = next(iter(columns.values())).size
+        fields = len(next(csv.reader([_last_line(path)]), []))
+    except csv.Error as exc:  # e.g. a field longer than the csv module's field size limit
+        raise DataError(f"{path}: malformed CSV ({exc})") from None
     if fields < len(header):
         problems.append(
             f"{path}: file truncated: {_line_label(n - 1)} has {fields} of {len(header)} fields"

@@ -24,6 +24,7 @@ import numpy as np
 
 from ..errors import DataError
 from .meta_json import embedded_meta_json, parse_embedded_meta
+from .paths import check_input_file
 from .rawlog import RawChannel, RawLog
 from .signals import CANONICAL_ORDER, SIGNALS
 from .trace import Trace
@@ -143,11 +144,7 @@ def decode_mat(path: str | Path, wanted: Callable[[str], bool] | None = None) ->
         Missing or unreadable file, no numeric vector in it, several structs (which is the
         experiment is ambiguous), or vectors of different lengths (each named).
     """
-    path = Path(path)
-    if not path.exists():
-        raise DataError(f"{path}: file not found")
-    if not path.is_file():
-        raise DataError(f"{path}: not a regular file")
+    path = check_input_file(path)
     if path.stat().st_size == 0:
         raise DataError(f"{path}: empty file")
     major, _ = _version(path)

@@ -20,6 +20,7 @@ import numpy as np
 from ..errors import DataError
 from .mdf_check import check_mdf4_structure
 from .meta_json import embedded_meta_json, parse_embedded_meta
+from .paths import check_input_file
 from .rawlog import RawChannel, RawLog, TimeBase
 from .signals import CANONICAL_ORDER, SIGNALS
 from .trace import Trace
@@ -124,11 +125,7 @@ def decode_mf4(path: str | Path, wanted: Callable[[str], bool] | None = None) ->
     DataError
         Missing or empty file, no MDF identification block, truncated or corrupt file.
     """
-    path = Path(path)
-    if not path.exists():
-        raise DataError(f"{path}: file not found")
-    if not path.is_file():
-        raise DataError(f"{path}: not a file")
+    path = check_input_file(path)
     size = path.stat().st_size
     if size == 0:
         raise DataError(f"{path}: empty file")

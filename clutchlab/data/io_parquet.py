@@ -17,6 +17,7 @@ import numpy as np
 
 from ..errors import DataError
 from .meta_json import embedded_meta_json, parse_embedded_meta
+from .paths import check_input_file
 from .rawlog import RawChannel, RawLog
 from .signals import CANONICAL_ORDER, SIGNALS
 from .trace import Trace
@@ -114,11 +115,7 @@ def decode_parquet(path: str | Path, wanted: Callable[[str], bool] | None = None
     """
     import pyarrow.parquet as pq
 
-    path = Path(path)
-    if not path.exists():
-        raise DataError(f"{path}: file not found")
-    if not path.is_file():
-        raise DataError(f"{path}: not a file")
+    path = check_input_file(path)
     if path.stat().st_size == 0:
         raise DataError(f"{path}: empty file")
     try:

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import DataError
+from .paths import check_input_file, contained_file, file_kind_problem
 
 __all__ = [
     "ENTRY_KEYS",
@@ -140,13 +141,9 @@ def _string(entry: dict, key: str, where: str, problems: list[str]) -> str | Non
 
 
 def _map_path(value: Any, root: Path, where: str, problems: list[str]) -> Path | None:
-    if not isinstance(value, str) or not value:
-        problems.append(f"{where}: 'channel_map' must be a file name, got {json.dumps(value)}")
-        return None
-    path = root / value
-    if not path.is_file():
-        problems.append(f"{where}: channel map {value!r} not found ({path})")
-        return None
+    path, why = contained_file(root, value, where, "channel_map")
+    if why is not None:
+        problems.append(why)
     return path
 
 
@@ -184,10 +181,9 @@ def _check_entry(
         map_ok = cmap is not None
     path = None
     if file is not None:
-        path = root / file
-        if not path.is_file():
-            problems.append(f"{where}: file {file!r} not found ({path})")
-            path = None
+        path, why = contained_file(root, file, where, "file")
+        if why is not None:
+            problems.append(why)
     # The file is still read when only optional keys are wrong, so that its own problems
     # are listed too; without a file, a ramp or its channel map there is nothing to read.
     if path is None or ramp is None or not map_ok:
@@ -222,9 +218,9 @@ def read_manifest(path: str | Path) -> Manifest:
     else:
         root, manifest_path = path, path / MANIFEST_NAME
     if not root.is_dir():
-        raise DataError(f"{root}: dataset folder not found")
-    if not manifest_path.is_file():
-        raise DataError(f"{manifest_path}: manifest not found")
+        why = file_kind_problem(root)
+        raise DataError(f"{root}: dataset folder {'not found' if why == 'not found' else why}")
+    check_input_file(manifest_path, "manifest")
     try:
         data = json.loads(manifest_path.read_text(encoding="utf-8-sig"))
     except UnicodeDecodeError as exc:

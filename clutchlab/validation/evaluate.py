@@ -284,18 +284,15 @@ def _band_curves(ev: Evaluation, progress: bool) -> dict[str, dict[str, Hysteres
 
 
 def _classifier_comparison(protocol: Protocol, progress: bool, random_state: int) -> Any:
-    """The latch-classifier comparison of residual_ml (paper Table 1 / Fig. 2), if it has one.
+    """The latch-classifier comparison of residual_ml (paper Table 1 / Fig. 2).
 
     Leave-one-experiment-out over the **training** experiments only.
     """
-    try:
-        from .. import residual_ml as ml
-    except Exception:  # the layer is optional here; the report says so
-        return None
-    fn = getattr(ml, "compare_classifiers", None)
-    if fn is None:
-        return None
-    return fn(list(protocol.train_traces()), random_state=random_state, progress=progress)
+    from .. import residual_ml as ml  # a failing import is an error, not a missing table
+
+    return ml.compare_classifiers(
+        list(protocol.train_traces()), random_state=random_state, progress=progress
+    )
 
 
 def evaluate(

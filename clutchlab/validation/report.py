@@ -19,6 +19,7 @@ import html
 import io
 import json
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -130,6 +131,22 @@ def _best(rows: dict[str, dict[str, Any]], key: str) -> str | None:
 # ---- Markdown ---------------------------------------------------------------------------------
 
 
+_MD_SPECIAL = re.compile(r"([\\`*_\[\]()#|~!])")
+
+
+def _md_text(text: Any) -> str:
+    """A user-provided string (ramp label, path, message) as literal Markdown text: HTML and
+    Markdown syntax characters escaped, so a label renders as written and injects nothing."""
+    return _MD_SPECIAL.sub(r"\\\1", html.escape(str(text), quote=False))
+
+
+def _md_code(text: Any) -> str:
+    """``text`` as an inline code span, whatever backticks it contains."""
+    text = str(text).replace("\n", " ")
+    fence = "`" * (max((len(r) for r in re.findall(r"`+", text)), default=0) + 1)
+    return f"{fence} {text} {fence}"
+
+
 def _md_cell(text: str) -> str:
     return str(text).replace("|", "\\|")
 
@@ -167,20 +184,21 @@ def render_markdown(doc: dict[str, Any], figure_files: list[tuple[str, str, str]
     out = [
         "# clutchlab validation report",
         "",
-        f"Command: `{doc['command']}`  ",
+        f"Command: {_md_code(doc['command'])}  ",
         f"Created {doc['created_utc']} · clutchlab {doc['versions']['clutchlab']} · "
         f"total {fmt(doc['timings'].get('total_s', doc['timings'].get('evaluate_s')))} s",
         "",
-        f"Dataset: {data['experiments']} experiments ({data['root'] or 'in memory'}); "
-        f"train = {', '.join(split['train_ramps'])} ({len(split['train'])} experiments), "
-        f"test = {', '.join(split['test_ramps'])} ({len(split['test'])} experiments, never "
+        f"Dataset: {data['experiments']} experiments ({_md_text(data['root'] or 'in memory')}); "
+        f"train = {_md_text(', '.join(split['train_ramps']))} ({len(split['train'])} "
+        f"experiments), test = {_md_text(', '.join(split['test_ramps']))} "
+        f"({len(split['test'])} experiments, never "
         "used for fitting or model selection).",
         "",
     ]
     if doc["failed"] or doc["unavailable"]:
         out.append("**Not in this report:**")
-        out += [f"- `{n}` failed: {why}" for n, why in doc["failed"].items()]
-        out += [f"- `{n}` not available: {why}" for n, why in doc["unavailable"].items()]
+        out += [f"- `{n}` failed: {_md_text(why)}" for n, why in doc["failed"].items()]
+        out += [f"- `{n}` not available: {_md_text(why)}" for n, why in doc["unavailable"].items()]
         out.append("")
     out += [
         "## Variants on the test ramp (dither-period mean)",

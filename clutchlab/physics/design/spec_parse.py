@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from ...errors import ModelError
+from ..effects import effect_names
 from ..model import CircuitModel
 from ..stand.scenarios import DITHER_SHAPES, RAMPS, RampProfile, dither_amplitude
 from .metrics import MetricSettings
@@ -87,9 +88,10 @@ def parse_spec(doc: dict, source: str = "spec") -> SweepSpec:
 
 def _parse_model(doc: dict, problems: list[str]) -> tuple[ModelSpec, CircuitModel | None]:
     tab = _table(doc, "model", {"effects", "baseline", "parameters"}, problems)
-    effects = tab.get("effects", [])
-    if not isinstance(effects, list) or not all(isinstance(e, str) for e in effects):
-        problems.append("[model] effects must be a list of effect names")
+    try:
+        effects = list(effect_names(tab.get("effects", []), "[model] effects"))
+    except ModelError as exc:
+        problems.append(str(exc))
         effects = []
     baseline = tab.get("baseline", "default")
     if baseline not in ("default", "stand"):

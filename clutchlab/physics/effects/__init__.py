@@ -7,6 +7,8 @@ zero, and a one-line residual signature.
 
 from __future__ import annotations
 
+from typing import Any
+
 from ...errors import ModelError
 from .base import Effect
 from .friction import DitherFrictionReduction, StribeckFriction
@@ -38,6 +40,7 @@ __all__ = [
     "StribeckFriction",
     "SupplyDroop",
     "TransportDelay",
+    "effect_names",
     "effect_table",
     "make_effect",
 ]
@@ -61,6 +64,43 @@ EFFECTS: dict[str, type[Effect]] = {
         AccumulatorSpringNonlinearity,
     )
 }
+
+
+def effect_names(value: Any, where: str = "effects") -> tuple[str, ...]:
+    """Effect names given as one name (a string) or a list of names, checked against the library.
+
+    Parameters
+    ----------
+    value : str or sequence of str
+        ``"sensor_lag"`` (one effect; a comma-separated string is split) or
+        ``["sensor_lag", "flow_force"]``.
+    where : str
+        How messages name the setting.
+
+    Returns
+    -------
+    tuple of str
+        The names, stripped, in the given order.
+
+    Raises
+    ------
+    ModelError
+        For a value of another type (naming it) or unknown names (listing the known ones).
+    """
+    if isinstance(value, str):
+        names = [v.strip() for v in value.split(",") if v.strip()]
+    elif isinstance(value, list | tuple) and all(isinstance(v, str) for v in value):
+        names = [v.strip() for v in value]
+    else:
+        raise ModelError(
+            f"{where}: expected an effect name or a list of effect names, got "
+            f"{type(value).__name__} {value!r:.60}"
+        )
+    unknown = [n for n in names if n not in EFFECTS]
+    if unknown:
+        known = ", ".join(sorted(EFFECTS))
+        raise ModelError(f"{where}: unknown effect(s) {unknown}; known effects: {known}")
+    return tuple(names)
 
 
 def make_effect(name: str) -> Effect:

@@ -89,10 +89,10 @@ class PhysicsFitter:
         settings = self.settings or FitSettings()
         if isinstance(data, Dataset):
             missing = [r for r in settings.train_ramps if r not in data.ramps]
-            if len(missing) == len(settings.train_ramps):
+            if missing:  # never train silently on fewer ramps than asked for
                 raise FitError(
-                    f"no training experiments: ramps {list(settings.train_ramps)} "
-                    f"not in the dataset (it has {data.ramps})"
+                    f"training ramp(s) {missing} not in the dataset (it has {data.ramps}); "
+                    f"asked for {list(settings.train_ramps)}"
                 )
             traces = list(data.select(ramps=[r for r in settings.train_ramps if r in data.ramps]))
         else:

@@ -21,7 +21,7 @@ from ...data import Dataset, Trace, save_dataset
 from ...data.output import check_output, write_file_atomic
 from ...errors import ModelError
 from ..assembly import MODEL_INPUTS
-from ..effects import make_effect
+from ..effects import effect_names
 from ..model import CircuitModel
 from ..parameters import ParameterSet
 from ..settings import SimulationSettings
@@ -114,8 +114,7 @@ class StandConfig:
     def model(self) -> CircuitModel:
         """The stand's truth model (built-in + requested effects)."""
         names = list(BUILTIN_EFFECTS) if self.builtin_effects else []
-        for e in self.effects:
-            make_effect(e)  # unknown names fail here, listing the known ones
+        for e in effect_names(self.effects, "stand effects"):  # unknown names fail here
             if e not in names:
                 names.append(e)
         return CircuitModel().with_effects(*names)
