@@ -8,6 +8,7 @@ no input for the solenoid current, inputs that cannot be fed from a trace.
 
 from __future__ import annotations
 
+import os
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,7 +20,15 @@ from ...data.signals import SIGNALS
 from .errors import FmuError
 from .units import FmiUnit, convertible, lookup
 
-__all__ = ["CURRENT_SIGNALS", "FmuInterface", "FmuPort", "inspect_fmu"]
+__all__ = [
+    "CURRENT_SIGNALS",
+    "FmuInterface",
+    "FmuLimits",
+    "FmuPort",
+    "check_archive",
+    "inspect_fmu",
+    "read_member",
+]
 
 #: Canonical signals of which an FMU must take one (the solenoid current).
 CURRENT_SIGNALS: tuple[str, ...] = ("current_mA", "current_cmd_mA")
@@ -92,6 +101,9 @@ class FmuInterface:
         Exported by clutchlab (its trace-dependent parameters are set from the trace).
     can_interpolate_inputs : bool
         The FMU accepts input derivatives (inputs linear over a step instead of held).
+    unfed : dict
+        Inputs clutchlab does not feed (not Real, or not mapped to a signal): name → text
+        with type and start value. They keep their start values.
     """
 
     path: Path
@@ -102,6 +114,7 @@ class FmuInterface:
     parameters: dict[str, int] = field(default_factory=dict)
     clutchlab: bool = False
     can_interpolate_inputs: bool = False
+    unfed: dict[str, str] = field(default_factory=dict)
 
     @property
     def current_signal(self) -> str:
@@ -129,23 +142,114 @@ def _declared_units(md) -> dict[str, FmiUnit]:
     return out
 
 
+@dataclass(frozen=True)
+class FmuLimits:
+    """Resource limits of FMU import: an archive beyond them is refused before extraction.
+
+    Each is raised by its environment variable (an integer), for an FMU that is genuinely
+    that large.
+
+    Attributes
+    ----------
+    max_total_bytes : int
+        Uncompressed size of all members (``CLUTCHLAB_FMU_MAX_TOTAL_BYTES``; 2 GiB).
+    max_members : int
+        Number of members (``CLUTCHLAB_FMU_MAX_MEMBERS``; 20 000).
+    max_ratio : int
+        Largest compression ratio of a member over 1 MiB (``CLUTCHLAB_FMU_MAX_RATIO``; 200):
+        real binaries and sources compress 2–20×, a zip bomb 1000×.
+    max_description_bytes : int
+        Size of ``modelDescription.xml`` (``CLUTCHLAB_FMU_MAX_DESCRIPTION_BYTES``; 64 MiB).
+    """
+
+    max_total_bytes: int = 2 << 30
+    max_members: int = 20_000
+    max_ratio: int = 200
+    max_description_bytes: int = 64 << 20
+
+    @classmethod
+    def from_env(cls) -> FmuLimits:
+        """The limits, each raised by its environment variable when set."""
+        kw = {}
+        for name in ("max_total_bytes", "max_members", "max_ratio", "max_description_bytes"):
+            env = f"CLUTCHLAB_FMU_{name.upper()}"
+            if os.environ.get(env, "").strip().isdigit():
+                kw[name] = int(os.environ[env])
+        return cls(**kw)
+
+
+def _member_problem(name: str) -> str | None:
+    parts = name.replace("\\", "/").split("/")
+    if name.startswith(("/", "\\")) or (parts and len(parts[0]) == 2 and parts[0][1] == ":"):
+        return f"member {name!r} has an absolute path"
+    if ".." in parts:
+        return f"member {name!r} leads out of the archive ('..')"
+    if "\0" in name:
+        return f"member {name!r} contains a NUL character"
+    return None
+
+
+def check_archive(path: Path, zf: zipfile.ZipFile, limits: FmuLimits) -> list[zipfile.ZipInfo]:
+    """Refuse an archive beyond :class:`FmuLimits` or with unsafe member names (FmuError)."""
+    infos = zf.infolist()
+    problems = [p for p in (_member_problem(i.filename) for i in infos) if p]
+    hint = " (raise it with CLUTCHLAB_FMU_{} if the FMU is genuine)"
+    if len(infos) > limits.max_members:
+        problems.append(
+            f"{len(infos)} members, more than {limits.max_members}" + hint.format("MAX_MEMBERS")
+        )
+    total = sum(i.file_size for i in infos)
+    if total > limits.max_total_bytes:
+        problems.append(
+            f"{total} bytes uncompressed, more than {limits.max_total_bytes}"
+            + hint.format("MAX_TOTAL_BYTES")
+        )
+    for i in infos:
+        if i.file_size > (1 << 20) and i.file_size > limits.max_ratio * max(i.compress_size, 1):
+            problems.append(
+                f"member {i.filename!r} expands {i.file_size / max(i.compress_size, 1):.0f}× "
+                f"(limit {limits.max_ratio}×: a zip bomb?)" + hint.format("MAX_RATIO")
+            )
+    if problems:
+        raise FmuError(f"{path}: refused before extraction", problems)
+    return infos
+
+
+def read_member(zf: zipfile.ZipFile, name: str, limit: int, source: Path) -> bytes:
+    """A member's bytes, reading at most ``limit`` + 1 whatever its header claims."""
+    with zf.open(name) as fh:
+        data = fh.read(limit + 1)
+    if len(data) > limit:
+        raise FmuError(
+            f"{source}: {name} is larger than {limit} bytes (raise "
+            "CLUTCHLAB_FMU_MAX_DESCRIPTION_BYTES if the FMU is genuine)"
+        )
+    return data
+
+
 def _read_description(path: Path, problems: list[str]):
     if not path.is_file():
         raise FmuError(f"{path}: no such file")
     if not zipfile.is_zipfile(path):
         raise FmuError(f"{path}: not an FMU — the file is not a zip archive")
-    with zipfile.ZipFile(path) as zf:
-        names = set(zf.namelist())
-        if "modelDescription.xml" not in names:
-            listing = ", ".join(sorted(names)[:8]) or "nothing"
-            raise FmuError(
-                f"{path}: not an FMU — the zip archive has no modelDescription.xml "
-                f"(it holds {listing})"
-            )
-        try:
-            root = ElementTree.fromstring(zf.read("modelDescription.xml"))
-        except ElementTree.ParseError as exc:
-            raise FmuError(f"{path}: modelDescription.xml is not valid XML: {exc}") from exc
+    limits = FmuLimits.from_env()
+    try:
+        with zipfile.ZipFile(path) as zf:
+            check_archive(path, zf, limits)
+            names = set(zf.namelist())
+            if "modelDescription.xml" not in names:
+                listing = ", ".join(sorted(names)[:8]) or "nothing"
+                raise FmuError(
+                    f"{path}: not an FMU — the zip archive has no modelDescription.xml "
+                    f"(it holds {listing})"
+                )
+            text = read_member(zf, "modelDescription.xml", limits.max_description_bytes, path)
+    except (zipfile.BadZipFile, NotImplementedError, OSError, EOFError) as exc:
+        raise FmuError(f"{path}: damaged zip archive: {exc}") from None
+    try:
+        root = ElementTree.fromstring(text)
+    except ElementTree.ParseError as exc:
+        raise FmuError(f"{path}: modelDescription.xml is not valid XML: {exc}") from exc
     version = root.get("fmiVersion")
     if root.tag != "fmiModelDescription" or version is None:
         raise FmuError(
@@ -234,18 +338,22 @@ def inspect_fmu(
             f"input_map names FMU input(s) {', '.join(missing_keys)} the FMU does not have "
             f"(its inputs: {', '.join(sorted(names)) or 'none'})"
         )
-    ports = []
+    ports, unfed = [], {}
     for var in fmu_inputs:
         signal = input_map.get(var.name, var.name)
-        if var.type != "Real":
-            problems.append(f"input {var.name!r} is of type {var.type}; only Real inputs are fed")
+        start_text = f"start value {var.start}" if var.start is not None else "no start value"
+        if var.type != "Real":  # vendor FMUs carry Integer / Boolean / String switches
+            unfed[var.name] = f"{var.type}, kept at its {start_text}"
             continue
         if signal not in SIGNALS or signal == "time_s":
-            problems.append(
-                f"input {var.name!r} has no source: it is not a canonical signal name; "
-                f"map it with input_map={{{var.name!r}: '<signal>'}} "
-                f"(signals: {', '.join(s for s in SIGNALS if s != 'time_s')})"
-            )
+            if var.name in input_map or var.start is None:
+                problems.append(
+                    f"input {var.name!r} has no source: it is not a canonical signal name "
+                    f"and has no start value; map it with input_map={{{var.name!r}: "
+                    f"'<signal>'}} (signals: {', '.join(s for s in SIGNALS if s != 'time_s')})"
+                )
+            else:
+                unfed[var.name] = f"Real, not mapped to a signal, kept at its {start_text}"
             continue
         unit = lookup(var.unit or (var.declaredType.unit if var.declaredType else None), declared)
         sig_unit = lookup(SIGNALS[signal].unit)
@@ -262,6 +370,7 @@ def inspect_fmu(
             "missing input: no FMU input takes the solenoid current (current_mA or "
             f"current_cmd_mA); its inputs are {', '.join(sorted(names))}"
             + ("" if input_map else " — map one with input_map")
+            + (f" (left at their start values: {', '.join(unfed)})" if unfed else "")
         )
     elif not fmu_inputs:
         problems.append("missing inputs: the FMU has no inputs, so no current can drive it")
@@ -296,4 +405,5 @@ def inspect_fmu(
         parameters={v.name: v.valueReference for v in variables if v.causality == "parameter"},
         clutchlab=str(md.generationTool or "").startswith("clutchlab"),
         can_interpolate_inputs=bool(md.coSimulation.canInterpolateInputs),
+        unfed=unfed,
     )
