@@ -4,15 +4,18 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
+import sys
 
 __all__ = ["register"]
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
     from .physics.design import design_points, load_spec, run_sweep
+    from .physics.design.runner import check_sweep_output
 
     spec = load_spec(args.spec)
+    if not args.dry_run:
+        check_sweep_output(args.out, args.overwrite)  # before any work
     if args.scheduler and args.workers is not None:
         raise SystemExit("clutchlab sweep: --workers is for local runs; a Dask cluster has its own")
     if args.dry_run:
@@ -45,7 +48,12 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     if res.figures:
         print(f"figures: {res.figures[0].parent}")
     if args.json:
-        Path(args.json).write_text(json.dumps(res.summary(), indent=2) + "\n", encoding="utf-8")
+        from .cli import write_json_output
+
+        write_json_output(args.json, json.dumps(res.summary(), indent=2))
+    if res.n_run and res.n_failed >= res.n_run:
+        print(f"every point failed ({res.n_failed}): see the errors above", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -8,11 +8,13 @@ order. A batch whose task itself fails (a worker process killed, a lost Dask wor
 from __future__ import annotations
 
 import multiprocessing
+import os
 import uuid
 from collections.abc import Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from typing import Any
 
+from . import lifetime
 from .evaluate import STATUS_FAILED, evaluate_batch
 from .sampling import DesignPoint
 from .spec import SweepSpec
@@ -32,10 +34,14 @@ def _failed_rows(batch: Batch, exc: BaseException) -> list[dict[str, Any]]:
 
 
 def _worker_context():
-    """``forkserver`` preloaded with the evaluator where available, else ``spawn``."""
+    """``forkserver`` preloaded with the evaluator where available, else ``spawn``.
+
+    The fork server and every worker die with this process (:mod:`.lifetime`).
+    """
     if "forkserver" in multiprocessing.get_all_start_methods():
         ctx = multiprocessing.get_context("forkserver")
-        ctx.set_forkserver_preload([evaluate_batch.__module__])
+        ctx.set_forkserver_preload([lifetime.__name__, evaluate_batch.__module__])
+        os.environ[lifetime.FORKSERVER_ENV] = str(os.getpid())  # read by the server it starts
         return ctx
     return multiprocessing.get_context("spawn")
 
@@ -63,7 +69,9 @@ def run_local(
     ctx = _worker_context()
     pending: dict[Future, Batch] = {}
     todo = iter(batches)
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+    with ProcessPoolExecutor(
+        max_workers=workers, mp_context=ctx, initializer=lifetime.die_with_parent
+    ) as pool:
         try:
             while True:
                 while len(pending) < 2 * workers:

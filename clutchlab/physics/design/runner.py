@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import time
@@ -12,11 +13,13 @@ from typing import Any
 import pandas as pd
 from tqdm.auto import tqdm
 
+from ...data.output import check_output
+from ...errors import OutputError
 from .evaluate import STATUS_FAILED, STATUS_OK
 from .executors import run_dask, run_local
 from .metrics import metric_names
 from .sampling import DesignPoint, design_points
-from .spec import SweepSpec
+from .spec import SpecError, SweepSpec
 from .store import ResultStore
 
 __all__ = ["SweepResult", "run_sweep"]
@@ -177,6 +180,64 @@ def run_sweep(
         If ``out`` holds results of a spec with another core and ``overwrite`` is false.
     """
     t0 = time.perf_counter()
+    out = check_sweep_output(out, overwrite)
+    with output_lock(out):
+        return _run_locked(
+            spec, out, t0, workers, scheduler, progress, overwrite, retry_failed, figures,
+            batch_size, flush_s,
+        )  # fmt: skip
+
+
+def check_sweep_output(out: str | Path, overwrite: bool = False) -> Path:
+    """Check a sweep's results file before any work (``SpecError`` / ``OutputError``).
+
+    It must be named ``*.parquet``; an existing file is replaced only with ``overwrite``,
+    unless it is this kind of sweep's own results (``<out>.parts/spec.json`` beside it),
+    which a restart continues.
+    """
+    out = Path(out)
+    if out.suffix.lower() != ".parquet":
+        raise SpecError(
+            [f"--out {out}: results are written as Parquet; name the file *.parquet"], str(out)
+        )
+    ours = (out.with_name(out.name + ".parts") / "spec.json").is_file()
+    return check_output(out, kind="file", overwrite=overwrite or ours, what="--out")
+
+
+@contextlib.contextmanager
+def output_lock(out: Path):
+    """Hold an exclusive lock on ``<out>.lock`` for the whole run (POSIX ``flock``).
+
+    A second sweep on the same ``--out`` fails at once, naming the process that holds it.
+    """
+    try:
+        import fcntl
+    except ImportError:  # no flock (Windows): no lock
+        yield
+        return
+    lock = out.with_name(out.name + ".lock")
+    fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "another process"
+            raise OutputError(
+                f"--out {out}: another sweep (PID {holder}) is writing these results; wait "
+                "for it or choose another --out"
+            ) from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, str(os.getpid()).encode(), 0)
+        yield
+        lock.unlink(missing_ok=True)
+    finally:
+        os.close(fd)
+
+
+def _run_locked(
+    spec, out, t0, workers, scheduler, progress, overwrite, retry_failed, figures, batch_size,
+    flush_s,
+) -> SweepResult:  # fmt: skip
     points = design_points(spec)
     store = ResultStore(out, spec.core_hash, _spec_doc(spec), overwrite=overwrite)
     done = store.read()

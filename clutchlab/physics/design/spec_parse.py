@@ -12,6 +12,7 @@ from ...errors import ModelError
 from ..effects import effect_names
 from ..model import CircuitModel
 from ..stand.scenarios import DITHER_SHAPES, RAMPS, RampProfile, dither_amplitude
+from .limits import SweepLimits
 from .metrics import MetricSettings
 from .spec import (
     MAX_DITHER_MA,
@@ -72,6 +73,7 @@ def parse_spec(doc: dict, source: str = "spec") -> SweepSpec:
         problems.append("[[variables]]: at least one design variable is needed")
     if simulation.sample_rate_Hz > 0:
         _check_dither(scenario, simulation, variables, problems)
+    _check_size(scenario, simulation, sampling, variables, problems)
     if problems:
         raise SpecError(problems, source)
     return SweepSpec(
@@ -84,6 +86,28 @@ def parse_spec(doc: dict, source: str = "spec") -> SweepSpec:
         name=str(doc.get("name", "sweep")),
         source=source,
     )
+
+
+def _check_size(scenario, simulation, sampling, variables, problems: list[str]) -> None:
+    """The sweep's size against :class:`SweepLimits`, without building any point."""
+    limits = SweepLimits.from_env()
+    if sampling.method == "grid":
+        n = math.prod(len(v.values) if v.values else v.levels for v in variables)
+    else:
+        n = sampling.n
+    if n > limits.max_points:
+        problems.append(
+            f"[sampling] {n} design points, more than the limit of {limits.max_points} "
+            "(raise it with CLUTCHLAB_SWEEP_MAX_POINTS if you mean it)"
+        )
+    seconds = sum(r.duration_s + simulation.settle_s for r in scenario.ramps)
+    if scenario.step is not None:
+        seconds += scenario.step.duration_s + simulation.settle_s
+    if not math.isfinite(seconds) or seconds > limits.max_simulated_s:
+        problems.append(
+            f"[scenario] {seconds:.6g} s simulated per design point, more than the limit of "
+            f"{limits.max_simulated_s:g} s (raise it with CLUTCHLAB_SWEEP_MAX_SIMULATED_S)"
+        )
 
 
 def _parse_model(doc: dict, problems: list[str]) -> tuple[ModelSpec, CircuitModel | None]:
