@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from ...errors import ModelError
 from .base import Effect
+from .flexible import FreeLatchThresholds, MonotoneForceCorrection, PlayHysteresis
 from .friction import DitherFrictionReduction, StribeckFriction
 from .hydraulic import (
     AccumulatorSpringNonlinearity,
@@ -24,15 +25,19 @@ from .thermal import OilTemperature
 
 __all__ = [
     "EFFECTS",
+    "FLEXIBLE_LAWS",
     "AccumulatorSpringNonlinearity",
     "AirEntrainment",
     "DitherFrictionReduction",
     "EddyCurrentLag",
     "Effect",
     "FlowForce",
+    "FreeLatchThresholds",
     "LatchThresholdDrift",
     "MagneticHysteresis",
+    "MonotoneForceCorrection",
     "OilTemperature",
+    "PlayHysteresis",
     "SensorLag",
     "SpoolLeakage",
     "StribeckFriction",
@@ -59,8 +64,18 @@ EFFECTS: dict[str, type[Effect]] = {
         LatchThresholdDrift,
         AirEntrainment,
         AccumulatorSpringNonlinearity,
+        MonotoneForceCorrection,
+        PlayHysteresis,
+        FreeLatchThresholds,
     )
 }
+
+#: The flexible component laws among them (identity at their defaults; no stand uses them).
+FLEXIBLE_LAWS: tuple[str, ...] = (
+    MonotoneForceCorrection.name,
+    PlayHysteresis.name,
+    FreeLatchThresholds.name,
+)
 
 
 def make_effect(name: str) -> Effect:
