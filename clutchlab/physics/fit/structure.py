@@ -33,6 +33,7 @@ import numpy as np
 
 from ...data import Dataset, Trace, dither_period_mean, dither_period_samples
 from ...errors import FitError, ModelError
+from ..components.latch import latch_thresholds
 from ..effects import FLEXIBLE_LAWS
 from ..model import CircuitModel
 from ..simulate import simulate
@@ -90,6 +91,22 @@ def _period_residuals(trace: Trace, predicted: np.ndarray) -> np.ndarray:
     r = dither_period_mean(predicted, n) - dither_period_mean(trace.get("clutch_pressure_bar"), n)
     step = max(1, round(n))
     return np.asarray(r[step // 2 :: step], dtype=float)
+
+
+def _warm_start(model: CircuitModel, values: dict[str, float]):
+    """Start values of ``model`` from a fit of the structure without flexible laws.
+
+    The flexible laws start at their identity setting (their defaults); free latch
+    thresholds start at the thresholds of the fitted latch spring.
+    """
+    known = {p.name for p in model.parameters}
+    start = {k: v for k, v in values.items() if k in known}
+    if "lthr_p_on" in known and "latch_F0" in values:
+        p_on, p_off = latch_thresholds(values)
+        start.update(lthr_p_on=p_on, lthr_p_off=p_off)
+    specs = {p.name: p for p in model.parameters}
+    start = {k: min(max(v, specs[k].lower), specs[k].upper) for k, v in start.items()}
+    return model.params(**start)
 
 
 def effective_sample_size(residuals: list[np.ndarray]) -> float:
@@ -308,9 +325,16 @@ class StructureSelector:
         residuals: dict[str, list[np.ndarray]] = {}
         results: dict[str, FitResult] = {}
         fitters: dict[str, PhysicsFitter] = {}
-        for name, effects in cands.items():
+        plain_values: dict[str, float] | None = None
+        # Nested structures: the one without flexible laws first, so that every other
+        # candidate starts at its optimum (a flexible law at its identity setting is
+        # that model): a flexible fit can then only improve on it within its budget.
+        order = sorted(cands, key=lambda k: bool(set(cands[k]) - set(self.base_effects)))
+        for name in order:
+            effects = cands[name]
             model = CircuitModel().with_effects(*effects)
-            fitter = PhysicsFitter(model, settings)
+            start = _warm_start(model, plain_values) if plain_values is not None else None
+            fitter = PhysicsFitter(model, settings, start)
             t = time.perf_counter()
             try:
                 fitter.fit(traces)
@@ -325,6 +349,8 @@ class StructureSelector:
             res = [_period_residuals(tr, simulate(model, params, tr).pressure_bar) for tr in traces]
             allr = np.concatenate(res)
             residuals[name] = res
+            if not set(effects) - set(self.base_effects):
+                plain_values = dict(result.values)
             results[name] = result
             fitters[name] = fitter
             scores.append(
