@@ -10,7 +10,7 @@ from synthetic import make_trace
 from clutchlab.errors import ModelError
 from clutchlab.physics import CircuitModel, latch_thresholds
 from clutchlab.physics.assembly import MODEL_INPUTS, Assembly
-from clutchlab.physics.effects import EFFECTS, FLEXIBLE_LAWS
+from clutchlab.physics.effects import EFFECTS, FLEXIBLE_LAWS, make_effect
 from clutchlab.physics.effects.flexible import FORCE_KNOTS_MA, PLAY_WIDTHS_MA
 from clutchlab.physics.simulate import simulate
 from clutchlab.physics.units import SI_FACTOR
@@ -141,3 +141,12 @@ def test_retire_and_redefine_fail_loudly_on_unknown_names():
         asm.retire_parameter("latch_F0")
     with pytest.raises(ModelError, match="nothing to redefine"):
         asm.redefine("latch_F_net", lambda a: 0.0)
+
+
+def test_laws_are_found_by_name_but_stay_out_of_the_effect_library():
+    """Discovery draws candidates from the library; a flexible law is no physical effect."""
+    for law, cls in FLEXIBLE_LAWS.items():
+        assert law not in EFFECTS and law not in list(EFFECTS)
+        assert EFFECTS[law] is cls and make_effect(law).name == law
+    with pytest.raises(ModelError, match="flexible laws: vfs_force_monotone"):
+        make_effect("vfs_force_spline9")

@@ -60,7 +60,7 @@ STRUCTURES: dict[str, tuple[str, ...]] = {
     "play": ("vfs_play_hysteresis",),
     "latch": ("latch_free_thresholds",),
     "vfs": ("vfs_force_monotone", "vfs_play_hysteresis"),
-    "flex": FLEXIBLE_LAWS,
+    "flex": tuple(FLEXIBLE_LAWS),
 }
 
 #: Candidates compared by default: the datasheet form and every flexible law at once.
