@@ -55,7 +55,10 @@ def register(sub) -> None:
     p.add_argument(
         "--candidates",
         default="",
-        help="structures, comma separated: plain, force, play, latch, vfs, flex (plain,flex)",
+        help=(
+            "structures, comma separated: plain, force, play, latch, vfs, flex "
+            "(default plain,force,play,latch)"
+        ),
     )
     p.add_argument("--effects", default="", help="library effects on in every candidate")
     p.add_argument("--train", default="fast,slow", help="training ramp labels (fast,slow)")
