@@ -8,10 +8,13 @@ from __future__ import annotations
 
 import json
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 
+from clutchlab.data import save_dataset
 from clutchlab.errors import FitError, ModelError
 from clutchlab.physics import CircuitModel
 from clutchlab.physics.fit import FitSettings, StructureSelector
@@ -116,3 +119,26 @@ def test_bad_structure_requests_fail_loudly():
         structure_effects("spline9")
     with pytest.raises(FitError, match="free=None"):
         StructureSelector(("plain",), FitSettings(free=("vfs_K_m",))).fit([])
+
+
+def test_select_structure_cli_names_the_known_structures_on_a_bad_request(tmp_path):
+    config = StandConfig(
+        builtin_effects=False,
+        settings=(DitherSetting(50.0, "A"),),
+        ramps=(RampProfile("fast", 1.0, 0.3), RampProfile("slow", 1.5, 0.3)),
+        seed=4,
+        substeps=2,
+    )
+    data = tmp_path / "stand"
+    save_dataset(run_stand(config, progress=False).dataset, data)
+    res = subprocess.run(
+        [
+            *(sys.executable, "-m", "clutchlab.cli", "select-structure", str(data)),
+            *("--candidates", "plain,spline9", "--quiet"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert res.returncode == 2
+    assert "unknown structure 'spline9'" in res.stderr and "flex" in res.stderr
