@@ -155,6 +155,35 @@ class Assembly:
         """Replace signal ``name`` by ``fn(assembly, previous_expression)``."""
         self._wraps.setdefault(name, []).append(fn)
 
+    def redefine(self, name: str, fn: SignalFn) -> None:
+        """Replace the definition of signal ``name`` (a flexible law in place of a component's).
+
+        Wraps and terms added to ``name`` still apply on top of the new definition.
+
+        Raises
+        ------
+        ModelError
+            If ``name`` has no definition to replace.
+        """
+        if name not in self._defs:
+            raise ModelError(f"signal {name!r} is not defined; nothing to redefine")
+        self._defs[name] = fn
+
+    def retire_parameter(self, name: str) -> None:
+        """Remove a declared parameter that a replacing law no longer uses.
+
+        A definition that still reads it fails loudly when evaluated ("not declared").
+
+        Raises
+        ------
+        ModelError
+            If ``name`` is not declared.
+        """
+        if name not in self.parameters:
+            raise ModelError(f"parameter {name!r} is not declared; nothing to retire")
+        del self.parameters[name]
+        del self._p_sym[name]
+
     def tap(self, name: str, new_name: str) -> None:
         """Define ``new_name`` as signal ``name`` as it is *now* in its wrap chain.
 

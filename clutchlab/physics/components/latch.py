@@ -24,7 +24,11 @@ def latch_thresholds(values) -> tuple[float, float]:
     ----------
     values : mapping
         Parameter values in engineering units (``latch_d1`` mm, ``latch_F0`` N …).
+        With the ``latch_free_thresholds`` law on (``lthr_p_on``, ``lthr_p_off`` bar
+        among the values), those are the thresholds.
     """
+    if "lthr_p_on" in values and "lthr_p_off" in values:
+        return float(values["lthr_p_on"]), float(values["lthr_p_off"])
     a1 = math.pi / 4.0 * (values["latch_d1"] * 1e-3) ** 2
     a2 = math.pi / 4.0 * (values["latch_d2"] * 1e-3) ** 2
     p_on = values["latch_F0"] / a1 / 1e5

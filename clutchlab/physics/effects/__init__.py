@@ -11,6 +11,7 @@ from typing import Any
 
 from ...errors import ModelError
 from .base import Effect
+from .flexible import FreeLatchThresholds, MonotoneForceCorrection, PlayHysteresis
 from .friction import DitherFrictionReduction, StribeckFriction
 from .hydraulic import (
     AccumulatorSpringNonlinearity,
@@ -26,15 +27,19 @@ from .thermal import OilTemperature
 
 __all__ = [
     "EFFECTS",
+    "FLEXIBLE_LAWS",
     "AccumulatorSpringNonlinearity",
     "AirEntrainment",
     "DitherFrictionReduction",
     "EddyCurrentLag",
     "Effect",
     "FlowForce",
+    "FreeLatchThresholds",
     "LatchThresholdDrift",
     "MagneticHysteresis",
+    "MonotoneForceCorrection",
     "OilTemperature",
+    "PlayHysteresis",
     "SensorLag",
     "SpoolLeakage",
     "StribeckFriction",
@@ -45,9 +50,29 @@ __all__ = [
     "make_effect",
 ]
 
-#: Registry: effect name -> class.
-EFFECTS: dict[str, type[Effect]] = {
-    cls.name: cls
+#: The flexible component laws (identity at their defaults; no stand uses them).
+FLEXIBLE_LAWS: dict[str, type[Effect]] = {
+    cls.name: cls for cls in (MonotoneForceCorrection, PlayHysteresis, FreeLatchThresholds)
+}
+
+
+class _EffectRegistry(dict):
+    """Effect name -> class. Iterating it (``in``, ``len``, listing) gives the library's
+    physical effects; looking a flexible law up by name (``EFFECTS[name]``) finds it too,
+    so a model with flexible laws is built, fitted and saved like one with effects,
+    while the effect library (discovery candidates, ``clutchlab effects``) stays the
+    physical one."""
+
+    def __missing__(self, name: str) -> type[Effect]:
+        try:
+            return FLEXIBLE_LAWS[name]
+        except KeyError:
+            raise KeyError(name) from None
+
+
+#: Registry: effect name -> class (library effects; flexible laws by name lookup).
+EFFECTS: dict[str, type[Effect]] = _EffectRegistry(
+    (cls.name, cls)
     for cls in (
         StribeckFriction,
         DitherFrictionReduction,
@@ -63,7 +88,7 @@ EFFECTS: dict[str, type[Effect]] = {
         AirEntrainment,
         AccumulatorSpringNonlinearity,
     )
-}
+)
 
 
 def effect_names(value: Any, where: str = "effects") -> tuple[str, ...]:
@@ -115,7 +140,10 @@ def make_effect(name: str) -> Effect:
         return EFFECTS[name.strip()]()
     except KeyError:
         known = ", ".join(sorted(EFFECTS))
-        raise ModelError(f"unknown effect {name!r}; known effects: {known}") from None
+        laws = ", ".join(FLEXIBLE_LAWS)
+        raise ModelError(
+            f"unknown effect {name!r}; known effects: {known}; flexible laws: {laws}"
+        ) from None
 
 
 def effect_table() -> list[dict[str, str]]:

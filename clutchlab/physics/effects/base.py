@@ -29,6 +29,9 @@ class Effect(ABC):
         all of them at 0 the model output equals the model without the effect.
     ``FIT``
         Parameters a fit frees when the effect is switched on (default ``STRENGTH``).
+    ``REPLACES``
+        Base-model parameters the effect retires (a law written in other
+        parameters); they leave the model, so no fit frees them.
     """
 
     name: str = ""
@@ -38,6 +41,8 @@ class Effect(ABC):
     STRENGTH: tuple[str, ...] = ()
     #: Parameters a fit frees when the effect is on (default: the strength ones).
     FIT: tuple[str, ...] | None = None
+    #: Base-model parameters the effect retires from the model.
+    REPLACES: tuple[str, ...] = ()
 
     @classmethod
     def fit_parameters(cls) -> tuple[str, ...]:

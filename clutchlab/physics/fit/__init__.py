@@ -5,16 +5,28 @@ from .problem import FitProblem
 from .result import FitResult, identifiability
 from .sensitivity import SensitivityRun, sensitivity_chunk, simulate_sensitivities
 from .settings import DEFAULT_FREE, FitSettings
+from .structure import (
+    STRUCTURES,
+    CandidateScore,
+    StructureSelection,
+    StructureSelector,
+    select_structure,
+)
 
 __all__ = [
     "DEFAULT_FREE",
+    "STRUCTURES",
+    "CandidateScore",
     "FitProblem",
     "FitResult",
     "FitSettings",
     "PhysicsFitter",
     "SensitivityRun",
+    "StructureSelection",
+    "StructureSelector",
     "identifiability",
     "resolve_free",
+    "select_structure",
     "sensitivity_chunk",
     "simulate_sensitivities",
 ]

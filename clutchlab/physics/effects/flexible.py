@@ -1,0 +1,201 @@
+"""Flexible component laws: shapes the datasheet form of a component cannot take.
+
+Each is an :class:`~clutchlab.physics.effects.base.Effect` (switched on by name like
+the library effects) whose *identity* setting — every strength parameter at its
+default of zero, or the latch thresholds at the datasheet latch's — gives exactly
+today's model, so a fit starts from the datasheet model and moves away only as far
+as the training data ask. All forms are smooth (``tanh`` / logistic; no ``if_else``).
+
+- :class:`MonotoneForceCorrection` (``vfs_force_monotone``): the VFS magnetic force
+  curve plus a non-negative sum of logistic steps at fixed current knots: any
+  monotone static characteristic (saturating, quadratic, kinked) within the span of
+  the knots, monotone for every admissible parameter value.
+- :class:`PlayHysteresis` (``vfs_play_hysteresis``): a Prandtl–Ishlinskii operator —
+  a weighted sum of smooth play (backlash) operators of the coil current with fixed
+  widths — subtracted from the magnetic force: rate-independent hysteresis of any
+  convex loop shape, minor loops under dither.
+- :class:`FreeLatchThresholds` (``latch_free_thresholds``): the latch-on and
+  latch-off pilot pressures as parameters (bar) in place of the spring preload and
+  rate, so the latch hysteresis is no longer tied to the valve's area ratio.
+"""
+
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+
+from ..assembly import Assembly, StateSpec
+from ..components.base import param
+from ..components.latch import LatchValve, latch_thresholds
+from ..smooth import logistic
+from .base import Effect
+
+__all__ = [
+    "FORCE_KNOTS_MA",
+    "PLAY_WIDTHS_MA",
+    "FreeLatchThresholds",
+    "MonotoneForceCorrection",
+    "PlayHysteresis",
+]
+
+#: Current knots (mA) of the monotone force correction, and the width (mA) of each step.
+FORCE_KNOTS_MA: tuple[float, ...] = (150.0, 350.0, 550.0, 750.0)
+FORCE_STEP_WIDTH_MA = 70.0
+
+#: Widths (mA) of the play operators of the Prandtl–Ishlinskii hysteresis.
+PLAY_WIDTHS_MA: tuple[float, ...] = (15.0, 50.0, 150.0)
+
+#: Scale (A/s) of the smooth sign of the current rate in the play operators.
+_RATE_SIGN_SCALE = 1e-2
+
+
+class MonotoneForceCorrection(Effect):
+    """Monotone correction of the VFS magnetic force curve.
+
+    ``F_mag(i) + Σ_k d_k · σ((i − c_k)/w)`` with ``σ`` the logistic function, knots
+    ``c_k`` = :data:`FORCE_KNOTS_MA`, step width ``w`` = ``mspl_w`` and step heights
+    ``d_k ≥ 0`` (N). Every term is non-decreasing in ``i``, so the force curve stays
+    monotone for every admissible value; with the free gain, knee and preload of the
+    base curve it represents saturating, progressive and kinked characteristics.
+    All ``d_k = 0`` (the default) is exactly the datasheet curve.
+    """
+
+    name = "vfs_force_monotone"
+    description = "monotone (sum-of-logistic-steps) correction of the VFS force curve"
+    signature = (
+        "residual that is a smooth function of the current level, the same on rising and "
+        "falling ramps and at every ramp rate"
+    )
+    PARAMETERS = (
+        *(
+            param("mspl", f"d{k + 1}", "N", 0.0, 0.0, 6.0, f"force step at {c:g} mA", "linear")
+            for k, c in enumerate(FORCE_KNOTS_MA)
+        ),
+        param("mspl", "w", "mA", FORCE_STEP_WIDTH_MA, 20.0, 200.0, "width of each force step"),
+    )
+    STRENGTH = tuple(f"mspl_d{k + 1}" for k in range(len(FORCE_KNOTS_MA)))
+
+    def apply(self, asm: Assembly) -> None:
+        def steps(a):
+            i, w = a["i_coil"], a.p("mspl_w")
+            return [logistic((i - c * 1e-3) / w) for c in FORCE_KNOTS_MA]
+
+        def force(a, prev):
+            return prev + sum(a.p(n) * s for n, s in zip(self.STRENGTH, steps(a), strict=True))
+
+        def rate(a, prev):
+            w = a.p("mspl_w")
+            slope = sum(
+                a.p(n) * s * (1.0 - s) / w for n, s in zip(self.STRENGTH, steps(a), strict=True)
+            )
+            return prev + slope * a["di_coil"]
+
+        asm.wrap("F_mag", force)
+        asm.wrap("dF_mag", rate)
+
+
+class PlayHysteresis(Effect):
+    """Prandtl–Ishlinskii hysteresis of the VFS force: a weighted sum of play operators.
+
+    Each operator ``j`` of width ``r_j`` (:data:`PLAY_WIDTHS_MA`) has a normalized
+    play state ``h_j ∈ [−1, 1]`` (smooth: ``dh_j/dt = (di/dt / r_j)(1 − h_j tanh(di/dt /
+    ε))``, the play's ±1 stops reached asymptotically over a travel of about ``r_j``)
+    and the force is ``F_mag − Σ_j H_j h_j``: less force rising, more falling. The
+    weights ``H_j ≥ 0`` (N) shape the loop — narrow operators give a sharp loop corner,
+    wide ones a rounded one — and dither drives minor loops that shrink the loop.
+    All ``H_j = 0`` (the default) is exactly today's force; one operator alone is the
+    library's ``vfs_magnetic_hysteresis``.
+    """
+
+    name = "vfs_play_hysteresis"
+    description = "Prandtl–Ishlinskii (sum of play operators) hysteresis of the VFS force"
+    signature = (
+        "offset of opposite sign on rising and falling current whose shape varies along "
+        "the reversal; independent of ramp rate, reduced by dither"
+    )
+    PARAMETERS = tuple(
+        p
+        for j, r in enumerate(PLAY_WIDTHS_MA)
+        for p in (
+            param(
+                "play",
+                f"H{j + 1}",
+                "N",
+                0.0,
+                0.0,
+                3.0,
+                f"weight of play operator {j + 1}",
+                "linear",
+            ),
+            param("play", f"r{j + 1}", "mA", r, 2.0, 400.0, f"width of play operator {j + 1}"),
+        )
+    )
+    STRENGTH = tuple(f"play_H{j + 1}" for j in range(len(PLAY_WIDTHS_MA)))
+
+    def apply(self, asm: Assembly) -> None:
+        states = []
+        for j in range(len(PLAY_WIDTHS_MA)):
+            spec = StateSpec(f"h_play{j + 1}", "-", 0.0, f"play operator {j + 1} state", self.name)
+            h = asm.state(spec)
+            states.append(h)
+
+            def dh(a, h=h, j=j):
+                di = a["di_coil"]
+                return di / a.p(f"play_r{j + 1}") * (1.0 - h * ca.tanh(di / _RATE_SIGN_SCALE))
+
+            asm.define(f"der:h_play{j + 1}", dh, "1/s")
+
+        def force(a, prev):
+            return prev - sum(a.p(f"play_H{j + 1}") * h for j, h in enumerate(states))
+
+        def rate(a, prev):
+            return prev - sum(
+                a.p(f"play_H{j + 1}") * a[f"der:h_play{j + 1}"] for j in range(len(states))
+            )
+
+        asm.wrap("F_mag", force)
+        asm.wrap("dF_mag", rate)
+
+
+def _datasheet_thresholds() -> tuple[float, float]:
+    """Latch-on / latch-off pilot pressures (bar) of the datasheet latch valve."""
+    return latch_thresholds({p.name: p.default for p in LatchValve.PARAMETERS})
+
+
+_P_ON, _P_OFF = _datasheet_thresholds()
+
+
+class FreeLatchThresholds(Effect):
+    """Latch-on and latch-off pilot pressures as parameters of their own.
+
+    Replaces the latch force ``F_net = (1 − λ)(A1 p_a − F0) + λ(A2 p_a − F0 − k s)`` by
+    ``(1 − λ) A1 (p_a − p_on) + λ A2 (p_a − p_off)`` — the same law, written in its two
+    thresholds — and retires the spring preload ``latch_F0`` and rate ``latch_k``,
+    which then no longer act. The datasheet valve ties ``p_off`` to at least
+    ``A1/A2 · p_on`` (the area ratio); here the two are free. The defaults are the
+    datasheet valve's thresholds, so the effect at its defaults is today's model.
+    """
+
+    name = "latch_free_thresholds"
+    description = "latch-on / latch-off pressures as free parameters (no area-ratio tie)"
+    signature = "large residual in the current band between modelled and true latch-on/off"
+    PARAMETERS = (
+        param("lthr", "p_on", "bar", _P_ON, 1.0, 17.0, "latch-on pilot pressure"),
+        param("lthr", "p_off", "bar", _P_OFF, 0.5, 17.0, "latch-off pilot pressure"),
+    )
+    STRENGTH = ()
+    FIT = ("lthr_p_on", "lthr_p_off")
+    #: Base-model parameters this law retires (a fit must not free them).
+    REPLACES = ("latch_F0", "latch_k")
+
+    def apply(self, asm: Assembly) -> None:
+        def f_net(a):
+            a1 = math.pi / 4.0 * a.p("latch_d1") ** 2
+            a2 = math.pi / 4.0 * a.p("latch_d2") ** 2
+            lam, p = a.x("latch"), a.x("p_a")
+            return (1.0 - lam) * a1 * (p - a.p("lthr_p_on")) + lam * a2 * (p - a.p("lthr_p_off"))
+
+        asm.redefine("latch_F_net", f_net)
+        for name in self.REPLACES:
+            asm.retire_parameter(name)
