@@ -121,10 +121,13 @@ def effect_names(value: Any, where: str = "effects") -> tuple[str, ...]:
             f"{where}: expected an effect name or a list of effect names, got "
             f"{type(value).__name__} {value!r:.60}"
         )
-    unknown = [n for n in names if n not in EFFECTS]
+    unknown = [n for n in names if n not in EFFECTS and n not in FLEXIBLE_LAWS]
     if unknown:
         known = ", ".join(sorted(EFFECTS))
-        raise ModelError(f"{where}: unknown effect(s) {unknown}; known effects: {known}")
+        laws = ", ".join(FLEXIBLE_LAWS)
+        raise ModelError(
+            f"{where}: unknown effect(s) {unknown}; known effects: {known}; flexible laws: {laws}"
+        )
     return tuple(names)
 
 
