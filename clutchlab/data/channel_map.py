@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import os
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -277,6 +278,11 @@ def load_channel_map(source: str | Path | ChannelMap | Mapping[str, Any]) -> Cha
         return source
     if isinstance(source, Mapping):
         return ChannelMap.from_dict(source)
+    if not isinstance(source, str | os.PathLike):
+        raise DataError(
+            f"a channel map must be a TOML file, a mapping or a ChannelMap, got "
+            f"{type(source).__name__} {source!r:.60}"
+        )
     path = check_input_file(source, "channel map")
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8-sig"))

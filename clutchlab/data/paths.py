@@ -81,7 +81,7 @@ def contained_file(
     if "\0" in value:
         return None, f"{where}: {what!r} contains a NUL character"
     pure = PurePath(value)
-    if pure.is_absolute() or value.startswith(("/", "\\")) or ":" in pure.parts[0]:
+    if pure.is_absolute() or value.startswith(("/", "\\")) or ":" in (pure.parts or ("",))[0]:
         return None, (
             f"{where}: {what!r} {value!r:.200} is an absolute path; files must be named "
             "relative to the dataset folder and lie inside it"
