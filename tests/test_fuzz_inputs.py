@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from clutchlab.data import load_dataset, read_log
@@ -133,8 +133,18 @@ def _inside(path: str, folder: Path) -> bool:
     return not real.startswith(str(OUTSIDE.resolve()))
 
 
+def _entry(**kw):
+    return {"experiments": [{"file": "exp.csv", "ramp": "fast"} | kw]}
+
+
 @FUZZ
 @given(manifests)
+@example(_entry(file="../outside/secret.csv"))
+@example(_entry(file=str(OUTSIDE / "secret.csv")))
+@example(_entry(file="link.csv"))
+@example(_entry(channel_map="link.toml"))
+@example(_entry(channel_map="../outside/secret.toml"))
+@example({"channel_map": str(OUTSIDE / "secret.toml"), **_entry()})
 def test_manifest_fuzz(doc):
     folder = _dataset_folder()
     try:
