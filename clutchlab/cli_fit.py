@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 __all__ = ["register"]
@@ -25,6 +26,7 @@ def _cmd_fit_physics(args: argparse.Namespace) -> int:
         "progress": not args.quiet,
         "method": args.method,
         "time_limit_s": args.time_limit,
+        "strict": args.strict,
     }
     if args.free:
         kw["free"] = _csv(args.free)
@@ -43,13 +45,22 @@ def _cmd_fit_physics(args: argparse.Namespace) -> int:
     fitter.save(out)
     print(res.table())
     print(f"\nstatus {res.status}, {res.iterations} iterations, {res.wall_s:.1f} s")
+    if not res.success:
+        print(
+            f"warning: NOT CONVERGED ({res.status}): the best iterate is the model, written to "
+            f'{out} with "success": false; more time (--time-limit) may improve it, '
+            "--strict makes this an error",
+            file=sys.stderr,
+        )
     if res.unidentifiable:
         print(f"not identifiable from these data: {', '.join(res.unidentifiable)}")
     for name, m in res.per_experiment.items():
         print(f"  {name:20s} RMSE {m['rmse_bar']:.4f} bar  fit {m['fit_pct']:.1f} %")
     print(f"model written to {out}")
     if args.json:
-        Path(args.json).write_text(res.to_json() + "\n", encoding="utf-8")
+        from .cli import write_json_output
+
+        write_json_output(args.json, res.to_json())
     return 0
 
 
@@ -65,6 +76,12 @@ def register(sub) -> None:
         "--method", default="single_shooting", choices=["single_shooting", "multiple_shooting"]
     )
     p.add_argument("--time-limit", type=float, default=900.0, help="solver wall limit (s)")
+    p.add_argument(
+        "--strict",
+        action="store_true",
+        help="a fit stopped at a limit is an error (exit 1, best iterate to "
+        "OUT.best-iterate.json); default: the best iterate is the model, marked not converged",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", help="also write the fit result here")
     p.set_defaults(func=_cmd_fit_physics)

@@ -11,6 +11,7 @@ __all__ = [
     "DataError",
     "FitError",
     "FitResultError",
+    "FitWarning",
     "ModelError",
     "ModelFileError",
     "OutputError",
@@ -96,3 +97,7 @@ class FitResultError(ModelFileError, FitError):
     problems : list of str, optional
         Every problem found, each naming its key.
     """
+
+
+class FitWarning(UserWarning):
+    """A fit returned its best iterate without converging (stopped at a limit)."""

@@ -9,7 +9,7 @@ from synthetic import make_trace
 
 import clutchlab.physics.fit.problem as fit_problem
 from clutchlab.data import Dataset
-from clutchlab.errors import FitError, SimulationError
+from clutchlab.errors import FitError, FitWarning, SimulationError
 from clutchlab.physics import CircuitModel
 from clutchlab.physics.fit import DEFAULT_FREE, FitResult, FitSettings, PhysicsFitter
 from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
@@ -156,23 +156,29 @@ def test_diverging_integrator(small_data, monkeypatch):
 
 
 def test_time_limit_keeps_the_best_iterate(small_data):
-    with pytest.raises(FitError, match=r"did not converge \(Maximum_WallTime_Exceeded\)") as exc:
-        _fit(
-            small_data,
-            time_limit_s=3.0,
-            max_iter=500,
-            tol=1e-14,
-            ipopt_options={"acceptable_iter": 0},
-        )
-    best = exc.value.result
-    assert isinstance(best, FitResult)
-    assert best.cost_history and min(best.cost_history) <= best.cost_history[0]
+    """Stopped at its time limit, the fit's best iterate is the model, marked not converged;
+    with strict=True the limit is an error carrying the same best iterate."""
+    limit = {
+        "time_limit_s": 3.0,
+        "max_iter": 500,
+        "tol": 1e-14,
+        "ipopt_options": {"acceptable_iter": 0},
+    }
+    with pytest.warns(FitWarning, match=r"before converging \(Maximum_WallTime_Exceeded\)"):
+        fitter = _fit(small_data, **limit)
+    best = fitter.result_
+    assert isinstance(best, FitResult) and not best.success
+    assert best.cost_history and min(best.cost_history) < best.cost_history[0]
     assert set(best.free) == set(DEFAULT_FREE)
+    assert fitter.predict(small_data[0]).shape == (len(small_data[0]),)  # a usable model
+    with pytest.raises(FitError, match=r"did not converge \(Maximum_WallTime_Exceeded\)") as exc:
+        _fit(small_data, strict=True, **limit)
+    assert isinstance(exc.value.result, FitResult)
 
 
 def test_time_out_before_the_refinement_keeps_the_pre_fit(small_data, monkeypatch):
-    """The time limit reached between pre-fit and refinement: a FitError whose result is
-    the pre-fit's optimum, never the start values reported as fitted."""
+    """The time limit reached between pre-fit and refinement: the model is the pre-fit's
+    optimum (marked not converged), never the start values reported as fitted."""
     solve = PhysicsFitter._solve_starts
     calls = []
 
@@ -183,12 +189,24 @@ def test_time_out_before_the_refinement_keeps_the_pre_fit(small_data, monkeypatc
         return {"cost": np.inf, "z": None, "stats": None}  # what a spent time limit returns
 
     monkeypatch.setattr(PhysicsFitter, "_solve_starts", staticmethod(timed_out_refinement))
-    with pytest.raises(FitError, match=r"Maximum_WallTime_Exceeded \(refine\)") as exc:
-        _fit(small_data, prefit_samples=100)
-    assert len(calls) == 2
-    fitted = exc.value.result.params()
+    with pytest.warns(FitWarning, match=r"Maximum_WallTime_Exceeded \(refine\)"):
+        fitter = _fit(small_data, prefit_samples=100)
+    assert len(calls) == 2 and not fitter.result_.success
+    fitted = fitter.result_.params()
     start = CircuitModel().default_params()
     assert any(fitted[name] != start[name] for name in DEFAULT_FREE)
+    calls.clear()
+    with pytest.raises(FitError, match=r"Maximum_WallTime_Exceeded \(refine\)"):
+        _fit(small_data, prefit_samples=100, strict=True)
+
+
+def test_a_fit_that_never_improved_is_an_error(small_data, monkeypatch):
+    def nothing(problem, starts, settings, t_start):
+        return {"cost": np.inf, "z": None, "stats": None}
+
+    monkeypatch.setattr(PhysicsFitter, "_solve_starts", staticmethod(nothing))
+    with pytest.raises(FitError, match="did not improve on its start"):
+        _fit(small_data)
 
 
 def test_multiple_shooting_reaches_the_single_shooting_optimum(small_data):

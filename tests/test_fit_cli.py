@@ -71,6 +71,8 @@ def test_fit_physics_cli_writes_model_and_json(tmp_path):
             str(data),
             "--out",
             str(out),
+            "--train",
+            "fast",
             "--free",
             "nope",
             "--quiet",
@@ -80,3 +82,31 @@ def test_fit_physics_cli_writes_model_and_json(tmp_path):
         timeout=600,
     )
     assert bad.returncode == 2 and "unknown parameter(s) nope" in bad.stderr
+
+
+def test_fit_stopped_at_its_limit_writes_the_best_iterate_as_the_model(tmp_path):
+    """Issue 16 item 3: exit 0 with a warning and the model marked not converged; --strict
+    keeps the old behaviour (exit 1, the best iterate beside as .best-iterate.json)."""
+    config = StandConfig(
+        settings=(DitherSetting(50.0, "A"),),
+        ramps=(RampProfile("fast", 1.5, 0.3), RampProfile("medium", 2.0, 0.3)),
+        seed=5,
+        substeps=2,
+    )
+    data = tmp_path / "stand"
+    save_dataset(run_stand(config, progress=False).dataset, data)
+    base = [sys.executable, "-m", "clutchlab.cli", "fit-physics", str(data), "--train", "fast"]
+    base += ["--time-limit", "2", "--quiet"]
+    out = tmp_path / "model.json"
+    res = subprocess.run([*base, "--out", str(out)], capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr
+    assert "NOT CONVERGED" in res.stderr
+    doc = json.loads(out.read_text())
+    assert doc["success"] is False and "Exceeded" in doc["status"]
+    assert FitResult.from_json(out).cost_history
+    strict = tmp_path / "strict.json"
+    res = subprocess.run(
+        [*base, "--out", str(strict), "--strict"], capture_output=True, text=True, timeout=600
+    )
+    assert res.returncode == 2 and "did not converge" in res.stderr
+    assert not strict.exists() and (tmp_path / "strict.best-iterate.json").is_file()

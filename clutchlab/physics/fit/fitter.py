@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import math
 import time
+import warnings
 from dataclasses import asdict, replace
 
 import numpy as np
@@ -10,7 +12,7 @@ from sklearn.exceptions import NotFittedError
 from tqdm.auto import tqdm
 
 from ...data import Dataset, Trace, dither_period_mean, dither_period_samples, pressure_metrics
-from ...errors import FitError, ModelError
+from ...errors import FitError, FitWarning, ModelError
 from ..effects import EFFECTS
 from ..model import CircuitModel
 from ..parameters import ParameterSet
@@ -230,13 +232,24 @@ class PhysicsFitter:
         result.success = converged
         if not converged:
             status = result.status if statuses else "no start completed"
-            err = FitError(
-                f"the fit did not converge ({status}) after "
-                f"{time.perf_counter() - t_start:.1f} s; best cost "
-                f"{best['cost']:.6g} kept in exc.result"
+            start_cost = history[0] if history else math.inf
+            improved = best["z"] is not None and best["cost"] < start_cost
+            wall = time.perf_counter() - t_start
+            if settings.strict or not improved:
+                why = "" if improved else " and did not improve on its start"
+                err = FitError(
+                    f"the fit did not converge ({status}){why} after {wall:.1f} s; best "
+                    f"cost {best['cost']:.6g} kept in exc.result"
+                )
+                err.result = result
+                raise err
+            warnings.warn(
+                f"the fit stopped at a limit before converging ({status}) after {wall:.1f} s: "
+                f"its best iterate (cost {best['cost']:.6g}, start {start_cost:.6g}) is the "
+                "model, marked not converged",
+                FitWarning,
+                stacklevel=2,
             )
-            err.result = result
-            raise err
         self.result_ = result
         self.model_ = result.model()
         self.params_ = result.params()

@@ -104,6 +104,11 @@ class FitSettings:
         Processes that simulate experiments in parallel (1: in this process).
     ipopt_options : dict
         Extra IPOPT options.
+    strict : bool
+        A fit stopped at a limit (iterations, wall time) raises ``FitError`` (with the best
+        iterate in ``exc.result``). Default False: the best iterate *is* the model, marked
+        not converged (``result_.success`` False, its status) with a ``FitWarning``; only a
+        fit that did not improve on its start raises.
     """
 
     free: tuple[str, ...] | None = None
@@ -132,6 +137,7 @@ class FitSettings:
     progress: bool = True
     workers: int = 2
     ipopt_options: dict = field(default_factory=dict)
+    strict: bool = False
 
     def __post_init__(self) -> None:
         problems = []
