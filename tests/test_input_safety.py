@@ -123,7 +123,7 @@ def test_csv_header_followed_by_nul_bytes_is_refused_without_reading_it_whole(tm
 
 def test_effects_as_one_string_is_one_effect():
     assert "sensor_lag" in [e.name for e in StandConfig(effects="sensor_lag").model().effects]
-    with pytest.raises(ModelError, match=r"unknown effect\(s\) \['sensor_lagg'\]"):
+    with pytest.raises(ModelError, match=r"unknown effect 'sensor_lagg'"):
         StandConfig(effects="sensor_lagg").model()
     doc = {
         "name": "x",

@@ -63,7 +63,7 @@ def test_unknown_parameter_lists_known_ones_and_all_problems_at_once():
 @pytest.mark.parametrize(
     ("parts", "needle"),
     [
-        ({"model": {"effects": ["sensor_lagg"]}}, "unknown effect(s) ['sensor_lagg']"),
+        ({"model": {"effects": ["sensor_lagg"]}}, "unknown effect 'sensor_lagg'"),
         ({"model": {"parameters": {"reg_F_c": 99.0}}}, "reg_F_c = 99.0 N outside bounds"),
         ({"sampling": {"method": "lhs"}}, "n must be a positive integer"),
         ({"simulation": {"substeps": 0}}, "substeps must be an integer in 1..64"),

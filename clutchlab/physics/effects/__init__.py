@@ -125,8 +125,10 @@ def effect_names(value: Any, where: str = "effects") -> tuple[str, ...]:
     if unknown:
         known = ", ".join(sorted(EFFECTS))
         laws = ", ".join(FLEXIBLE_LAWS)
+        what = "unknown effect" + ("s " if len(unknown) > 1 else " ")
         raise ModelError(
-            f"{where}: unknown effect(s) {unknown}; known effects: {known}; flexible laws: {laws}"
+            f"{where}: {what}{', '.join(map(repr, unknown))}; known effects: {known}; "
+            f"flexible laws: {laws}"
         )
     return tuple(names)
 
