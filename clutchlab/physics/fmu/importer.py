@@ -454,6 +454,9 @@ def _run(job: _Job) -> tuple[np.ndarray, list[str]]:
 
 
 def _child(conn, job: _Job) -> None:  # pragma: no cover - runs in the child process
+    import faulthandler
+
+    faulthandler.disable()  # a crashing FMU is reported by the parent, not dumped here
     try:
         conn.send(("ok", _run(job)))
     except BaseException as exc:

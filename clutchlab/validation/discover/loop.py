@@ -20,13 +20,14 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from dataclasses import asdict, replace
 
 import numpy as np
 from tqdm.auto import tqdm
 
 from ...data import Dataset, Trace, dither_period_mean, dither_period_samples, pressure_metrics
-from ...errors import ClutchlabError, FitError
+from ...errors import ClutchlabError, FitError, FitWarning
 from ...physics import CircuitModel, simulate
 from ...physics.effects import EFFECTS
 from ...physics.fit import FitResult, PhysicsFitter, resolve_free
@@ -99,11 +100,14 @@ def _run_fit(
     free: tuple[str, ...],
     start: ParameterSet | None,
 ) -> FitResult:
-    """Fit; a fit that stops short (``FitError`` with a best iterate) returns that iterate."""
+    """Fit; a fit that stops short returns its best iterate (discovery's refits are short by
+    design, so the FitWarning saying so is not shown; the status is in the result)."""
     warm_sensitivities(model, train, settings.fit, len(free))
     fitter = PhysicsFitter(model, replace(settings.fit, free=free), start)
     try:
-        return fitter.fit(train).result_
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FitWarning)
+            return fitter.fit(train).result_
     except FitError as exc:
         best = getattr(exc, "result", None)
         if best is None:
