@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...data.output import write_file_atomic
 from ...errors import ClutchlabError, FitError, FitResultError
 from ..effects import EFFECTS, make_effect
 from ..model import CircuitModel
@@ -132,10 +133,7 @@ class FitResult:
         """JSON text (written to ``path`` when given, atomically)."""
         text = json.dumps(asdict(self), indent=2, ensure_ascii=False, allow_nan=True)
         if path is not None:
-            path = Path(path)
-            tmp = path.with_suffix(path.suffix + ".part")
-            tmp.write_text(text + "\n", encoding="utf-8")
-            tmp.replace(path)
+            write_file_atomic(path, (text + "\n").encode("utf-8"), overwrite=True)
         return text
 
     @classmethod
