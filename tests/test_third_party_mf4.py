@@ -57,3 +57,68 @@ def test_cli_check_lists_the_problems_without_a_traceback(mf4, tmp_path):
     assert res.returncode == 1, res.stderr
     assert "Traceback" not in res.stderr + res.stdout
     assert "ASAM.M.VIRTUAL.SCALAR.SWORD.PHYSICAL" in res.stdout
+
+
+def test_source_qualified_channel_map(mf4, tmp_path):
+    """Issue 19 must-show 3: a channel named with the source it was logged from."""
+    cmap = {
+        "signals": {
+            "current_mA": {
+                "channel": "ASAM.M.SCALAR.FLOAT64.IDENTICAL",
+                "unit": "mA",
+                "source": "ETK test device:1",  # the device, as the tool wrote it
+            },
+            "clutch_pressure_bar": {
+                "channel": "ASAM.M.VIRTUAL.SCALAR.SWORD.PHYSICAL",
+                "unit": "bar",
+                "source": "Leading_All",
+            },
+        },
+        "defaults": {"dither_freq_Hz": 50.0},
+    }
+    _, report = check_log(mf4, channel_map=cmap)
+    assert not [p for p in report.problems if "source" in p]
+    assert any("implausible unit" in p for p in report.problems)  # the same data was read
+    cmap["signals"]["current_mA"]["source"] = "Engine_1"
+    _, report = check_log(mf4, channel_map=cmap)
+    assert any(
+        "is not logged from source 'Engine_1'; its sources: 'ETK test device:1', 'Engine_3'" in p
+        for p in report.problems
+    )
+
+
+def test_a_name_under_several_sources_is_refused_with_the_sources_listed(tmp_path):
+    import numpy as np
+    from asammdf import MDF, Signal
+    from asammdf.blocks.source_utils import Source
+
+    t = np.arange(0.0, 2.0, 0.001)
+    mdf = MDF(version="4.10")
+    for name, level, acq in (("ECU_A", 5.0, "Stand_A"), ("LOGGER_B", 6.0, "Stand_B")):
+        src = Source(name, "CAN1", "", Source.SOURCE_ECU, Source.BUS_TYPE_CAN)
+        current = 500.0 + 100.0 * np.sin(2 * np.pi * 50.0 * t)
+        mdf.append(
+            [
+                Signal(np.full(t.size, level), t, name="P_CL", unit="bar", source=src),
+                Signal(current, t, name="I_sol", unit="mA", source=src),
+            ],
+            acq_name=acq,
+            acq_source=src,
+        )
+    path = tmp_path / "two_sources.mf4"
+    mdf.save(path, overwrite=True)
+    cmap = {
+        "signals": {"clutch_pressure_bar": "P_CL", "current_mA": {"channel": "I_sol"}},
+        "defaults": {"dither_freq_Hz": 50.0},
+    }
+    _, report = check_log(path, channel_map=cmap)
+    text = "\n".join(report.problems)
+    assert "'P_CL' (clutch_pressure_bar) is ambiguous" in text
+    assert "'Stand_A', 'ECU_A'" in text and "'Stand_B', 'LOGGER_B'" in text
+    for signal in ("clutch_pressure_bar", "current_mA"):
+        name = cmap["signals"][signal]
+        cmap["signals"][signal] = {"channel": name if isinstance(name, str) else "I_sol"}
+        cmap["signals"][signal]["source"] = "LOGGER_B"
+    trace, report = check_log(path, channel_map=cmap)
+    assert trace is not None, report.problems
+    assert np.allclose(trace.get("clutch_pressure_bar"), 6.0)

@@ -218,7 +218,14 @@ def assemble(
                     "channel of their group)"
                 )
             continue
-        candidates = raw.find(spec.channel, spec.group)
+        candidates = raw.find(spec.channel, spec.group, spec.source)
+        if not candidates and spec.source is not None:
+            known = sorted({x for c in raw.find(spec.channel, spec.group) for x in c.sources})
+            problems.append(
+                f"{file}: channel {spec.channel!r} ({signal}) is not logged from source "
+                f"{spec.source!r}; its sources: {', '.join(map(repr, known)) or 'none written'}"
+            )
+            continue
         if not candidates:
             if mapped and signal not in cmap.defaults:
                 missing_mapped[signal] = spec.channel
@@ -226,7 +233,11 @@ def assemble(
         if len(candidates) > 1:
             problems.append(
                 f"{file}: channel {spec.channel!r} ({signal}) is ambiguous, it occurs as "
-                f"{', '.join(c.where for c in candidates)}; set 'group' in the channel map"
+                + "; ".join(
+                    c.where + (f" from {', '.join(map(repr, c.sources))}" if c.sources else "")
+                    for c in candidates
+                )
+                + "; set 'source' (or 'group') in the channel map"
             )
             continue
         channel = candidates[0]

@@ -48,7 +48,7 @@ __all__ = ["ChannelMap", "ChannelMapLike", "ChannelSpec", "load_channel_map"]
 
 #: Signals that may not get a constant default (a constant time or current makes no sense).
 _NO_DEFAULT = ("time_s", "clutch_pressure_bar", *CURRENT_SIGNALS)
-_ENTRY_FIELDS = ("channel", "unit", "scale", "offset", "group")
+_ENTRY_FIELDS = ("channel", "unit", "scale", "offset", "group", "source")
 _TOP_KEYS = ("description", "signals", "defaults")
 
 
@@ -70,6 +70,10 @@ class ChannelSpec:
         absolute into gauge pressure).
     group : int or None
         MF4 channel group (0-based) when the channel name occurs in several groups.
+    source : str or None
+        MF4 source or device the channel was logged from, as the measurement tool wrote it
+        (the channel group's acquisition name, or a source name or path), when the channel
+        name occurs under several sources.
     """
 
     channel: str
@@ -77,6 +81,7 @@ class ChannelSpec:
     scale: float = 1.0
     offset: float = 0.0
     group: int | None = None
+    source: str | None = None
 
 
 def _close(name: str, known: tuple[str, ...] | list[str]) -> str:
@@ -223,8 +228,12 @@ def _parse_signals(table: Any, where: str, problems: list[str]) -> dict[str, Cha
         group = entry.get("group")
         if group is not None and (isinstance(group, bool) or not isinstance(group, int)):
             problems.append(f"{at}: 'group' must be an integer, got {group!r}")
+        source = entry.get("source")
+        if source is not None and (not isinstance(source, str) or not source.strip()):
+            problems.append(f"{at}: 'source' must be a non-empty string, got {source!r}")
+            source = None
         if len(problems) == before:
-            out[name] = ChannelSpec(channel, unit, float(scale), float(offset), group)
+            out[name] = ChannelSpec(channel, unit, float(scale), float(offset), group, source)
     return out
 
 

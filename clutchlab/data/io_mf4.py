@@ -163,6 +163,18 @@ def _collect_broken_mdf() -> None:
         sys.unraisablehook = previous
 
 
+def _source_names(block, attr: str) -> tuple[str, ...]:
+    """Name and path of an MF4 source block (``block.<attr>``), where written."""
+    src = getattr(block, attr, None)
+    if src is None:
+        return ()
+    names = (
+        str(getattr(src, "name", "") or "").strip(),
+        str(getattr(src, "path", "") or "").strip(),
+    )
+    return tuple(n for n in names if n)
+
+
 def _decode(path: Path, wanted: Callable[[str], bool]) -> RawLog:
     from asammdf import MDF
 
@@ -174,13 +186,22 @@ def _decode(path: Path, wanted: Callable[[str], bool]) -> RawLog:
         selection: list[tuple[RawChannel, int, int]] = []
         for gi, group in enumerate(mdf.groups):
             master = mdf.masters_db.get(gi)
+            group_sources = _source_names(group.channel_group, "acq_source")
+            acq = str(getattr(group.channel_group, "acq_name", "") or "").strip()
+            group_sources = ((acq,) if acq else ()) + group_sources
             for ci, ch in enumerate(group.channels):
                 if ci == master:
                     continue
                 name = str(ch.name)
                 unit = str(getattr(ch, "unit", "") or "").strip() or None
+                own = _source_names(ch, "source")
                 raw = RawChannel(
-                    name, None, unit, where=f"channel {name!r} (group {gi})", problem=None
+                    name,
+                    None,
+                    unit,
+                    where=f"channel {name!r} (group {gi})",
+                    problem=None,
+                    sources=tuple(dict.fromkeys(group_sources + own)),
                 )
                 channels.append(raw)
                 if wanted(name):

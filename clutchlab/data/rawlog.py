@@ -63,6 +63,10 @@ class RawChannel:
     reported : numpy.ndarray or None
         Boolean mask of samples whose problem the decoder already reported (unparseable
         cells, read as NaN); they are not reported again as missing values.
+    sources : tuple of str
+        Names of where the channel came from, as the measurement tool wrote them (MF4: the
+        channel group's acquisition name, its source's name and path, the channel's source
+        name and path); a channel map's ``source`` picks among them.
     """
 
     name: str
@@ -72,6 +76,7 @@ class RawChannel:
     where: str = ""
     problem: str | None = None
     reported: np.ndarray | None = None
+    sources: tuple[str, ...] = ()
 
 
 @dataclass
@@ -110,6 +115,14 @@ class RawLog:
     notes: list[str] = field(default_factory=list)
     tabular: bool = True
 
-    def find(self, name: str, group: int | None = None) -> list[RawChannel]:
-        """Channels called ``name`` (in MF4 group ``group`` if given)."""
-        return [c for c in self.channels if c.name == name and (group is None or c.base == group)]
+    def find(
+        self, name: str, group: int | None = None, source: str | None = None
+    ) -> list[RawChannel]:
+        """Channels called ``name`` (in MF4 group ``group``, from ``source``, if given)."""
+        return [
+            c
+            for c in self.channels
+            if c.name == name
+            and (group is None or c.base == group)
+            and (source is None or source in c.sources)
+        ]
