@@ -21,22 +21,53 @@ def _csv_list(text: str | None) -> tuple[str, ...]:
     return tuple(s.strip() for s in (text or "").split(",") if s.strip())
 
 
+def _list_plants() -> int:
+    from .physics.stand.plants import PLANTS
+
+    print("stand                 clutchlab's own synthetic stand (the default)")
+    for name, spec in PLANTS.items():
+        print(f"{name:21s} {spec.summary}")
+        for component, law in spec.laws.items():
+            print(f"{'':23s}{component}: {law}")
+        print(f"{'':23s}effects it carries: {', '.join(spec.effects)}")
+    return 0
+
+
 def _cmd_stand(args: argparse.Namespace) -> int:
     from .physics.stand import DEFAULT_SETTINGS, StandConfig, truth_path, write_stand
+    from .physics.stand.plants import PlantConfig, get_plant
 
+    if args.list_plants:
+        return _list_plants()
+    if not args.out:
+        raise SystemExit("clutchlab stand: --out is required (or --list-plants)")
     n = args.settings
     if not 1 <= n <= len(DEFAULT_SETTINGS):
         raise SystemExit(f"--settings must be 1..{len(DEFAULT_SETTINGS)}")
     # Spread the chosen settings over frequencies and shapes (3 → 30/A, 50/B, 70/C).
     step = max(len(DEFAULT_SETTINGS) // n, 1)
     settings = DEFAULT_SETTINGS[::step][:n] if n < len(DEFAULT_SETTINGS) else DEFAULT_SETTINGS
-    config = StandConfig(
-        effects=_csv_list(args.effects),
-        builtin_effects=not args.no_builtin,
-        settings=settings,
-        seed=args.seed,
-    )
-    config.model()  # unknown effect names fail before any work
+    if args.plant == "stand":
+        if args.temperature != "levels":
+            raise SystemExit("--temperature drift applies to the zoo's plants (--plant NAME)")
+        config = StandConfig(
+            effects=_csv_list(args.effects),
+            builtin_effects=not args.no_builtin,
+            settings=settings,
+            seed=args.seed,
+        )
+        config.model()  # unknown effect names fail before any work
+    else:
+        if args.no_builtin:
+            raise SystemExit("--no-builtin applies to the stand only; a plant has no built-ins")
+        config = PlantConfig(
+            plant=args.plant,
+            effects=_csv_list(args.effects),
+            settings=settings,
+            seed=args.seed,
+            temperature=args.temperature,
+        )
+        get_plant(config.plant).check_effects(config.effects)  # refused before any work
     run = write_stand(args.out, config, overwrite=args.overwrite, progress=not args.quiet)
     out = Path(args.out)
     print(
@@ -145,14 +176,35 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("stand", help="run the synthetic test stand and write a dataset folder")
-    p.add_argument("--out", required=True, help="dataset folder to create")
+    p.add_argument("--out", help="dataset folder to create")
+    p.add_argument(
+        "--plant",
+        default="stand",
+        help="circuit to run: 'stand' (clutchlab's own, the default) or a plant of the zoo "
+        "(see --list-plants)",
+    )
+    p.add_argument(
+        "--list-plants", action="store_true", help="list the zoo's plants and their laws"
+    )
     p.add_argument("--effects", default="", help="extra library effects, comma separated")
+    p.add_argument(
+        "--temperature",
+        choices=("levels", "drift"),
+        default="levels",
+        help="oil temperature of a zoo plant's runs: fixed levels (40/55/70 °C by setting) or "
+        "warming 40 → 85 °C through every run",
+    )
     p.add_argument(
         "--no-builtin",
         action="store_true",
         help="without the stand's built-in effects (base model + noise only)",
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of noise and wander")
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="seed of noise and wander (and, for a zoo plant, of its as-built unit)",
+    )
     p.add_argument(
         "--settings",
         type=int,

@@ -26,7 +26,13 @@ from ..model import CircuitModel
 from ..parameters import ParameterSet
 from ..settings import SimulationSettings
 from ..simulate import simulate_inputs
-from .scenarios import RAMPS, DitherSetting, RampProfile, dither_amplitude
+from .environment import (
+    BenchNoise,
+    bench_drive,
+    experiment_meta,
+    measured_signals,
+)
+from .scenarios import RAMPS, DitherSetting, RampProfile
 
 __all__ = [
     "BUILTIN_EFFECTS",
@@ -46,9 +52,6 @@ BUILTIN_EFFECTS: tuple[str, ...] = ("stribeck_friction", "flow_force", "sensor_l
 DEFAULT_SETTINGS: tuple[DitherSetting, ...] = tuple(
     DitherSetting(f, s) for f in (30.0, 50.0, 70.0) for s in ("A", "B", "C")
 )
-
-#: Oil temperature level (°C) per dither-setting index (cycled).
-TEMPERATURE_LEVELS = (40.0, 55.0, 70.0)
 
 
 def as_built_values() -> dict[str, float]:
@@ -111,6 +114,16 @@ class StandConfig:
     pressure_lsb_bar: float = 0.01
     current_lsb_mA: float = 0.5
 
+    @property
+    def noise(self) -> BenchNoise:
+        """The bench's measurement chain (sensor noise and ADC steps)."""
+        return BenchNoise(
+            self.pressure_noise_bar,
+            self.current_noise_mA,
+            self.pressure_lsb_bar,
+            self.current_lsb_mA,
+        )
+
     def model(self) -> CircuitModel:
         """The stand's truth model (built-in + requested effects)."""
         names = list(BUILTIN_EFFECTS) if self.builtin_effects else []
@@ -151,28 +164,8 @@ class StandRun:
             "changed_from_defaults": self.params.changed(),
             "seed": self.config.seed,
             "substeps": self.config.substeps,
-            "noise": {
-                "pressure_bar": self.config.pressure_noise_bar,
-                "current_mA": self.config.current_noise_mA,
-                "pressure_lsb_bar": self.config.pressure_lsb_bar,
-                "current_lsb_mA": self.config.current_lsb_mA,
-            },
+            "noise": self.config.noise.as_dict(),
         }
-
-
-def _wander(rng, n, dt, mean, sigma, tau_s, clip):
-    """Ornstein–Uhlenbeck wander around ``mean`` with stationary std ``sigma``, clipped."""
-    a = np.exp(-dt / tau_s)
-    e = rng.standard_normal(n) * sigma * np.sqrt(1 - a * a)
-    x = np.empty(n)
-    x[0] = rng.standard_normal() * sigma
-    for k in range(1, n):
-        x[k] = a * x[k - 1] + e[k]
-    return np.clip(mean + x, mean - clip, mean + clip)
-
-
-def _quantize(x, lsb):
-    return np.round(x / lsb) * lsb if lsb > 0 else x
 
 
 def run_stand(config: StandConfig | None = None, progress: bool = True) -> StandRun:
@@ -182,58 +175,28 @@ def run_stand(config: StandConfig | None = None, progress: bool = True) -> Stand
     params = config.truth_params(model)
     sim = SimulationSettings(drive="command", substeps=config.substeps, settle_s=1.0)
     rng = np.random.default_rng(config.seed)
-    dt = 1.0 / config.sample_rate_Hz
     names = [s.name for s in MODEL_INPUTS]
     fns = model.functions("command")
     i_state = fns.state_index("i")
     traces, truth_p = [], {}
     jobs = [(r, k, s) for r in config.ramps for k, s in enumerate(config.settings)]
     for ramp, k, setting in tqdm(jobs, desc="stand", unit="exp", disable=not progress):
-        t = np.arange(0.0, ramp.duration_s + 0.5 * dt, dt)
-        n = len(t)
-        i_nom = ramp.current(t)
-        amp = dither_amplitude(setting.shape, i_nom)
-        line = _wander(rng, n, dt, 17.7, 0.12, 3.0, 0.3)
-        prime = _wander(rng, n, dt, 0.5, 0.04, 2.0, 0.1)
-        temp = TEMPERATURE_LEVELS[k % len(TEMPERATURE_LEVELS)] + _wander(
-            rng, n, dt, 0.0, 0.5, 20.0, 1.5
-        )
-        u = np.zeros((n, len(names)))
-        u[:, names.index("current_nom_mA")] = i_nom
-        u[:, names.index("dither_amp_mA")] = amp
+        drive = bench_drive(ramp, setting, k, rng, config.sample_rate_Hz)
+        t = drive.time_s
+        u = np.zeros((len(t), len(names)))
+        u[:, names.index("current_nom_mA")] = drive.current_nom_mA
+        u[:, names.index("dither_amp_mA")] = drive.dither_amp_mA
         u[:, names.index("dither_freq_Hz")] = setting.freq_Hz
-        u[:, names.index("dither_phase")] = setting.freq_Hz * t + rng.uniform()
+        u[:, names.index("dither_phase")] = setting.freq_Hz * t + drive.phase0
         u[:, names.index(f"wave_{setting.waveform}")] = 1.0
-        u[:, names.index("line_pressure_bar")] = line
-        u[:, names.index("prime_pressure_bar")] = prime
-        u[:, names.index("oil_temp_C")] = temp
+        u[:, names.index("line_pressure_bar")] = drive.line_bar
+        u[:, names.index("prime_pressure_bar")] = drive.prime_bar
+        u[:, names.index("oil_temp_C")] = drive.oil_temp_C
         x, y = simulate_inputs(model, params, t, u, "command", sim)
         name = f"{ramp.label}_{setting.tag}"
         truth_p[name] = y[:, 1].copy()
-        p_meas = y[:, 0] + rng.standard_normal(n) * config.pressure_noise_bar
-        i_meas = x[:, i_state] + rng.standard_normal(n) * config.current_noise_mA
-        signals = {
-            "time_s": t,
-            "current_mA": _quantize(i_meas, config.current_lsb_mA),
-            "current_cmd_mA": i_nom,
-            "dither_amp_mA": amp,
-            "dither_freq_Hz": np.full(n, setting.freq_Hz),
-            "clutch_pressure_bar": _quantize(p_meas, config.pressure_lsb_bar),
-            "line_pressure_bar": _quantize(
-                line + rng.standard_normal(n) * 0.01, config.pressure_lsb_bar
-            ),
-            "prime_pressure_bar": _quantize(
-                prime + rng.standard_normal(n) * 0.005, config.pressure_lsb_bar / 2
-            ),
-            "oil_temp_C": _quantize(temp + rng.standard_normal(n) * 0.1, 0.1),
-        }
-        meta = {
-            "ramp": ramp.label,
-            "dither_freq_Hz": setting.freq_Hz,
-            "dither_shape": setting.shape,
-            "dither_waveform": setting.waveform,
-        }
-        traces.append(Trace(name, signals, meta=meta))
+        signals = measured_signals(rng, drive, x[:, i_state], y[:, 0], config.noise)
+        traces.append(Trace(name, signals, meta=experiment_meta(ramp, setting)))
     dataset = Dataset(
         traces,
         manifest_extra={
@@ -252,7 +215,7 @@ def truth_path(out: str | Path) -> Path:
 
 def write_stand(
     out: str | Path,
-    config: StandConfig | None = None,
+    config=None,
     *,
     overwrite: bool = False,
     progress: bool = True,
@@ -264,8 +227,10 @@ def write_stand(
     ----------
     out : path
         Dataset folder to create (``manifest.json`` + one CSV per experiment).
-    config : StandConfig, optional
-        What to run; the full default stand when omitted.
+    config : StandConfig or PlantConfig, optional
+        What to run: the stand, or a plant of the zoo
+        (:class:`~clutchlab.physics.stand.plants.PlantConfig`); the full default stand
+        when omitted.
     overwrite : bool
         Replace an existing dataset folder.
     progress : bool
@@ -275,12 +240,17 @@ def write_stand(
 
     Returns
     -------
-    StandRun
+    StandRun or PlantRun
     """
+    from .plants import PlantConfig, run_plant
+
     out = Path(out)
     check_output(out, kind="folder", overwrite=overwrite, what="dataset folder")
     check_output(truth_path(out), kind="file", overwrite=overwrite, what="truth file")
-    run = run_stand(config, progress=progress)
+    if isinstance(config, PlantConfig):
+        run = run_plant(config, progress=progress)
+    else:
+        run = run_stand(config, progress=progress)
     extra = {}
     if figure:
         from .overview import plot_pressure_vs_current
