@@ -97,15 +97,11 @@ def run_plant(config: PlantConfig, progress: bool = True) -> PlantRun:
     delay_s = (values.get("dead_ms", 0.0) + values.get("delay_ms", 0.0)) * 1e-3
     traces, truth_p = [], {}
     jobs = [(r, k, s) for r in config.ramps for k, s in enumerate(config.settings)]
-    for ramp, k, setting in tqdm(
-        jobs, desc=f"plant {spec.name}", unit="exp", disable=not progress
-    ):
+    for ramp, k, setting in tqdm(jobs, desc=f"plant {spec.name}", unit="exp", disable=not progress):
         drive = bench_drive(
             ramp, setting, k, rng, config.sample_rate_Hz, temperature=config.temperature
         )
-        current, pressure = run_kernel(
-            spec.simulate, vec, drive, config.substeps, setting.waveform
-        )
+        current, pressure = run_kernel(spec.simulate, vec, drive, config.substeps, setting.waveform)
         pressure = delayed(pressure, delay_s, dt)
         name = f"{ramp.label}_{setting.tag}"
         truth_p[name] = pressure.copy()
