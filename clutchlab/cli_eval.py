@@ -100,7 +100,11 @@ def register(sub) -> None:
     p.add_argument("--map", help="channel map (TOML) for logs with other channel names / units")
     p.add_argument("--effects", default="", help="effects of the fitted physics model")
     p.add_argument(
-        "--fit-time-limit", type=float, default=600.0, help="physics fit wall limit, s (600)"
+        "--fit-time-limit",
+        type=float,
+        default=120.0,
+        help="physics fit wall limit, s (120, the fit budget; the best iterate by then is the "
+        "model, marked not converged)",
     )
     p.add_argument("--fit-max-iter", type=int, default=None, help="physics fit iteration limit")
     p.add_argument(

@@ -27,6 +27,8 @@ def _cmd_fit_physics(args: argparse.Namespace) -> int:
         "method": args.method,
         "time_limit_s": args.time_limit,
         "strict": args.strict,
+        "staged_start": not args.no_staged_start,
+        "latch_law": args.latch_law,
     }
     if args.free:
         kw["free"] = _csv(args.free)
@@ -43,6 +45,9 @@ def _cmd_fit_physics(args: argparse.Namespace) -> int:
         raise
     res = fitter.result_
     fitter.save(out)
+    if fitter.staged_ is not None:
+        print(fitter.staged_.summary())
+    print(f"structure: {', '.join(res.effects) or 'base circuit'}")
     print(res.table())
     print(f"\nstatus {res.status}, {res.iterations} iterations, {res.wall_s:.1f} s")
     if not res.success:
@@ -75,7 +80,26 @@ def register(sub) -> None:
     p.add_argument(
         "--method", default="single_shooting", choices=["single_shooting", "multiple_shooting"]
     )
-    p.add_argument("--time-limit", type=float, default=900.0, help="solver wall limit (s)")
+    p.add_argument(
+        "--time-limit",
+        type=float,
+        default=120.0,
+        help="wall limit of the whole fit (s; default 120, the fit budget); the best iterate "
+        "found by then is the model",
+    )
+    p.add_argument(
+        "--no-staged-start",
+        action="store_true",
+        help="start the full fit from the datasheet values (default: static characteristic "
+        "and latch thresholds from the quasi-static data first)",
+    )
+    p.add_argument(
+        "--latch-law",
+        choices=("auto", "datasheet"),
+        default="auto",
+        help="auto: free latch thresholds when the data violate the datasheet latch's area "
+        "ratio (default); datasheet: keep the datasheet latch",
+    )
     p.add_argument(
         "--strict",
         action="store_true",

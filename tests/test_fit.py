@@ -49,13 +49,21 @@ def recovery_data():
 
 @pytest.fixture(scope="module")
 def recovered(recovery_data):
-    """Fit from the defaults, with the same drive (command) the data were made with."""
+    """Fit from the defaults, with the same drive (command) the data were made with.
+
+    Without the staged start: this is the recovery of the full fit from the datasheet
+    values. (From the staged start it lands on the same values within 0.1 %, but on the
+    other side of a sample at the latch snap, where the snap's residual spike dominates
+    every sensitivity column and the identifiability SVD flags three parameters; the
+    staged start has its own tests in ``test_fit_staged.py``.)
+    """
     settings = FitSettings(
         free=DEFAULT_FREE + UNIDENTIFIABLE,
         substeps=SUBSTEPS,
         method="single_shooting",
         drive="command",
         progress=False,
+        staged_start=False,
     )
     return PhysicsFitter(CircuitModel(), settings).fit(recovery_data)
 

@@ -22,6 +22,7 @@ from .nlp import solve_ipopt
 from .problem import FitProblem
 from .result import FitResult, identifiability
 from .settings import DEFAULT_FREE, FitSettings
+from .staged import free_latch_structure, staged_start
 
 __all__ = ["PhysicsFitter", "resolve_free"]
 
@@ -165,6 +166,23 @@ class PhysicsFitter:
         traces = self._training(data)
         free = resolve_free(model, settings)
         self._check_bounds(model, free, settings, start)
+        self.staged_ = None
+        if settings.staged_start and self.start is None and not settings.per_experiment:
+            start, self.staged_ = staged_start(
+                model,
+                traces,
+                settings,
+                start,
+                free,
+                settings.static_time_fraction * settings.time_limit_s,
+            )
+            if (
+                settings.latch_law == "auto"
+                and self.staged_.latch_tie_violated
+                and settings.free is None
+            ):
+                model, start = free_latch_structure(model, start, self.staged_)
+                free = resolve_free(model, settings)
         history: list[float] = []
         bar = tqdm(
             total=settings.max_iter,
@@ -329,7 +347,9 @@ class PhysicsFitter:
                     "the model diverges at the start parameters on "
                     f"{[e.name for e in problem.experiments]}"
                 )
-            remaining = settings.time_limit_s - (time.perf_counter() - t_start)
+            # The last 15 % of the limit is kept for the result (per-experiment errors,
+            # uncertainty pass), so the whole fit stays within its limit.
+            remaining = 0.85 * settings.time_limit_s - (time.perf_counter() - t_start)
             if remaining <= 0:
                 break
             try:
@@ -357,11 +377,13 @@ class PhysicsFitter:
         free = list(problem.free)
         # Uncertainty and identifiability from the single-shooting Jacobian at the optimum:
         # the last stage's (cached) when it is single shooting on all experiments, else
-        # one extra single-shooting pass.
+        # one extra single-shooting pass — unless the fit's time is nearly spent: then the
+        # last stage's subset (larger, i.e. conservative, standard errors).
+        short_of_time = wall > 0.7 * settings.time_limit_s
         reuse = (
             not problem.ms
             and not problem.per_exp
-            and len(problem.experiments) == len(traces)
+            and (len(problem.experiments) == len(traces) or short_of_time)
             and best["z"] is not None
         )
         ev = problem.evaluate(best["z"], True) if reuse else None

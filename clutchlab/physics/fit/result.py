@@ -11,7 +11,7 @@ import numpy as np
 
 from ...data.output import write_file_atomic
 from ...errors import ClutchlabError, FitError, FitResultError
-from ..effects import EFFECTS, make_effect
+from ..effects import EFFECTS, FLEXIBLE_LAWS, make_effect
 from ..model import CircuitModel
 from ..parameters import ParameterSet
 
@@ -249,10 +249,13 @@ def check_fit_document(doc, source: str = "fit result") -> None:
         problems.append("correlation: must be a list of lists of numbers")
     specs = None
     if "effects" in ok:
-        bad = [e for e in ok["effects"] if e.strip() not in EFFECTS]
+        bad = [
+            e for e in ok["effects"] if e.strip() not in EFFECTS and e.strip() not in FLEXIBLE_LAWS
+        ]
         dupes = sorted({e for e in ok["effects"] if ok["effects"].count(e) > 1})
         if bad:
-            problems.append(f"effects: unknown effect(s) {bad!r}; known: {', '.join(EFFECTS)}")
+            known = ", ".join([*EFFECTS, *FLEXIBLE_LAWS])
+            problems.append(f"effects: unknown effect(s) {bad!r}; known: {known}")
         if dupes:
             problems.append(f"effects: switched on twice: {', '.join(dupes)}")
         if not bad and not dupes:

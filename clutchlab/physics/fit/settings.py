@@ -89,7 +89,9 @@ class FitSettings:
     tol : float
         IPOPT convergence tolerance.
     time_limit_s : float
-        Wall-clock limit of the solver (s); the best iterate is kept when reached.
+        Wall-clock limit of the whole fit (s): staged start, solver and result; the
+        solver stops at 85 % of it (the rest is kept for the result's per-experiment
+        errors and uncertainty pass), and the best iterate is kept when reached.
     multistart : int
         Extra starts drawn (Latin hypercube) inside the bounds, besides the defaults.
     seed : int
@@ -104,6 +106,20 @@ class FitSettings:
         Processes that simulate experiments in parallel (1: in this process).
     ipopt_options : dict
         Extra IPOPT options.
+    staged_start : bool
+        Start from the data before the full fit (:mod:`~clutchlab.physics.fit.staged`):
+        the static characteristic on the quasi-static rising branch, then the latch
+        thresholds at the measured latch currents. Used only when the fit starts from the
+        datasheet values (no user start). Default True.
+    latch_law : {"auto", "datasheet"}
+        ``auto``: when the staged start finds the training data's latch thresholds closer
+        together than the datasheet latch's area ratio allows, the fit uses the
+        ``latch_free_thresholds`` law instead (same parameter count, no tie) and says
+        so; ``datasheet``: keep the model's latch as given.
+    static_max_iter : int
+        Iteration limit of the staged start's static stage.
+    static_time_fraction : float
+        Share of ``time_limit_s`` the static stage may use.
     strict : bool
         A fit stopped at a limit (iterations, wall time) raises ``FitError`` (with the best
         iterate in ``exc.result``). Default False: the best iterate *is* the model, marked
@@ -137,6 +153,10 @@ class FitSettings:
     progress: bool = True
     workers: int = 2
     ipopt_options: dict = field(default_factory=dict)
+    staged_start: bool = True
+    latch_law: Literal["auto", "datasheet"] = "auto"
+    static_max_iter: int = 15
+    static_time_fraction: float = 0.2
     strict: bool = False
 
     def __post_init__(self) -> None:
@@ -151,6 +171,10 @@ class FitSettings:
             problems.append("substeps must be 1..16")
         if self.decimate < 1:
             problems.append("decimate must be ≥ 1")
+        if self.latch_law not in ("auto", "datasheet"):
+            problems.append(f"latch_law {self.latch_law!r} is not auto or datasheet")
+        if not 0 < self.static_time_fraction < 1:
+            problems.append("static_time_fraction must be in (0, 1)")
         if self.max_iter < 1 or self.time_limit_s <= 0:
             problems.append("max_iter and time_limit_s must be positive")
         if problems:
