@@ -5,7 +5,13 @@ dither-period-mean pressure reached on the unseen medium ramp, default vs fitted
 (the fit never sees the medium ramp), and, with ``--decimation``, how the residual
 decimation changes the fitted model's medium-ramp RMSE.
 
-Usage: ``python benchmarks/bench_fit.py [--runs 3] [--data DIR] [--decimation 1,10,50]``
+With ``--zoo``, the same fit (default settings, staged start, 120 s limit) is also run
+on every plant of the zoo (``clutchlab stand --plant NAME``, seed ``--zoo-seed``), and a
+table gives each plant's wall time, status, structure and medium-ramp RMSE beside the
+default stand's.
+
+Usage: ``python benchmarks/bench_fit.py [--runs 3] [--data DIR] [--decimation 1,10,50]
+[--zoo [--zoo-seed 0] [--zoo-dir DIR]]``
 """
 
 from __future__ import annotations
@@ -43,6 +49,9 @@ def main() -> None:
     ap.add_argument("--data", default="bench-stand", help="stand dataset (written if absent)")
     ap.add_argument("--method", default=None, help="single_shooting or multiple_shooting")
     ap.add_argument("--decimation", default="", help="comma-separated decimations to compare")
+    ap.add_argument("--zoo", action="store_true", help="also fit every plant of the zoo")
+    ap.add_argument("--zoo-seed", type=int, default=0, help="seed of the zoo's units")
+    ap.add_argument("--zoo-dir", default="bench-zoo", help="zoo datasets (written if absent)")
     args = ap.parse_args()
 
     data = Path(args.data)
@@ -91,6 +100,44 @@ def main() -> None:
                 r = exc.result
             wall = time.perf_counter() - t0
             print(f"{d:8d} {wall:9.1f} {medium_rmse(ds, r.model(), r.params()):18.4f}")
+    if args.zoo:
+        zoo_rows(args, kw, ("stand", med, res, rmse_default, rmse_fit))
+
+
+def zoo_rows(args, kw, stand_row) -> None:
+    """One fit per zoo plant (seed ``--zoo-seed``); a table beside the stand's median run."""
+    import warnings
+
+    from clutchlab.errors import FitWarning
+    from clutchlab.physics.stand.plants import PlantConfig, plant_names
+
+    rows = [stand_row]
+    for name in plant_names():
+        data = Path(args.zoo_dir) / f"{name}_s{args.zoo_seed}"
+        if not (data / "manifest.json").exists():
+            write_stand(data, PlantConfig(name, seed=args.zoo_seed), progress=False, overwrite=True)
+        zds = load_dataset(data)
+        t0 = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FitWarning)
+            res = PhysicsFitter(settings=FitSettings(**kw, time_limit_s=120.0)).fit(zds).result_
+        wall = time.perf_counter() - t0
+        rows.append(
+            (
+                name,
+                wall,
+                res,
+                medium_rmse(zds, CircuitModel(), None),
+                medium_rmse(zds, res.model(), res.params()),
+            )
+        )
+    print(
+        f"\n{'circuit':22s} {'wall (s)':>8s} {'default':>8s} {'fitted':>8s} {'ratio':>6s}  "
+        "structure / status"
+    )
+    for name, wall, res, d, f in rows:
+        structure = ",".join(res.effects) or "base"
+        print(f"{name:22s} {wall:8.1f} {d:8.4f} {f:8.4f} {f / d:6.2f}  {structure} / {res.status}")
 
 
 if __name__ == "__main__":

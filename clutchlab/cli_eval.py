@@ -30,21 +30,46 @@ def _finish(files, failed: dict[str, str], json_path: str | None) -> int:
     return 1 if failed else 0
 
 
+def _fmu_params(items: list[str] | None) -> dict[str, float]:
+    """``NAME=VALUE`` options as a dict; a malformed one exits with its text."""
+    out = {}
+    for item in items or ():
+        name, sep, value = item.partition("=")
+        try:
+            if not sep or not name.strip():
+                raise ValueError
+            out[name.strip()] = float(value)
+        except ValueError:
+            raise SystemExit(f"--fmu-param {item!r}: expected NAME=VALUE with a number") from None
+    return out
+
+
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from .data import load_dataset
     from .physics import CircuitModel
     from .physics.fit import FitSettings
     from .validation import evaluate, write_report
 
+    fmu_params = _fmu_params(args.fmu_param)  # a malformed option fails before any work
     dataset = load_dataset(args.dataset, channel_map=args.map)
     fmu = None
     if args.physics_fmu:
         from .physics.fmu import FmuPhysics
 
-        fmu = FmuPhysics(args.physics_fmu, timeout_s=args.fmu_timeout, isolate=args.fmu_isolate)
+        fmu = FmuPhysics(
+            args.physics_fmu,
+            timeout_s=args.fmu_timeout,
+            isolate=args.fmu_isolate,
+            parameters=fmu_params,
+        )
     kw = {"progress": not args.quiet, "time_limit_s": args.fit_time_limit}
     if args.fit_max_iter is not None:
         kw["max_iter"] = args.fit_max_iter
+    options = {}
+    if args.physics_model:
+        from .physics.fit import PhysicsFitter
+
+        options["physics_fitted"] = {"fitted": PhysicsFitter.load(args.physics_model)}
     ev = evaluate(
         dataset,
         _csv(args.variants) or None,
@@ -57,6 +82,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         classifiers=False if args.no_classifiers else None,
         command=command_line(),
         physics_fmu=fmu,
+        options=options,
     )
     files = write_report(ev, Path(args.out))
     return _finish(files, ev.failed, args.json)
@@ -108,6 +134,13 @@ def register(sub) -> None:
     )
     p.add_argument("--fit-max-iter", type=int, default=None, help="physics fit iteration limit")
     p.add_argument(
+        "--physics-model",
+        metavar="FIT.json",
+        help="a fit from `clutchlab fit-physics` on this dataset's training ramps: used as "
+        "physics_fitted (and under hybrid) instead of fitting again; refused if it was "
+        "fitted on other experiments",
+    )
+    p.add_argument(
         "--no-classifiers",
         action="store_true",
         help="skip the latch-classifier comparison (run by default with an ML variant)",
@@ -118,6 +151,13 @@ def register(sub) -> None:
         help="an FMI 2.0 co-simulation FMU as the physics model (e.g. from Amesim or "
         "`clutchlab export-fmu`): scored as variant physics_fmu, and the physics under "
         "hybrid instead of the fitted in-process model",
+    )
+    p.add_argument(
+        "--fmu-param",
+        action="append",
+        metavar="NAME=VALUE",
+        help="set an FMU parameter before initialization (in the FMU's unit); repeat for "
+        "more. Parameters left at the FMU's start value are listed in the report",
     )
     p.add_argument(
         "--fmu-timeout",

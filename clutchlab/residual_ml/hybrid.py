@@ -26,7 +26,12 @@ from .estimators import SVCPartitionedGP
 from .features import DIDT_FEATURES, PHYSICS_FEATURES
 from .physics import DefaultPhysics, PhysicsPredictor
 
-__all__ = ["HYBRID_CLASSIFIER_FEATURES", "HYBRID_FEATURES", "HybridModel"]
+__all__ = ["HYBRID_CLASSIFIER_FEATURES", "HYBRID_FEATURES", "RESIDUAL_FORMS", "HybridModel"]
+
+#: Forms of the hybrid: the residual model on top of the physics, the standalone
+#: pipeline (the physics ignored) when the physics explains little, or the physics alone
+#: when a residual model does not generalize across the training experiments.
+RESIDUAL_FORMS: tuple[str, ...] = ("residual", "standalone", "physics")
 
 #: Features of the default residual model: the paper's + the physics clutch pressure.
 HYBRID_FEATURES: tuple[str, ...] = (*DIDT_FEATURES, "physics_bar")
@@ -56,6 +61,18 @@ class HybridModel(TraceEstimator):
     residual : TraceEstimator, optional
         Residual model (cloned); default :class:`SVCPartitionedGP` on
         :data:`HYBRID_FEATURES` with the classifier on :data:`HYBRID_CLASSIFIER_FEATURES`.
+    form : {"auto", "residual", "standalone", "physics"}
+        ``residual``: the residual model learns measured − physics, with the physics
+        prediction among its features. ``standalone``: the residual model, on its
+        features without the physics ones, learns the measured pressure itself — the
+        paper's standalone pipeline; the physics is ignored. ``physics``: the physics
+        prediction alone (the residual model is fitted and kept, but not added; the
+        predictive std is the form's leave-one-experiment-out RMSE). ``auto`` (default):
+        the form with the lowest leave-one-experiment-out RMSE (dither-period mean, bar)
+        on the training traces, held out by dither setting in ``form_folds`` folds; the
+        test ramp plays no part.
+    form_folds : int
+        Folds of the ``auto`` choice (default 3).
 
     Attributes
     ----------
@@ -65,6 +82,11 @@ class HybridModel(TraceEstimator):
         The fitted residual model.
     feature_names_ : list of str
         Features of the residual model.
+    form_ : str
+        The form used (``residual``, ``standalone`` or ``physics``).
+    form_scores_ : dict of str to float
+        Leave-one-experiment-out RMSE (bar) of each form on the training traces (empty
+        unless ``form="auto"``).
 
     Notes
     -----
@@ -72,9 +94,11 @@ class HybridModel(TraceEstimator):
     residual model is fitted to ``y − X[:, -1]`` on all columns.
     """
 
-    def __init__(self, physics=None, residual=None) -> None:
+    def __init__(self, physics=None, residual=None, form="auto", form_folds=3) -> None:
         self.physics = physics
         self.residual = residual
+        self.form = form
+        self.form_folds = form_folds
 
     def _physics(self):
         phys = self.physics if self.physics is not None else DefaultPhysics()
@@ -86,6 +110,78 @@ class HybridModel(TraceEstimator):
 
     def _residual(self) -> TraceEstimator:
         return clone(self.residual) if self.residual is not None else default_residual()
+
+    def _standalone(self) -> TraceEstimator:
+        """The standalone form: the paper pipeline, i.e. the residual model without physics.
+
+        With the default residual model this is :class:`SVCPartitionedGP` with its own
+        default features (the ``paper_svc_gp`` variant); a given residual model keeps its
+        settings with the physics features taken out of its feature lists.
+        """
+        res = self._residual()
+        if self.residual is None:
+            return res.set_params(features=None, classifier_features=None)
+        params = res.get_params(deep=False)
+        update = {
+            key: tuple(f for f in params[key] if f not in PHYSICS_FEATURES)
+            for key in ("features", "classifier_features")
+            if params.get(key) is not None
+        }
+        return res.set_params(**update) if update else res
+
+    def _fit_residual(self, res, traces, outputs):
+        """Fit ``res`` on measured − physics of ``traces`` (physics outputs given)."""
+        res.feature_names_ = list(res._builder().names)
+        blocks = []
+        for t, (raw, smooth) in zip(traces, outputs, strict=True):
+            b = res._block(t, smooth)
+            ref = smooth["clutch_pressure_bar"] if res.target == "period_mean" else raw
+            b.y = b.y - ref
+            blocks.append(b)
+        res.n_features_in_ = len(res.feature_names_)
+        res.train_experiments_ = [t.name for t in traces]
+        res._fit_blocks(blocks)
+        return res
+
+    def _form_folds(self, traces) -> list[list[int]]:
+        """Held-out groups of the form choice: experiments grouped by dither setting."""
+        keys = []
+        for t in traces:
+            m = t.meta or {}
+            keys.append(
+                (m.get("dither_freq_Hz"), m.get("dither_shape"), m.get("dither_waveform"))
+                if "dither_freq_Hz" in m
+                else (t.name,)
+            )
+        groups = sorted(set(keys), key=str)
+        k = max(2, min(int(self.form_folds), len(groups)))
+        folds = [[] for _ in range(k)]
+        for j, g in enumerate(groups):
+            folds[j % k].extend(i for i, key in enumerate(keys) if key == g)
+        return [f for f in folds if f]
+
+    def _loeo_scores(self, traces, outputs) -> dict[str, float]:
+        """Leave-one-group-out RMSE (bar, dither-period mean) of each form on ``traces``."""
+        errors = {f: [] for f in RESIDUAL_FORMS}
+        for held in self._form_folds(traces):
+            train = [i for i in range(len(traces)) if i not in held]
+            if not train:
+                continue
+            res = self._fit_residual(
+                self._residual(), [traces[i] for i in train], [outputs[i] for i in train]
+            )
+            alone = self._standalone().fit([traces[i] for i in train])
+            for i in held:
+                t = traces[i]
+                n = dither_period_samples(t)
+                y = dither_period_mean(t.get("clutch_pressure_bar"), n)
+                raw, smooth = outputs[i]
+                F = res._builder().build(t, smooth)
+                r = res._predict_matrix(F, path=True, return_std=False)
+                errors["residual"].append(dither_period_mean(raw + r, n) - y)
+                errors["standalone"].append(dither_period_mean(alone.predict(t), n) - y)
+                errors["physics"].append(dither_period_mean(raw, n) - y)
+        return {f: float(np.sqrt(np.mean(np.concatenate(e) ** 2))) for f, e in errors.items() if e}
 
     def _outputs(
         self, phys, trace: Trace, needed: tuple[str, ...] = ()
@@ -142,21 +238,26 @@ class HybridModel(TraceEstimator):
             res.train_experiments_ = []
             res._fit_blocks([b])
             self.physics_ = None
+            self.form_, self.form_scores_ = "residual", {}
         else:
             if y is not None:
                 raise DataError("y must be None when fitting on traces (targets come from them)")
+            if self.form not in (*RESIDUAL_FORMS, "auto"):
+                raise ModelError(
+                    f"form must be 'auto' or one of {', '.join(RESIDUAL_FORMS)}, not {self.form!r}"
+                )
             phys = self._physics()
-            res.feature_names_ = list(res._builder().names)
-            blocks = []
-            for t in traces:
-                raw, smooth = self._outputs(phys, t, tuple(res.feature_names_))
-                b = res._block(t, smooth)
-                ref = smooth["clutch_pressure_bar"] if res.target == "period_mean" else raw
-                b.y = b.y - ref
-                blocks.append(b)
-            res.n_features_in_ = len(res.feature_names_)
-            res.train_experiments_ = [t.name for t in traces]
-            res._fit_blocks(blocks)
+            needed = tuple(res._builder().names)
+            outputs = [self._outputs(phys, t, needed) for t in traces]
+            form, scores = self.form, {}
+            if form == "auto":
+                scores = self._loeo_scores(traces, outputs)
+                form = min(scores, key=scores.get) if scores else "residual"
+            if form == "standalone":
+                res = self._standalone().fit(traces)
+            else:  # the physics form keeps a residual model too (saved, exported alike)
+                res = self._fit_residual(res, traces, outputs)
+            self.form_, self.form_scores_ = form, scores
             self.physics_ = phys
             self.n_features_in_ = len(res.feature_names_)
         self.residual_ = res
@@ -173,7 +274,13 @@ class HybridModel(TraceEstimator):
     def _predict_trace(self, trace: Trace, return_std: bool):
         if self.physics_ is None:
             raise ModelError("this HybridModel was fitted on arrays; predict on arrays too")
+        if self.form_ == "standalone":
+            return self.residual_._predict_trace(trace, return_std)
         raw, smooth = self._outputs(self.physics_, trace, tuple(self.feature_names_))
+        if self.form_ == "physics":
+            if return_std:
+                return raw, np.full(len(raw), self.form_scores_.get("physics", np.nan))
+            return raw
         F = self.residual_._builder().build(trace, smooth)
         out = self.residual_._predict_matrix(F, path=True, return_std=return_std)
         if return_std:
@@ -184,6 +291,11 @@ class HybridModel(TraceEstimator):
         """Physics prediction and residual per sample of ``trace`` (bar), and their sum."""
         self._check_fitted()
         raw, smooth = self._outputs(self.physics_, trace, tuple(self.feature_names_))
+        if self.form_ == "standalone":
+            p = self.residual_._predict_trace(trace, False)
+            return {"physics_bar": raw, "residual_bar": p - raw, "pressure_bar": p}
+        if self.form_ == "physics":
+            return {"physics_bar": raw, "residual_bar": np.zeros_like(raw), "pressure_bar": raw}
         F = self.residual_._builder().build(trace, smooth)
         r = self.residual_._predict_matrix(F, path=True, return_std=False)
         return {"physics_bar": raw, "residual_bar": r, "pressure_bar": raw + r}

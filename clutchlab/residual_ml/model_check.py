@@ -180,6 +180,8 @@ _PARAM_RULES: dict[str, Callable | None] = {
     "label_rule": None,
     "physics": None,
     "residual": None,
+    "form": _one_of(("auto", "residual", "standalone", "physics")),
+    "form_folds": _integer(2),
 }
 
 
@@ -394,7 +396,7 @@ class _Checker:
             return
         common = ("feature_names", "train_experiments", "n_features_in", "lag_s")
         own = {
-            HybridModel: ("physics", "residual"),
+            HybridModel: ("physics", "residual", "form", "form_scores"),
             SVCPartitionedGP: (
                 "classifier_columns",
                 "classifier_train_accuracy",
@@ -439,6 +441,14 @@ class _Checker:
             )
 
     def hybrid(self, state: dict, where: str, prefix: str, names) -> None:
+        forms = ("residual", "standalone", "physics")
+        self.key(state, "form", where, _one_of(forms), required=False)
+        scores = self.key(state, "form_scores", where, required=False)
+        if scores is not _MISSING and (scores := self.mapping(scores, f"{where}.form_scores")):
+            for k, v in scores.items():
+                problem = _one_of(forms)(k) or _number(0.0)(v)
+                if problem:
+                    self.add(f"{where}.form_scores.{k}", problem)
         phys = self.key(state, "physics", where)
         if phys is not _MISSING and phys is not None:
             self.physics(phys, f"{where}.physics")

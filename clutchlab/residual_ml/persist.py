@@ -131,6 +131,8 @@ def _state(est, arrays: dict, prefix: str) -> dict:
     }
     if isinstance(est, HybridModel):
         state["physics"] = None if est.physics_ is None else _as_predictor(est.physics_).to_dict()
+        state["form"] = getattr(est, "form_", "residual")
+        state["form_scores"] = dict(getattr(est, "form_scores_", {}))
         state["residual"] = {
             "class": type(est.residual_).__name__,
             "params": _params(est.residual_),
@@ -170,6 +172,9 @@ def _restore(est, state: dict, arrays, prefix: str) -> None:
         est.physics_ = (
             None if state["physics"] is None else PhysicsPredictor.from_dict(state["physics"])
         )
+        # Files written before the residual-form choice hold the residual form.
+        est.form_ = state.get("form", "residual")
+        est.form_scores_ = {k: float(v) for k, v in state.get("form_scores", {}).items()}
         r = state["residual"]
         res = _CLASSES[r["class"]](**_params_from(r["params"]))
         _restore(res, r["state"], arrays, prefix + "residual")

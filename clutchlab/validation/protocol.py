@@ -451,6 +451,9 @@ class Protocol:
         }
         if callable(getattr(model, "predict_latch", None)):
             details["classifier_accuracy"] = self._latch_accuracy(model)
+        if getattr(model, "form_", None) is not None:  # a hybrid's residual form, and why
+            details["residual_form"] = model.form_
+            details["residual_form_loeo_rmse_bar"] = dict(getattr(model, "form_scores_", {}))
         return VariantScore(
             name=name,
             metrics=metrics,

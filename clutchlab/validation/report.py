@@ -332,6 +332,12 @@ def _describe(name: str, d: dict[str, Any], html_: bool) -> str:
     text = d["description"]
     if d.get("classifier_accuracy") is not None:
         text += f"; latch-classifier accuracy on the test ramp {fmt(d['classifier_accuracy'])}"
+    if d.get("residual_form"):
+        scores = d.get("residual_form_loeo_rmse_bar") or {}
+        why = ", ".join(f"{k} {fmt(v)} bar" for k, v in scores.items())
+        text += f"; form: {d['residual_form']}" + (
+            f" (leave-one-experiment-out RMSE on the training ramps: {why})" if why else ""
+        )
     if html_:
         return f"<code>{_e(name)}</code>: {_e(text)}<br>"
     return f"- `{name}`: {text}"

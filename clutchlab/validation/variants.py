@@ -300,14 +300,23 @@ class FittedPhysics(BaseEstimator):
         Fit settings; the defaults by default.
     accept_best_iterate : bool
         Keep the best iterate of a non-converged fit instead of raising (default True).
+    fitted : PhysicsFitter or FitResult, optional
+        A fit made before (e.g. ``clutchlab fit-physics``): used as is, not refitted, after
+        checking that it was fitted on exactly the training experiments given to
+        :meth:`fit` (a fit that saw a test experiment is refused).
     """
 
     def __init__(
-        self, model: Any = None, settings: Any = None, accept_best_iterate: bool = True
+        self,
+        model: Any = None,
+        settings: Any = None,
+        accept_best_iterate: bool = True,
+        fitted: Any = None,
     ) -> None:
         self.model = model
         self.settings = settings
         self.accept_best_iterate = accept_best_iterate
+        self.fitted = fitted
 
     def fit(self, traces: Sequence[Trace]) -> FittedPhysics:
         """Fit on ``traces`` (the training experiments); returns self.
@@ -318,8 +327,24 @@ class FittedPhysics(BaseEstimator):
             When the fit fails without a usable iterate (or does not converge and
             ``accept_best_iterate`` is false).
         """
-        from ..physics.fit import PhysicsFitter
+        from ..physics.fit import FitResult, PhysicsFitter
 
+        if self.fitted is not None:
+            fitter = self.fitted
+            if isinstance(fitter, FitResult):
+                fitter = PhysicsFitter.load(fitter.to_json())
+            names = sorted(t.name for t in traces)
+            if sorted(fitter.result_.train) != names:
+                raise FitError(
+                    "the given physics fit was made on other experiments "
+                    f"({', '.join(sorted(fitter.result_.train))}) than this evaluation's "
+                    f"training experiments ({', '.join(names)}); refit it on the training ramps"
+                )
+            self.fitter_ = fitter
+            self.result_ = fitter.result_
+            self.converged_ = bool(fitter.result_.success)
+            self.train_experiments_ = list(self.result_.train)
+            return self
         fitter = PhysicsFitter(self.model, self.settings)
         try:
             fitter.fit(list(traces))

@@ -17,7 +17,8 @@ lag the centred ones by half a window and move the model's output at ramp revers
 ~0.1 bar on the default stand). Models using the physics features (dither-period means
 centred on the sample) are refused: they have no causal form.
 
-A hybrid (``HybridModel``) is exported as its physics (command drive) plus its residual
+A hybrid (``HybridModel``) in its standalone form (``form_ == "standalone"``) is exported
+as its ML model alone. Otherwise it is exported as its physics (command drive) plus its residual
 model, when the physics is a :class:`~clutchlab.residual_ml.physics.PhysicsPredictor`
 (effects + parameter values) and the residual's features are exact.
 """
@@ -195,7 +196,17 @@ def ml_program_from(
     ident = name or f"clutch_{kind.lower()}"
     physics = None
     est = model
-    if hasattr(model, "residual_"):
+    if getattr(model, "form_", "residual") == "physics":
+        raise FmuError(
+            f"this {kind} chose its physics form (its residual model did not generalize in "
+            "leave-one-experiment-out): export the physics fit itself "
+            "(`clutchlab export-fmu FIT.json`)"
+        )
+    if hasattr(model, "residual_") and getattr(model, "form_", "residual") == "standalone":
+        # A hybrid that chose its standalone form predicts with its ML model alone.
+        est = model.residual_
+        features = _fmu_features(est, kind, approximate_didt)
+    elif hasattr(model, "residual_"):
         est = model.residual_
         features = _fmu_features(est, kind, approximate_didt)
         physics = _physics_program(model, kind)

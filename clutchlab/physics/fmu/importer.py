@@ -117,6 +117,10 @@ class FmuPhysics(BaseEstimator):
         only Real output).
     start_values : dict, optional
         FMU parameter name → value (in the FMU's unit), set before initialization.
+    parameters : dict, optional
+        The same as ``start_values`` (the name vendor tools use); both may be given, a
+        parameter in both with two values is an error. Every parameter left at the FMU's
+        own start value is listed in each simulation's messages.
     timeout_s : float
         Wall-time limit of one trace's simulation (s).
     isolate : bool
@@ -151,6 +155,7 @@ class FmuPhysics(BaseEstimator):
         isolate: bool = True,
         use_start_values: bool = True,
         name: str | None = None,
+        parameters: dict[str, float] | None = None,
     ) -> None:
         # Arguments are stored as given (scikit-learn's clone() checks identity).
         self.fmu = fmu
@@ -161,13 +166,26 @@ class FmuPhysics(BaseEstimator):
         self.isolate = isolate
         self.use_start_values = use_start_values
         self.name = name
+        self.parameters = parameters
         self.interface_: FmuInterface = inspect_fmu(Path(fmu), input_map, output)
-        unknown = sorted(set(start_values or {}) - set(self.interface_.parameters))
+        given = self._given_parameters()
+        unknown = sorted(set(given) - set(self.interface_.parameters))
         if unknown:
             raise FmuError(
                 f"{fmu}: start_values for unknown parameter(s) {', '.join(unknown)}; "
                 f"its parameters: {', '.join(self.interface_.parameters) or 'none'}"
             )
+
+    def _given_parameters(self) -> dict[str, float]:
+        """``start_values`` and ``parameters`` merged; a clash of values is an error."""
+        a, b = dict(self.start_values or {}), dict(self.parameters or {})
+        clash = sorted(k for k in set(a) & set(b) if a[k] != b[k])
+        if clash:
+            raise FmuError(
+                f"{self.fmu}: parameter(s) {', '.join(clash)} given twice with different "
+                "values (start_values and parameters)"
+            )
+        return a | b
 
     @property
     def label(self) -> str:
@@ -230,7 +248,7 @@ class FmuPhysics(BaseEstimator):
             The FMU reported an error (its log messages are in the message).
         """
         u, sources = self._inputs(trace)
-        starts = self._trace_start_values(trace) | dict(self.start_values or {})
+        starts = self._trace_start_values(trace) | self._given_parameters()
         t = np.asarray(trace.time_s, dtype=float)
         job = _Job(
             fmu=str(self.fmu),
@@ -250,9 +268,15 @@ class FmuPhysics(BaseEstimator):
         )
         t0 = time.perf_counter()
         y, messages = _run_isolated(job) if self.isolate else _run(job)
-        messages = [
-            f"input {name!r} not fed ({why})" for name, why in self.interface_.unfed.items()
-        ] + list(messages)
+        messages = (
+            [f"input {name!r} not fed ({why})" for name, why in self.interface_.unfed.items()]
+            + [
+                f"parameter {name!r} left at the FMU's start value"
+                for name in self.interface_.parameters
+                if name not in starts
+            ]
+            + list(messages)
+        )
         wall = time.perf_counter() - t0
         outputs = {n: y[:, k] for k, n in enumerate(job.out_names)}
         pressure = self.interface_.output.from_fmu(outputs[self.interface_.output.name])

@@ -1,0 +1,110 @@
+"""The hybrid's form (residual on the physics, or standalone) chosen inside the training set."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from clutchlab.data import dither_period_mean, dither_period_samples
+from clutchlab.errors import ModelError
+from clutchlab.residual_ml import HybridModel, SVCPartitionedGP, load_model, save_model
+from clutchlab.residual_ml.physics import PhysicsPredictor
+
+
+class _Recording:
+    """A physics model that explains nothing (smoothed noise of 2 bar, seeded by the trace's
+    name) and records the traces it saw."""
+
+    def __init__(self):
+        self.seen: list[str] = []
+
+    def predict(self, trace):
+        self.seen.append(trace.name)
+        rng = np.random.default_rng(sum(trace.name.encode()))
+        noise = rng.standard_normal(len(trace)) * 2.0
+        return 8.0 + np.convolve(noise, np.ones(300) / np.sqrt(300), mode="same")
+
+
+def _rmse(model, traces):
+    e = []
+    for t in traces:
+        n = dither_period_samples(t)
+        e.append(
+            dither_period_mean(model.predict(t), n)
+            - dither_period_mean(t.get("clutch_pressure_bar"), n)
+        )
+    return float(np.sqrt(np.mean(np.concatenate(e) ** 2)))
+
+
+@pytest.fixture(scope="module")
+def split(stand_run):
+    ds = stand_run.dataset
+    return list(ds.select(ramps=["fast", "slow"])), list(ds.select(ramps=["medium"]))
+
+
+@pytest.fixture(scope="module")
+def truth_physics(stand_run):
+    return PhysicsPredictor(
+        effects=tuple(stand_run.model.effect_names), params=dict(stand_run.params.values)
+    )
+
+
+def test_wrong_physics_gives_the_standalone_form_and_never_sees_the_test_ramp(split):
+    train, test = split
+    phys = _Recording()
+    model = HybridModel(physics=phys).fit(train)
+    assert model.form_ == "standalone"
+    assert set(model.form_scores_) == {"residual", "standalone", "physics"}
+    assert model.form_scores_["standalone"] < model.form_scores_["residual"]
+    assert set(phys.seen) <= {t.name for t in train}  # the choice saw training traces only
+    # Standalone = the paper pipeline on the same training traces.
+    paper = SVCPartitionedGP().fit(train)
+    assert _rmse(model, test) == pytest.approx(_rmse(paper, test), rel=1e-6)
+
+
+def test_exact_physics_gives_the_physics_form(split, truth_physics):
+    """The stand's own truth model: nothing is left for a residual model to learn."""
+    train, _ = split
+    model = HybridModel(physics=truth_physics).fit(train)
+    assert model.form_ == "physics"
+    assert model.form_scores_["physics"] < 0.05 < model.form_scores_["standalone"]
+
+
+def test_datasheet_physics_gives_the_residual_form(split):
+    """Right structure, wrong parameters (0.3 bar off): the residual model corrects it."""
+    train, test = split
+    physics = PhysicsPredictor()
+    model = HybridModel(physics=physics).fit(train)
+    assert model.form_ == "residual"
+    assert model.form_scores_["residual"] < min(
+        model.form_scores_["standalone"], model.form_scores_["physics"]
+    )
+    fixed = HybridModel(physics=physics, form="residual").fit(train)
+    assert _rmse(model, test) == pytest.approx(_rmse(fixed, test), rel=1e-9)
+    assert fixed.form_scores_ == {}
+
+
+def test_form_round_trips_and_a_bad_form_is_refused(split, tmp_path):
+    train, test = split
+    model = HybridModel(physics=_Recording(), form="standalone").fit(train)
+    with pytest.raises(ModelError):
+        HybridModel(physics=_Recording(), form="both").fit(train)
+    path = tmp_path / "h.json"
+    save_model(HybridModel(physics=PhysicsPredictor(), form="standalone").fit(train), path)
+    loaded = load_model(path)
+    assert loaded.form_ == "standalone"
+    np.testing.assert_allclose(loaded.predict(test[0]), model.predict(test[0]), atol=1e-9)
+
+
+def test_physics_form_predicts_the_physics_with_its_loeo_error_as_std(split, truth_physics):
+    train, test = split
+    model = HybridModel(physics=truth_physics, form="physics").fit(train)
+    trace = test[0]
+    np.testing.assert_array_equal(model.predict(trace), truth_physics.predict(trace))
+    comp = model.predict_components(trace)
+    assert np.all(comp["residual_bar"] == 0)
+    auto = HybridModel(physics=truth_physics).fit(train)
+    assert set(auto.form_scores_) == {"residual", "standalone", "physics"}
+    auto.form_ = "physics"  # as if chosen: its std is the physics form's LOEO RMSE
+    _, std = auto.predict(trace, return_std=True)
+    assert np.all(std == auto.form_scores_["physics"])
