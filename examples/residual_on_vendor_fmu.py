@@ -37,7 +37,11 @@ def main() -> None:
     physics = FmuPhysics(args.fmu, input_map={k.strip(): v.strip() for k, v in pairs} or None)
     dataset = load_dataset(args.data)
     train = dataset.select(ramps=["fast", "slow"])
+    # form="auto" (the default): residual model on the FMU, standalone ML, or the FMU alone,
+    # whichever predicts best in leave-one-experiment-out on the training experiments.
     hybrid = HybridModel(physics=physics).fit(list(train))
+    scores = ", ".join(f"{k} {v:.4f}" for k, v in hybrid.form_scores_.items())
+    print(f"hybrid form: {hybrid.form_} (leave-one-experiment-out RMSE, bar: {scores})")
     print(f"{'medium experiment':24s} {'FMU alone':>10s} {'FMU + residual':>15s}  (RMSE, bar)")
     for trace in dataset.select(ramps=["medium"]):
         print(

@@ -68,6 +68,7 @@ def fitted(train):
         "hybrid": HybridModel(
             physics=PhysicsPredictor(substeps=2),
             residual=SVCPartitionedGP(features=HYBRID_FEATURES, **SMALL),
+            form="residual",  # the residual form under test (the form choice: test_hybrid_form)
         ).fit(train),
     }
 

@@ -69,7 +69,8 @@ class HybridModel(TraceEstimator):
         prediction alone (the residual model is fitted and kept, but not added; the
         predictive std is the form's leave-one-experiment-out RMSE). ``auto`` (default):
         the form with the lowest leave-one-experiment-out RMSE (dither-period mean, bar)
-        on the training traces, held out by dither setting in ``form_folds`` folds; the
+        on the training traces, in ``form_folds`` folds that hold out experiments whose
+        dither setting stays trained at another ramp (as a test experiment's is); the
         test ramp plays no part.
     form_folds : int
         Folds of the ``auto`` choice (default 3).
@@ -144,20 +145,28 @@ class HybridModel(TraceEstimator):
         return res
 
     def _form_folds(self, traces) -> list[list[int]]:
-        """Held-out groups of the form choice: experiments grouped by dither setting."""
-        keys = []
+        """Held-out experiments of the form choice, like the test's: seen settings, new run.
+
+        Experiment (setting ``s``, ramp ``r``, both indexed in sorted order) goes to fold
+        ``(s + r) mod k``: a held-out experiment's dither setting is still trained at the
+        other ramps, as a test experiment's is. Experiments without a dither setting in
+        their metadata are spread over the folds in order.
+        """
+        settings, ramps = [], []
         for t in traces:
             m = t.meta or {}
-            keys.append(
-                (m.get("dither_freq_Hz"), m.get("dither_shape"), m.get("dither_waveform"))
+            settings.append(
+                str((m.get("dither_freq_Hz"), m.get("dither_shape"), m.get("dither_waveform")))
                 if "dither_freq_Hz" in m
-                else (t.name,)
+                else t.name
             )
-        groups = sorted(set(keys), key=str)
-        k = max(2, min(int(self.form_folds), len(groups)))
+            ramps.append(str(t.ramp))
+        s_index = {v: j for j, v in enumerate(sorted(set(settings)))}
+        r_index = {v: j for j, v in enumerate(sorted(set(ramps)))}
+        k = max(2, min(int(self.form_folds), len(traces)))
         folds = [[] for _ in range(k)]
-        for j, g in enumerate(groups):
-            folds[j % k].extend(i for i, key in enumerate(keys) if key == g)
+        for i, (st, rp) in enumerate(zip(settings, ramps, strict=True)):
+            folds[(s_index[st] + r_index[rp]) % k].append(i)
         return [f for f in folds if f]
 
     def _loeo_scores(self, traces, outputs) -> dict[str, float]:
