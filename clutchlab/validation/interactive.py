@@ -16,13 +16,13 @@ few megabytes (plotly.js itself is about 4.8 MB).
 from __future__ import annotations
 
 import html
-import json
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._plotly import MAX_POINTS, PLOTLY_CONFIG, figure_div, plotlyjs_script, thin
+from .._plotly import f32 as _f32
 from .figures import VARIANT_COLORS, _band, featured_experiment
 
 if TYPE_CHECKING:
@@ -33,7 +33,6 @@ if TYPE_CHECKING:
 __all__ = [
     "MAX_POINTS",
     "PLOTLY_CONFIG",
-    "InteractiveFigure",
     "figure_div",
     "interactive_figures",
     "iplot_hysteresis_bands",
@@ -45,17 +44,7 @@ __all__ = [
     "thin",
 ]
 
-#: Most points drawn per line (longer traces are thinned by a constant stride).
-MAX_POINTS = 2000
-
-#: Plotly options of every report figure: responsive, no logo, PNG export at 2×.
-PLOTLY_CONFIG: dict[str, Any] = {
-    "responsive": True,
-    "displaylogo": False,
-    "toImageButtonOptions": {"format": "png", "scale": 2},
-}
-
-# Default plotly colours for variants without a fixed one, and the ramp colours of Fig. 5.
+# Default plotly colours, for variants without a fixed one.
 _CYCLE = (
     "#1f77b4",
     "#ff7f0e",
@@ -92,27 +81,6 @@ def _rgba(hex_color: str, alpha: float) -> str:
     h = hex_color.lstrip("#")
     r, g, b = (int(h[i : i + 2], 16) for i in (0, 2, 4))
     return f"rgba({r},{g},{b},{alpha})"
-
-
-def thin(n: int, max_points: int = MAX_POINTS) -> slice:
-    """Stride that keeps at most ``max_points`` of ``n`` samples (first sample kept).
-
-    Parameters
-    ----------
-    n : int
-        Samples in the line.
-    max_points : int
-        Most samples kept.
-
-    Returns
-    -------
-    slice
-    """
-    return slice(None, None, max(1, -(-n // max_points)))
-
-
-def _f32(x: np.ndarray, sl: slice = slice(None)) -> np.ndarray:
-    return np.asarray(x, dtype=float)[sl].astype(np.float32)
 
 
 def _layout(fig: go.Figure, title: str, height: int) -> go.Figure:
@@ -496,22 +464,6 @@ def iplot_uncertainty(ev: Evaluation, experiment: str | None = None) -> go.Figur
     return _layout(fig, f"Predictive uncertainty on {name} (test)", 480)
 
 
-@dataclass(frozen=True)
-class InteractiveFigure:
-    """An interactive report figure.
-
-    Attributes
-    ----------
-    key : str
-        Key of the static figure it stands for (``figures/<key>.png``).
-    figure : plotly.graph_objects.Figure
-        The figure.
-    """
-
-    key: str
-    figure: Any
-
-
 _BUILDERS = {
     "prediction_vs_time": iplot_prediction_vs_time,
     "pressure_vs_current": iplot_pressure_vs_current,
@@ -546,52 +498,3 @@ def interactive_figures(ev: Evaluation, keys: Sequence[str] | None = None) -> di
         if fig is not None:
             out[key] = fig
     return out
-
-
-def plotlyjs_script() -> str:
-    """plotly.js as one inline ``<script>`` element (about 4.8 MB), for the page's ``<head>``.
-
-    Returns
-    -------
-    str
-    """
-    from plotly.offline import get_plotlyjs
-
-    # "</script" cannot occur inside a script element; plotly.js has none, but be safe.
-    return "<script>" + get_plotlyjs().replace("</script", "<\\/script") + "</script>"
-
-
-def figure_div(fig: go.Figure, div_id: str) -> str:
-    """A figure as a ``<div class="plotly-graph-div">`` and the script that draws it.
-
-    plotly.js must already be on the page (:func:`plotlyjs_script`). User-provided strings
-    in the figure (variant and experiment names) are JSON-encoded with ``<``, ``>`` and ``&``
-    escaped, so they cannot end the script element.
-
-    Parameters
-    ----------
-    fig : plotly.graph_objects.Figure
-        The figure.
-    div_id : str
-        ``id`` of the ``<div>`` (letters, digits, ``-`` and ``_``).
-
-    Returns
-    -------
-    str
-    """
-    spec = fig.to_plotly_json()
-    payload = _script_json([spec["data"], spec["layout"], PLOTLY_CONFIG])
-    height = int(spec["layout"].get("height") or 450)
-    return (
-        f"<div id='{html.escape(div_id)}' class='plotly-graph-div' "
-        f"style='height:{height}px;width:100%'></div>"
-        f"<script>(function(){{var a={payload};"
-        f"Plotly.newPlot({json.dumps(div_id)},a[0],a[1],a[2]);}})();</script>"
-    )
-
-
-def _script_json(obj: Any) -> str:
-    from plotly.utils import PlotlyJSONEncoder
-
-    text = json.dumps(obj, cls=PlotlyJSONEncoder, separators=(",", ":"))
-    return text.replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026")

@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._plotly import MARKER_SCRIPT as _MARKER
 from ..data.output import write_file_atomic, write_folder_atomic
 from .figures import FigureSpec, report_figures
 from .interactive import interactive_figures
@@ -292,27 +293,6 @@ figcaption{font-size:.9em;color:#555}
 .note{font-size:.85em;color:#555}
 figure .plotly-graph-div{border:1px solid #ddd}
 """
-
-# After load, record on <body> how many figures there are (PNG images and interactive plots)
-# and how many are drawn: an image decoded and laid out with a non-zero size, a plot that
-# plotly.js has drawn (its container has the class js-plotly-plot and an svg.main-svg of
-# non-zero size). Read by clutchlab.validation.render in headless Chromium.
-_MARKER = (
-    "<script>window.addEventListener('load',function(){"
-    "function shown(e){var r=e.getBoundingClientRect();return r.width>0&&r.height>0;}"
-    "var im=Array.prototype.slice.call(document.images);"
-    "var ok=im.filter(function(i){return i.complete&&i.naturalWidth>0&&shown(i);});"
-    "var pl=Array.prototype.slice.call(document.querySelectorAll('.plotly-graph-div'));"
-    "var dr=pl.filter(function(d){var s=d.querySelector('svg.main-svg');"
-    "return d.classList.contains('js-plotly-plot')&&s!==null&&shown(s);});"
-    "var b=document.body;"
-    "b.setAttribute('data-figures',String(im.length+pl.length));"
-    "b.setAttribute('data-figures-visible',String(ok.length+dr.length));"
-    "b.setAttribute('data-plots',String(pl.length));"
-    "b.setAttribute('data-plots-drawn',String(dr.length));"
-    "b.setAttribute('data-page-height',String(document.documentElement.scrollHeight));});"
-    "</script>"
-)
 
 
 def _e(x: Any) -> str:
