@@ -21,6 +21,7 @@ __all__ = [
     "PLOTLY_CONFIG",
     "f32",
     "figure_div",
+    "minmax_indices",
     "plotlyjs_script",
     "thin",
 ]
@@ -75,15 +76,52 @@ def thin(n: int, max_points: int = MAX_POINTS) -> slice:
     return slice(None, None, max(1, -(-n // max_points)))
 
 
-def f32(x: Any, sl: slice = slice(None)) -> np.ndarray:
+def minmax_indices(y: Any, max_points: int = MAX_POINTS) -> np.ndarray:
+    """Indices of at most ``max_points`` samples of ``y`` that keep its peaks.
+
+    ``y`` is cut into ``max_points // 2`` consecutive buckets; of each, the samples with the
+    smallest and the largest value are kept (in order), so a spike narrower than a bucket
+    (a latch snap in a residual) survives the thinning, unlike a constant stride.
+
+    Parameters
+    ----------
+    y : array_like
+        The line's values (any unit); NaN allowed.
+    max_points : int
+        Most samples kept (at least 2).
+
+    Returns
+    -------
+    numpy.ndarray
+        Increasing integer indices; every index when ``len(y) <= max_points``.
+    """
+    y = np.asarray(y, dtype=float)
+    n = y.size
+    if n <= max_points:
+        return np.arange(n)
+    size = -(-n // max(1, max_points // 2))
+    nb = -(-n // size)
+    lo = np.full(nb * size, np.inf)
+    hi = np.full(nb * size, -np.inf)
+    finite = np.isfinite(y)
+    lo[:n] = np.where(finite, y, np.inf)
+    hi[:n] = np.where(finite, y, -np.inf)
+    start = np.arange(nb) * size
+    idx = np.concatenate(
+        [start + lo.reshape(nb, size).argmin(1), start + hi.reshape(nb, size).argmax(1)]
+    )
+    return np.unique(np.minimum(idx, n - 1))
+
+
+def f32(x: Any, sl: slice | np.ndarray = slice(None)) -> np.ndarray:
     """``x[sl]`` as a float32 array (half the size of float64 in the page).
 
     Parameters
     ----------
     x : array_like
         Values (any unit).
-    sl : slice
-        Samples kept.
+    sl : slice or numpy.ndarray
+        Samples kept (a slice or indices).
 
     Returns
     -------

@@ -1,5 +1,6 @@
 """Issue 19 must-show 1: the interactive report renders in headless Chromium with every Plotly
-figure drawn, with the network disabled, and a screenshot is written beside the report.
+figure drawn, with the network disabled, and a screenshot is written beside the report; the
+sweep page too (the discovery report's check is in ``test_discover.py``).
 
 The browser is ``$CLUTCHLAB_CHROMIUM``, a Chromium on PATH or ``/usr/bin/chromium`` (Debian:
 ``apt-get install chromium``). A missing browser fails these tests with that message; they
@@ -13,9 +14,13 @@ import threading
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
 import numpy as np
+import pandas as pd
 import pytest
+from test_sweep_run import _spec
 from test_validation_report import TINY_RAMPS
 
+from clutchlab.physics.design.figures import _metrics
+from clutchlab.physics.design.interactive import sweep_html
 from clutchlab.physics.stand import DEFAULT_SETTINGS, StandConfig, run_stand
 from clutchlab.validation import evaluate, write_report
 from clutchlab.validation.interactive import MAX_POINTS, interactive_figures
@@ -129,3 +134,27 @@ def test_traces_are_thinned_and_each_variant_is_one_legend_group(evaluation):
     bands = figs["hysteresis_bands"]
     assert {t.legendgroup for t in bands.data} == set(evaluation.curves)
     assert bands.layout.legend.groupclick == "togglegroup"
+
+
+def test_sweep_page_draws_both_figures_offline(tmp_path):
+    """sweep.html (written by write_figures beside the PNGs, see test_sweep_run): tornado and
+    metric scatter, failed points marked; a synthetic result table (no simulation) with a
+    linear metric and a failed point."""
+    browser = _browser()
+    spec = _spec(n=12)
+    rng = np.random.default_rng(0)
+    rows = []
+    for k in range(12):
+        row = {"point_id": f"p{k:02d}", "index": k, "status": "ok", "error": ""}
+        row |= {v.name: rng.uniform(v.low, v.high) for v in spec.variables}
+        row |= {m: rng.normal() for m in _metrics(spec)}
+        row["latch_off_mA"] = 500.0 + 400.0 * row["vfs_d_orf"]  # a clear tornado bar
+        rows.append(row)
+    rows[-1] |= {"status": "failed", "error": "simulation failed: <test> & more"}
+    table = pd.DataFrame(rows)
+    html = sweep_html(table, spec)
+    assert html.count("* plotly.js v") == 1 and "<test>" not in html
+    page_path = tmp_path / "sweep.html"
+    page_path.write_text(html, encoding="utf-8")
+    page = load_page(page_path, browser)
+    assert page.offline and page.figures == page.visible == page.plots == page.plots_drawn == 2

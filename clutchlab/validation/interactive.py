@@ -21,7 +21,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .._plotly import MAX_POINTS, PLOTLY_CONFIG, figure_div, plotlyjs_script, thin
+from .._plotly import (
+    MAX_POINTS,
+    PLOTLY_CONFIG,
+    figure_div,
+    minmax_indices,
+    plotlyjs_script,
+    thin,
+)
 from .._plotly import f32 as _f32
 from .figures import VARIANT_COLORS, _band, featured_experiment
 
@@ -33,6 +40,8 @@ if TYPE_CHECKING:
 __all__ = [
     "MAX_POINTS",
     "PLOTLY_CONFIG",
+    "RESIDUAL_MIN_POINTS",
+    "RESIDUAL_PANEL_POINTS",
     "figure_div",
     "interactive_figures",
     "iplot_hysteresis_bands",
@@ -43,6 +52,12 @@ __all__ = [
     "plotlyjs_script",
     "thin",
 ]
+
+#: Most points of one residual panel (a variant, vs time or vs current), over all lines.
+RESIDUAL_PANEL_POINTS = 6000
+
+#: Fewest points per line of the residual figure, however many test experiments.
+RESIDUAL_MIN_POINTS = 400
 
 # Default plotly colours, for variants without a fixed one.
 _CYCLE = (
@@ -333,7 +348,10 @@ def iplot_residuals(ev: Evaluation) -> go.Figure | None:
     """Residual (predicted − measured, dither-period mean, bar) vs time and vs current.
 
     One row per scored variant, every test experiment overlaid (dash style per experiment);
-    a variant is one legend group over both columns.
+    a variant is one legend group over both columns. Each line keeps the minimum and maximum
+    of every stretch of samples (:func:`clutchlab._plotly.minmax_indices`), at most
+    :data:`RESIDUAL_PANEL_POINTS` points per panel over the experiments (at least
+    :data:`RESIDUAL_MIN_POINTS` per line).
 
     Parameters
     ----------
@@ -357,13 +375,16 @@ def iplot_residuals(ev: Evaluation) -> go.Figure | None:
         vertical_spacing=min(0.08, 0.3 / max(1, len(variants))),
     )
     refs = ev.references
+    # Many test experiments × variants × 2 panels: a budget per panel keeps the page small;
+    # min / max thinning keeps the latch-snap spikes.
+    per_line = max(RESIDUAL_MIN_POINTS, min(MAX_POINTS, RESIDUAL_PANEL_POINTS // len(refs)))
     for r, v in enumerate(variants, start=1):
         c = _color(v, r - 1)
         all_res = []
         for e, (name, ref) in enumerate(refs.items()):
             res = ref.period_mean(ev.scores[v].predictions[name].mean_bar) - ref.measured_mean_bar
             all_res.append(res)
-            sl = thin(res.size)
+            sl = minmax_indices(res, per_line)
             line = {"color": c, "width": 1, "dash": _DASHES[e % len(_DASHES)]}
             for col, x, unit in ((1, ref.time_s, "s"), (2, ref.current_mA, "mA")):
                 fig.add_trace(
