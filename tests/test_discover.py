@@ -112,6 +112,23 @@ def test_cli_writes_the_issue_json_and_a_report(cli_run):
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_the_report_draws_every_figure_interactive_offline(cli_run):
+    """Issue 19: report.html draws each iteration's figures with Plotly (embedded once) in
+    headless Chromium with the network disabled; the PNGs stay for report.md."""
+    from clutchlab.validation.render import find_browser, load_page
+
+    browser = find_browser()
+    assert browser is not None, "no headless Chromium: set CLUTCHLAB_CHROMIUM or install one"
+    report = cli_run[1] / "report"
+    html = (report / "report.html").read_text(encoding="utf-8")
+    n_iter = len(json.loads((report / "discovery.json").read_text())["iterations"])
+    assert html.count("* plotly.js v") == 1 and "<img" not in html
+    page = load_page(report / "report.html", browser)
+    assert page.offline and page.plots == page.plots_drawn == page.figures == 3 * n_iter
+    md = (report / "report.md").read_text(encoding="utf-8")
+    assert md.count(".png)") == 3 * n_iter
+
+
 def test_the_one_undeclared_effect_is_named_and_lowers_both_errors(cli_run):
     """Supply droop explains most of the residual; a latch threshold shift moves mainly the
     latch snaps, which the evidence leaves out."""

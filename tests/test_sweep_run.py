@@ -93,6 +93,7 @@ def test_local_sweep_writes_results_figures_and_skips_finished_points(tmp_path):
         "tornado.png",
         "metrics_vs_variables.png",
         "sensitivity.csv",
+        "sweep.html",
     }
     # The same numbers as evaluating the points directly.
     direct = pd.DataFrame(evaluate_batch(spec, design_points(spec)))[df.columns]

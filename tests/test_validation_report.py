@@ -66,11 +66,11 @@ class Lookup:
 
 
 class _Cells(HTMLParser):
-    """Metric cells of the report's tables and the embedded images."""
+    """Metric cells of the report's tables, the embedded images and the interactive plots."""
 
     def __init__(self):
         super().__init__()
-        self.cells, self.images, self._cell = {}, [], None
+        self.cells, self.images, self.plots, self._cell = {}, [], [], None
 
     def handle_starttag(self, tag, attrs):
         a = dict(attrs)
@@ -79,6 +79,8 @@ class _Cells(HTMLParser):
             self.cells[self._cell[:3]] = [a["data-value"], ""]
         elif tag == "img":
             self.images.append(a.get("src", ""))
+        elif tag == "div" and "plotly-graph-div" in (a.get("class") or "").split():
+            self.plots.append(a.get("id", ""))
 
     def handle_data(self, data):
         if self._cell is not None:
@@ -126,12 +128,22 @@ def check_report(folder: Path) -> dict:
         src = doc["variants" if r["signal"] == "period_mean" else "raw"][r["variant"]]
         for key in ACCURACY_KEYS:
             assert float(r[key]) == src[key]
-    # Every embedded figure is a PNG, and nothing is loaded from outside the file.
-    assert parser.images and len(parser.images) == len(doc["figures"]["drawn"])
+    # Every drawn figure is an interactive plot or an embedded PNG; plotly.js is inline, once;
+    # nothing is loaded from outside the file.
+    drawn = doc["figures"]["drawn"]
+    assert len(parser.images) + len(parser.plots) == len(drawn) > 0
+    assert parser.plots == [f"plot-{k}" for k in drawn if f"plot-{k}" in parser.plots]
+    if parser.plots:
+        assert html.count("Plotly.newPlot(") >= len(parser.plots)
+        assert html.count("* plotly.js v") == 1  # the library, embedded once
     for src in parser.images:
         assert src.startswith("data:image/png;base64,")
         assert base64.b64decode(src.split(",", 1)[1])[:8] == b"\x89PNG\r\n\x1a\n"
-    assert not re.search(r"(src|href)=['\"](?!data:|#)", html)
+    # (Outside the inline scripts: plotly.js holds URLs of map tiles it never loads here;
+    # the headless-Chromium test runs the page with the network disabled.)
+    markup = re.sub(r"<script>.*?</script>", "<script></script>", html, flags=re.S)
+    assert not re.search(r"<script[^>]*\ssrc=", markup)
+    assert not re.search(r"(src|href)=['\"](?!data:|#)", markup)
     for key in doc["figures"]["drawn"]:
         assert (folder / "figures" / f"{key}.png").stat().st_size > 1000
     return doc

@@ -4,7 +4,8 @@
 - :mod:`~clutchlab.validation.variants` names the compared models, whichever layer they come
   from (:func:`register_variant` adds new ones);
 - :func:`evaluate` fits and scores every variant; :func:`write_report` writes
-  ``report.html``, ``report.md``, ``metrics.json`` and ``metrics.csv`` from one dictionary;
+  ``report.html`` (interactive Plotly figures, :func:`interactive_figures`), ``report.md``,
+  ``metrics.json`` and ``metrics.csv`` from one dictionary;
 - :func:`run_demo` is ``clutchlab demo``: the embedded stand end to end.
 """
 
@@ -30,6 +31,7 @@ from .hysteresis import (
     hysteresis_curve,
     hysteresis_width_error,
 )
+from .interactive import interactive_figures
 from .latch import LatchCurrents, latch_currents, latch_error
 from .metrics import (
     ACCURACY_KEYS,
@@ -118,6 +120,7 @@ __all__ = [
     "hysteresis_curve",
     "hysteresis_width_error",
     "inputs_only",
+    "interactive_figures",
     "is_fitted",
     "jsonable",
     "latch_currents",

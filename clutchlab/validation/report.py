@@ -20,14 +20,17 @@ import io
 import json
 import math
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._plotly import MARKER_SCRIPT as _MARKER
 from ..data.output import write_file_atomic, write_folder_atomic
 from .figures import FigureSpec, report_figures
+from .interactive import interactive_figures
 from .metrics import ACCURACY_KEYS, METRIC_KEYS
 
 if TYPE_CHECKING:
@@ -287,20 +290,9 @@ code{background:#f4f4f4;padding:0 .2em}
 .warn{background:#fff3e0;border-left:4px solid #fb8c00;padding:.5em 1em}
 figure{margin:1.2em 0} figure img{max-width:100%;border:1px solid #ddd}
 figcaption{font-size:.9em;color:#555}
+.note{font-size:.85em;color:#555}
+figure .plotly-graph-div{border:1px solid #ddd}
 """
-
-# After load, record on <body> how many figures there are and how many are decoded and laid
-# out with a non-zero size (read by clutchlab.validation.render in headless Chromium).
-_MARKER = (
-    "<script>window.addEventListener('load',function(){"
-    "var im=Array.prototype.slice.call(document.images);"
-    "var ok=im.filter(function(i){return i.complete&&i.naturalWidth>0&&"
-    "i.getBoundingClientRect().width>0;});var b=document.body;"
-    "b.setAttribute('data-figures',String(im.length));"
-    "b.setAttribute('data-figures-visible',String(ok.length));"
-    "b.setAttribute('data-page-height',String(document.documentElement.scrollHeight));});"
-    "</script>"
-)
 
 
 def _e(x: Any) -> str:
@@ -387,8 +379,12 @@ def _per_experiment_html(doc: dict[str, Any]) -> str:
     return "".join(parts)
 
 
-def render_html(doc: dict[str, Any], figures: list[tuple[FigureSpec, bytes]]) -> str:
-    """The self-contained HTML report (figures embedded as base64 PNG).
+def render_html(
+    doc: dict[str, Any],
+    figures: list[tuple[FigureSpec, bytes]],
+    interactive: Mapping[str, Any] | None = None,
+) -> str:
+    """The self-contained HTML report: interactive Plotly figures, the others as PNG.
 
     Parameters
     ----------
@@ -396,17 +392,28 @@ def render_html(doc: dict[str, Any], figures: list[tuple[FigureSpec, bytes]]) ->
         The ``metrics.json`` document (JSON-safe).
     figures : list of (FigureSpec, bytes)
         Each figure with its PNG bytes.
+    interactive : mapping of str to plotly.graph_objects.Figure, optional
+        Figure key → interactive form (:func:`~clutchlab.validation.interactive.
+        interactive_figures`); such a figure is drawn by plotly.js (embedded once, inline)
+        instead of its PNG. None or empty: every figure as PNG, no JavaScript library.
 
     Returns
     -------
     str
     """
+    interactive = dict(interactive or {})
     split, data, t = doc["split"], doc["dataset"], doc["timings"]
     total = t.get("total_s", t.get("evaluate_s"))
+    drawn = {spec.key for spec, _ in figures}
+    plotly_js = ""
+    if any(k in drawn for k in interactive):
+        from .interactive import plotlyjs_script
+
+        plotly_js = plotlyjs_script()
     s = [
         "<!doctype html><html lang='en'><head><meta charset='utf-8'>",
         "<title>clutchlab validation report</title>",
-        f"<style>{_CSS}</style></head><body>",
+        f"<style>{_CSS}</style>{plotly_js}</head><body>",
         "<h1>clutchlab validation report</h1>",
         f"<p>Command: <code id='command'>{_e(doc['command'])}</code><br>",
         f"Created {_e(doc['created_utc'])} · clutchlab {_e(doc['versions']['clutchlab'])} · "
@@ -470,11 +477,22 @@ def render_html(doc: dict[str, Any], figures: list[tuple[FigureSpec, bytes]]) ->
             ),
         ]
     s.append("<h2>Figures</h2>")
-    for spec, png in figures:
-        b64 = base64.b64encode(png).decode("ascii")
+    if plotly_js:
         s.append(
-            f"<figure id='fig-{spec.key}'><h3>{_e(spec.title)}</h3>"
-            f"<img alt='{_e(spec.title)}' src='data:image/png;base64,{b64}'>"
+            "<p class='note'>Interactive figures: drag to zoom, double-click to reset, hover "
+            "for values; click a legend entry to hide or show that variant, double-click it "
+            "to show it alone.</p>"
+        )
+    for spec, png in figures:
+        if spec.key in interactive:
+            from .interactive import figure_div
+
+            body = figure_div(interactive[spec.key], f"plot-{spec.key}")
+        else:
+            b64 = base64.b64encode(png).decode("ascii")
+            body = f"<img alt='{_e(spec.title)}' src='data:image/png;base64,{b64}'>"
+        s.append(
+            f"<figure id='fig-{spec.key}'><h3>{_e(spec.title)}</h3>{body}"
             f"<figcaption>{_e(spec.caption)}</figcaption></figure>"
         )
     for key, why in doc.get("figures", {}).get("missing", {}).items():
@@ -590,7 +608,7 @@ def _png(fig: Any) -> bytes:
     return buf.getvalue()
 
 
-def write_report(ev: Evaluation, out: str | Path) -> ReportFiles:
+def write_report(ev: Evaluation, out: str | Path, interactive: bool = True) -> ReportFiles:
     """Render and write the report of an evaluation into the folder ``out``.
 
     Parameters
@@ -601,6 +619,11 @@ def write_report(ev: Evaluation, out: str | Path) -> ReportFiles:
         Report folder (created). Written in one atomic step: the files of an earlier report
         are replaced, every file clutchlab did not write (cached stand data, notes) is kept,
         and one in the way of a report file is an error (``OutputError``, nothing written).
+    interactive : bool
+        Draw the figures of ``report.html`` with Plotly (zoom, hover, variants toggled from
+        the legend; plotly.js embedded, so the page works offline) where an interactive form
+        exists (:mod:`~clutchlab.validation.interactive`); False: every figure as PNG. The
+        PNGs in ``figures/`` (used by ``report.md``) are written either way.
 
     Returns
     -------
@@ -617,7 +640,8 @@ def write_report(ev: Evaluation, out: str | Path) -> ReportFiles:
     files: dict[str, bytes] = {f"figures/{spec.key}.png": png for spec, png in pngs}
     files["metrics.csv"] = metrics_csv(doc).encode("utf-8")
     files["report.md"] = render_markdown(doc, rel).encode("utf-8")
-    files["report.html"] = render_html(doc, pngs).encode("utf-8")
+    iplots = interactive_figures(ev, [spec.key for spec in figures]) if interactive else {}
+    files["report.html"] = render_html(doc, pngs, iplots).encode("utf-8")
     files["metrics.json"] = _json_text(doc).encode("utf-8")  # last: its presence = complete
     # One atomic swap of the whole folder: a kill leaves the old report or the new one; a
     # user's file in the way is refused, every other file (cached stand data) is kept, and

@@ -128,7 +128,11 @@ def plot_metrics_vs_variables(table: pd.DataFrame, spec: SweepSpec) -> Figure:
 
 
 def write_figures(table: pd.DataFrame, spec: SweepSpec, folder: str | Path) -> tuple[Path, ...]:
-    """Write ``tornado.png`` and ``metrics_vs_variables.png`` and ``sensitivity.csv``.
+    """Write ``tornado.png``, ``metrics_vs_variables.png``, ``sensitivity.csv`` and ``sweep.html``.
+
+    ``sweep.html`` holds the two figures interactive (zoom, hover for each point's id and
+    values, finished / failed points toggled from the legend; plotly.js embedded, so it works
+    offline): :func:`~clutchlab.physics.design.interactive.sweep_html`.
 
     Parameters
     ----------
@@ -150,8 +154,12 @@ def write_figures(table: pd.DataFrame, spec: SweepSpec, folder: str | Path) -> t
         folder / "tornado.png",
         folder / "metrics_vs_variables.png",
         folder / "sensitivity.csv",
+        folder / "sweep.html",
     )
     plot_tornado(table, spec).savefig(paths[0], dpi=110)
     plot_metrics_vs_variables(table, spec).savefig(paths[1], dpi=90)
     sensitivity_table(table, spec, _metrics(spec)).to_csv(paths[2], index=False)
+    from .interactive import sweep_html
+
+    paths[3].write_text(sweep_html(table, spec), encoding="utf-8")
     return paths

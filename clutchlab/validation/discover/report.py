@@ -11,7 +11,9 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
+from ..._plotly import MARKER_SCRIPT, figure_div, plotlyjs_script
 from ...data.output import write_folder_atomic
+from .interactive import iplot_diagnostics, iplot_evidence, iplot_residuals
 from .result import DiscoveryResult, IterationRecord, ModelState
 
 __all__ = ["plot_diagnostics", "plot_evidence", "plot_residuals", "write_report"]
@@ -106,6 +108,14 @@ def _png(fig: Figure, files: dict[str, bytes], name: str) -> str:
     return base64.b64encode(files[name]).decode()
 
 
+#: Interactive form of each figure of an iteration (same keys as the PNGs).
+_IPLOTS = {
+    "residuals": iplot_residuals,
+    "evidence": iplot_evidence,
+    "diagnostics": iplot_diagnostics,
+}
+
+
 def _fmt(x, spec=".4f") -> str:
     return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, spec)
 
@@ -157,7 +167,9 @@ def _html_table(head: list[str], rows: list[list[str]]) -> str:
     return f"<table border='1' cellpadding='3' style='border-collapse:collapse'>{h}{b}</table>"
 
 
-def write_report(result: DiscoveryResult, out: str | Path, command: str = "") -> Path:
+def write_report(
+    result: DiscoveryResult, out: str | Path, command: str = "", interactive: bool = True
+) -> Path:
     """Write ``discovery.json``, the figures, ``report.md`` and ``report.html`` into ``out``.
 
     Parameters
@@ -168,6 +180,11 @@ def write_report(result: DiscoveryResult, out: str | Path, command: str = "") ->
         Folder (created; written atomically, see :func:`clutchlab.data.write_folder_atomic`).
     command : str
         Command line recorded in the report.
+    interactive : bool
+        Draw the figures of ``report.html`` with Plotly (zoom, hover, experiments toggled
+        from the legend; plotly.js embedded once, so the page works offline,
+        :mod:`~clutchlab.validation.discover.interactive`); False: as PNG. The PNGs beside the
+        report (used by ``report.md``) are written either way.
 
     Returns
     -------
@@ -253,15 +270,19 @@ def write_report(result: DiscoveryResult, out: str | Path, command: str = "") ->
             "<p>Parameters after (± standard error):</p>",
             _html_table(["parameter", "value", "± SE", "unit"], params),
             *(
-                f"<img src='data:image/png;base64,{p}' style='max-width:100%'>"
-                for p in pngs.values()
+                figure_div(_IPLOTS[k](it), f"plot-iteration{it.index}_{k}")
+                if interactive
+                else f"<img src='data:image/png;base64,{p}' style='max-width:100%'>"
+                for k, p in pngs.items()
             ),
         ]
     files["report.md"] = ("\n".join(md) + "\n").encode("utf-8")
     page = (
         "<!doctype html><html><head><meta charset='utf-8'><title>clutchlab discover</title>"
-        "</head><body style='font-family:sans-serif;max-width:1000px'>"
+        + (plotlyjs_script() if interactive and result.iterations else "")
+        + "</head><body style='font-family:sans-serif;max-width:1000px'>"
         + "".join(parts_html)
+        + MARKER_SCRIPT
         + "</body></html>"
     )
     files["report.html"] = page.encode("utf-8")
