@@ -29,6 +29,7 @@ def _cmd_fit_physics(args: argparse.Namespace) -> int:
         "strict": args.strict,
         "staged_start": not args.no_staged_start,
         "latch_law": args.latch_law,
+        "regulator_lag": args.regulator_lag,
     }
     if args.free:
         kw["free"] = _csv(args.free)
@@ -99,6 +100,14 @@ def register(sub) -> None:
         default="auto",
         help="auto: free latch thresholds when the data violate the datasheet latch's area "
         "ratio (default); datasheet: keep the datasheet latch",
+    )
+    p.add_argument(
+        "--regulator-lag",
+        choices=("auto", "off"),
+        default="off",
+        help="auto: add the reg_pilot_lag law when the training data's regulated band widens "
+        "with ramp rate more than the latch delay allows (lag signature, logged); off: never "
+        "(default)",
     )
     p.add_argument(
         "--strict",

@@ -79,10 +79,12 @@ class RegulatorSpool(Component):
                 smooth_max0(x - xm, EDGE_EPS) - smooth_max0(-xm - x, EDGE_EPS)
             )
 
+        # The pilot pressure the spool's pilot face sees (a flexible law may lag it).
+        asm.define("p_reg_pilot", lambda a: a.x("p_a"), "Pa")
         asm.define(
             "F_reg",
             lambda a: (
-                a_pil(a) * a.x("p_a")
+                a_pil(a) * a["p_reg_pilot"]
                 + a.p("reg_F0")
                 - a.p("reg_k") * x
                 - a_fb(a) * a.x("p_fb")

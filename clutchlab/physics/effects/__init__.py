@@ -11,7 +11,12 @@ from typing import Any
 
 from ...errors import ModelError
 from .base import Effect
-from .flexible import FreeLatchThresholds, MonotoneForceCorrection, PlayHysteresis
+from .flexible import (
+    FreeLatchThresholds,
+    MonotoneForceCorrection,
+    PlayHysteresis,
+    RegulatorPilotLag,
+)
 from .friction import DitherFrictionReduction, StribeckFriction
 from .hydraulic import (
     AccumulatorSpringNonlinearity,
@@ -40,6 +45,7 @@ __all__ = [
     "MonotoneForceCorrection",
     "OilTemperature",
     "PlayHysteresis",
+    "RegulatorPilotLag",
     "SensorLag",
     "SpoolLeakage",
     "StribeckFriction",
@@ -52,7 +58,8 @@ __all__ = [
 
 #: The flexible component laws (identity at their defaults; no stand uses them).
 FLEXIBLE_LAWS: dict[str, type[Effect]] = {
-    cls.name: cls for cls in (MonotoneForceCorrection, PlayHysteresis, FreeLatchThresholds)
+    cls.name: cls
+    for cls in (MonotoneForceCorrection, PlayHysteresis, FreeLatchThresholds, RegulatorPilotLag)
 }
 
 

@@ -37,6 +37,7 @@ __all__ = [
     "FreeLatchThresholds",
     "MonotoneForceCorrection",
     "PlayHysteresis",
+    "RegulatorPilotLag",
 ]
 
 #: Current knots (mA) of the monotone force correction, and the width (mA) of each step.
@@ -199,3 +200,35 @@ class FreeLatchThresholds(Effect):
         asm.redefine("latch_F_net", f_net)
         for name in self.REPLACES:
             asm.retire_parameter(name)
+
+
+class RegulatorPilotLag(Effect):
+    """A first-order lag of the pilot pressure on the regulator spool's pilot face alone.
+
+    The regulator sees ``p_r = p_a + w (q − p_a)`` with ``τ dq/dt = p_a − q``; the latch
+    valve still sees ``p_a``. In the datasheet circuit one lag (the VFS accumulator
+    orifice) sets both the rate-dependent width of the regulated hysteresis band and
+    the delay of the latch snap behind the current; a circuit whose clutch fills
+    through a slower path than its latch pilot (a damping orifice, a clutch
+    accumulator, entrained air) has a wider band at fast ramps than that one lag can
+    give without moving the latch currents. ``w = 0`` (the default) is exactly today's
+    model; a fit that switches the law on holds ``w = 1`` and frees ``τ``.
+    """
+
+    name = "reg_pilot_lag"
+    description = "first-order lag of the pilot pressure at the regulator alone (not the latch)"
+    signature = (
+        "regulated branch lags the current more at fast ramps (band wider than the latch "
+        "delay allows); latched plateau and latch currents unaffected"
+    )
+    PARAMETERS = (
+        param("rlag", "w", "-", 0.0, 0.0, 1.0, "weight of the lagged pilot pressure", "linear"),
+        param("rlag", "tau", "ms", 80.0, 2.0, 1000.0, "time constant of the regulator lag"),
+    )
+    STRENGTH = ("rlag_w",)
+    FIT = ("rlag_tau",)
+
+    def apply(self, asm: Assembly) -> None:
+        q = asm.state(StateSpec("p_rlag", "bar", 0.5, "lagged regulator pilot", self.name))
+        asm.define("der:p_rlag", lambda a: (a.x("p_a") - q) / a.p("rlag_tau"), "Pa/s")
+        asm.wrap("p_reg_pilot", lambda a, prev: prev + a.p("rlag_w") * (q - prev))

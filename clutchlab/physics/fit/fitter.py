@@ -22,7 +22,7 @@ from .nlp import solve_ipopt
 from .problem import FitProblem
 from .result import FitResult, identifiability
 from .settings import DEFAULT_FREE, FitSettings
-from .staged import free_latch_structure, staged_start
+from .staged import free_latch_structure, regulator_lag_structure, staged_start
 
 __all__ = ["PhysicsFitter", "resolve_free"]
 
@@ -182,6 +182,9 @@ class PhysicsFitter:
                 and settings.free is None
             ):
                 model, start = free_latch_structure(model, start, self.staged_)
+                free = resolve_free(model, settings)
+            if self.staged_.regulator_lag_ms is not None and settings.free is None:
+                model, start = regulator_lag_structure(model, start, self.staged_)
                 free = resolve_free(model, settings)
         history: list[float] = []
         bar = tqdm(

@@ -17,6 +17,13 @@ samples and steep at them. The staged start gives it a start near the data first
    (simulated with the static stage's parameters) gives the latch-on and latch-off
    pilot pressures; set directly with ``latch_free_thresholds``, or as the spring
    preload and rate of the datasheet valve, within their bounds.
+4. **lag signature**: two time constants read off the fastest and the slowest
+   training ramps — how much the regulated band widens with the pressure rate
+   (``τ_band``) and how far the latch currents move with the current rate
+   (``τ_latch``) — for the data and for the model at the staged start. The model's
+   one pilot lag scales both together; when the data's ``τ_band / τ_latch`` is well
+   above the model's, the regulated branch lags through a path the latch does not
+   see, and the fit adds ``reg_pilot_lag`` (:func:`lag_signature`).
 
 Only training experiments are used (the fit's own), and every stage is optional:
 a stage that finds nothing to work on (no latch in the data, no static parameter free)
@@ -43,9 +50,14 @@ from .settings import FitSettings
 __all__ = [
     "STATIC_PARAMETERS",
     "StagedStart",
+    "fastest_traces",
     "free_latch_structure",
+    "lag_signature",
     "measured_latch_indices",
     "quasi_static_traces",
+    "ramp_rate",
+    "regulated_band",
+    "regulator_lag_structure",
     "staged_start",
 ]
 
@@ -83,6 +95,11 @@ class StagedStart:
         Latch-on / latch-off pilot pressure (bar) read off the model at those currents.
     static_experiments : list of str
         Experiments of the static stage.
+    lag_signature : dict of str to float
+        ``tau_band_ms`` and ``tau_latch_ms`` of the data and of the start model
+        (keys prefixed ``data_`` / ``model_``), when measurable.
+    regulator_lag_ms : float or None
+        Start time constant (ms) of ``reg_pilot_lag`` when the signature asks for it.
     latch_tie_violated : bool
         The measured thresholds do not fit the datasheet latch: with its areas and
         stroke, the spring rate they need lies outside its bounds (a latch-off far below
@@ -96,6 +113,8 @@ class StagedStart:
     values: dict[str, float] = field(default_factory=dict)
     latch_currents_mA: dict[str, tuple[float, float]] = field(default_factory=dict)
     thresholds_bar: tuple[float, float] | None = None
+    lag_signature: dict[str, float] = field(default_factory=dict)
+    regulator_lag_ms: float | None = None
     static_experiments: list[str] = field(default_factory=list)
     latch_tie_violated: bool = False
     wall_s: float = 0.0
@@ -109,6 +128,13 @@ class StagedStart:
         if self.thresholds_bar is not None:
             on, off = self.thresholds_bar
             parts.append(f"latch pilot thresholds {on:.2f} / {off:.2f} bar from the data")
+        if self.lag_signature:
+            sig = self.lag_signature
+            parts.append(
+                "lag signature τ_band / τ_latch: data "
+                f"{sig['data_tau_band_ms']:.0f} / {sig['data_tau_latch_ms']:.0f} ms, model "
+                f"{sig['model_tau_band_ms']:.0f} / {sig['model_tau_latch_ms']:.0f} ms"
+            )
         if self.values:
             parts.append(
                 "start: " + ", ".join(f"{k}={v:.4g}" for k, v in sorted(self.values.items()))
@@ -130,12 +156,77 @@ def quasi_static_traces(traces: list[Trace]) -> list[Trace]:
     The ramp rate of an experiment is the 95th percentile of |dI/dt| of its
     dither-period-mean current (mA/s), so the rate is the data's, not a label's.
     """
-    rates = []
-    for tr in traces:
-        i = _period_mean(tr, _current(tr))
-        rates.append(float(np.percentile(np.abs(np.gradient(i, tr.time_s)), 95)))
+    rates = [ramp_rate(tr) for tr in traces]
     lo = min(rates)
     return [tr for tr, r in zip(traces, rates, strict=True) if r <= 1.5 * lo]
+
+
+def fastest_traces(traces: list[Trace]) -> list[Trace]:
+    """The training experiments of the fastest ramp rate (within 1.5× of it)."""
+    rates = [ramp_rate(tr) for tr in traces]
+    hi = max(rates)
+    return [tr for tr, r in zip(traces, rates, strict=True) if r >= hi / 1.5]
+
+
+def ramp_rate(trace: Trace) -> float:
+    """Ramp rate (mA/s): the 95th percentile of |dI/dt| of the period-mean current."""
+    i = _period_mean(trace, _current(trace))
+    return float(np.percentile(np.abs(np.gradient(i, trace.time_s)), 95))
+
+
+def _line(trace: Trace, n: int) -> np.ndarray:
+    if trace.has("line_pressure_bar"):
+        return _period_mean(trace, trace.get("line_pressure_bar"))
+    return np.full(n, _LINE_DEFAULT_BAR)
+
+
+def regulated_band(trace: Trace, pressure: np.ndarray | None = None) -> tuple[float, float] | None:
+    """Width of the regulated hysteresis band and the pressure rate on it.
+
+    Over the currents where both the rising and the falling branch regulate (above
+    prime + 1 bar, below line − 1 bar), on dither-period means: the median of falling
+    minus rising pressure (bar) at equal current, and the median |dp/dt| (bar/s).
+
+    Parameters
+    ----------
+    trace : Trace
+        One ramp experiment (current up, then down).
+    pressure : ndarray, optional
+        Clutch pressure (bar) to measure instead of the trace's (a model's prediction).
+
+    Returns
+    -------
+    (float, float) or None
+        Width (bar) and rate (bar/s); ``None`` when the branches share no regulated
+        current span of at least 50 mA.
+    """
+    i = _period_mean(trace, _current(trace))
+    p_raw = trace.get("clutch_pressure_bar") if pressure is None else pressure
+    p = _period_mean(trace, p_raw)
+    line = _line(trace, len(p))
+    prime = (
+        _period_mean(trace, trace.get("prime_pressure_bar"))
+        if trace.has("prime_pressure_bar")
+        else np.zeros(len(p))
+    )
+    top = int(np.argmax(i))
+    ok = (p > prime + 1.0) & (p < line - _LATCH_MARGIN_BAR)
+    branches = []
+    for sl in (slice(0, top), slice(top, len(i))):
+        m = np.flatnonzero(ok[sl]) + (sl.start or 0)
+        if len(m) < 10:
+            return None
+        order = np.argsort(i[m])
+        branches.append((i[m][order], p[m][order], m))
+    lo = max(b[0][0] for b in branches)
+    hi = min(b[0][-1] for b in branches)
+    if hi - lo < 50.0:
+        return None
+    grid = np.linspace(lo, hi, 50)
+    rise, fall = (np.interp(grid, b[0], b[1]) for b in branches)
+    dpdt = np.abs(np.gradient(p, trace.time_s))
+    band = np.concatenate([b[2][(i[b[2]] >= lo) & (i[b[2]] <= hi)] for b in branches])
+    return float(np.median(fall - rise)), float(np.median(dpdt[band]))
 
 
 def measured_latch_indices(trace: Trace) -> tuple[int, int] | None:
@@ -146,11 +237,7 @@ def measured_latch_indices(trace: Trace) -> tuple[int, int] | None:
     """
     i = _period_mean(trace, _current(trace))
     p = _period_mean(trace, trace.get("clutch_pressure_bar"))
-    line = (
-        _period_mean(trace, trace.get("line_pressure_bar"))
-        if trace.has("line_pressure_bar")
-        else np.full(len(p), _LINE_DEFAULT_BAR)
-    )
+    line = _line(trace, len(p))
     di = np.gradient(i)
     near = p > line - _LATCH_MARGIN_BAR
     rising = np.flatnonzero((di > 0) & near)
@@ -258,6 +345,101 @@ def _threshold_stage(model, start, traces, latch, settings, free, info):
     return start.replace(**values)
 
 
+#: The data's τ_band / τ_latch must exceed the model's by this factor to add the lag.
+LAG_RATIO_MARGIN = 1.3
+#: Shortest regulator lag (ms) worth a state of its own.
+_MIN_REG_LAG_MS = 10.0
+
+
+def lag_signature(
+    fast: list[Trace],
+    slow: list[Trace],
+    pressures: dict[str, np.ndarray] | None = None,
+) -> dict[str, float] | None:
+    """Two time constants of a circuit, read off a fast and a slow ramp (median over each).
+
+    - ``tau_band_ms``: the regulated band's widening with the pressure rate,
+      ``(W_fast − W_slow) / (2 (ṗ_fast − ṗ_slow))`` with ``W`` the band width (bar) and
+      ``ṗ`` the pressure rate on it (bar/s) (:func:`regulated_band`); a first-order lag
+      ``τ`` in the regulated path gives ``τ``.
+    - ``tau_latch_ms``: the latch currents' shift with the current rate, the mean over
+      latch-on (later when faster) and latch-off (earlier when faster) of
+      ``Δi / (İ_fast − İ_slow)``; a first-order lag ``τ`` before the latch gives ``τ``.
+
+    Parameters
+    ----------
+    fast, slow : list of Trace
+        Experiments at the fastest and the slowest ramp rate.
+    pressures : dict of str to ndarray, optional
+        Clutch pressure (bar) per experiment name to use in place of the measured one
+        (a model's prediction).
+
+    Returns
+    -------
+    dict or None
+        ``{"tau_band_ms", "tau_latch_ms"}``; ``None`` when either is not measurable
+        (no shared regulated span, no latch snap on both branches, equal rates).
+    """
+    rows = []
+    for group in (fast, slow):
+        vals = []
+        for tr in group:
+            p = None if pressures is None else pressures[tr.name]
+            band = regulated_band(tr, p)
+            k = measured_latch_indices(tr if p is None else tr.with_signals(clutch_pressure_bar=p))
+            if band is None or k is None:
+                continue
+            i = _period_mean(tr, _current(tr))
+            vals.append((ramp_rate(tr), *band, i[k[0]], i[k[1]]))
+        if not vals:
+            return None
+        rows.append(np.median(np.array(vals), axis=0))
+    (rf, wf, pf, onf, offf), (rs, ws, ps, ons, offs) = rows
+    if rf <= 1.5 * rs or pf <= ps:
+        return None
+    tau_band = (wf - ws) / (2.0 * (pf - ps))
+    tau_latch = 0.5 * ((onf - ons) + (offs - offf)) / (rf - rs)
+    return {"tau_band_ms": 1e3 * tau_band, "tau_latch_ms": 1e3 * tau_latch}
+
+
+def _lag_stage(model, params, traces, settings, info) -> None:
+    """Compare the data's lag signature with the model's; ask for ``reg_pilot_lag``."""
+    fast, slow = fastest_traces(traces)[:2], quasi_static_traces(traces)[:2]
+    if fast[0] is slow[0]:
+        info.notes.append("one ramp rate only: lag signature not measured")
+        return
+    data = lag_signature(fast, slow)
+    sim = SimulationSettings(substeps=settings.substeps)
+    pred = {
+        tr.name: simulate(model, params, tr, sim).outputs["clutch_pressure_bar"]
+        for tr in fast + slow
+    }
+    mod = lag_signature(fast, slow, pred)
+    if data is None or mod is None:
+        info.notes.append("lag signature not measurable (no regulated band or latch snap)")
+        return
+    info.lag_signature = {
+        **{f"data_{k}": v for k, v in data.items()},
+        **{f"model_{k}": v for k, v in mod.items()},
+    }
+    d_band, d_latch = data["tau_band_ms"], max(data["tau_latch_ms"], 1.0)
+    m_band, m_latch = mod["tau_band_ms"], max(mod["tau_latch_ms"], 1.0)
+    ratio_data, ratio_model = d_band / d_latch, m_band / m_latch
+    if ratio_data <= LAG_RATIO_MARGIN * ratio_model:
+        return
+    # With the pilot lag matched to the latch's delay, the model's band lag is
+    # ratio_model × τ_latch; the regulator lag supplies the rest.
+    tau = d_band - ratio_model * d_latch
+    if tau < _MIN_REG_LAG_MS:
+        return
+    info.regulator_lag_ms = float(tau)
+    info.notes.append(
+        f"structure: reg_pilot_lag (data τ_band/τ_latch {ratio_data:.2f} > "
+        f"{LAG_RATIO_MARGIN:g} × the model's {ratio_model:.2f}: the regulated branch lags "
+        f"through a path the latch does not see; start τ = {tau:.0f} ms)"
+    )
+
+
 def staged_start(
     model: CircuitModel,
     traces: list[Trace],
@@ -295,6 +477,8 @@ def staged_start(
             info.latch_currents_mA[tr.name] = (float(i[k[0]]), float(i[k[1]]))
     params = _static_stage(model, start, qs, latch, settings, free, budget_s, info)
     params = _threshold_stage(model, params, qs[:3], latch, settings, free, info)
+    if settings.regulator_lag == "auto" and "rlag_w" not in {p.name for p in model.parameters}:
+        _lag_stage(model, params, traces, settings, info)
     info.values = {n: params[n] for n in free if params[n] != start[n]}
     info.wall_s = time.perf_counter() - t0
     return params, info
@@ -323,3 +507,16 @@ def free_latch_structure(
         "preload and rate, without the area-ratio tie the training data violate)"
     )
     return free_model, free_model.params(**values)
+
+
+def regulator_lag_structure(
+    model: CircuitModel, start: ParameterSet, info: StagedStart
+) -> tuple[CircuitModel, ParameterSet]:
+    """The model with ``reg_pilot_lag`` on (weight 1) at the staged start's time constant."""
+    lag_model = model.with_effects("reg_pilot_lag")
+    names = {p.name for p in lag_model.parameters}
+    values = {n: start[n] for n in start if n in names}
+    spec = lag_model.default_params().spec("rlag_tau")
+    values["rlag_w"] = 1.0
+    values["rlag_tau"] = float(min(max(info.regulator_lag_ms, spec.lower), spec.upper))
+    return lag_model, lag_model.params(**values)

@@ -1,0 +1,111 @@
+"""The ``reg_pilot_lag`` flexible law and the lag signature that switches it on.
+
+A circuit whose regulated branch lags through a path the latch pilot does not see (a
+clutch-fill lag, a damping orifice) has a regulated band that widens with ramp rate
+more than its latch currents move. The datasheet model's one pilot lag (the VFS
+accumulator orifice) cannot give both; the staged start reads the two time constants
+off the training data and adds the law when the data ask for it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from clutchlab.errors import ModelError
+from clutchlab.physics import CircuitModel, simulate
+from clutchlab.physics.fit import FitSettings
+from clutchlab.physics.fit.fitter import resolve_free
+from clutchlab.physics.fit.staged import (
+    lag_signature,
+    regulated_band,
+    regulator_lag_structure,
+    staged_start,
+)
+from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
+from clutchlab.physics.stand.plants import PlantConfig, run_plant
+
+RAMPS = (RampProfile("fast", 2.5, 0.5), RampProfile("slow", 10.0, 0.5))
+SETTING = (DitherSetting(50.0, "A"),)
+
+
+@pytest.fixture(scope="module")
+def stand_small():
+    """clutchlab's own circuit: one pilot lag sets the band and the latch delay."""
+    return list(run_stand(StandConfig(settings=SETTING, ramps=RAMPS), False).dataset)
+
+
+@pytest.fixture(scope="module")
+def zoo_small():
+    """A zoo plant whose clutch fills through a slower lag than its latch pilot."""
+    cfg = PlantConfig("saturating_lugre", settings=SETTING, ramps=RAMPS, seed=5)
+    return list(run_plant(cfg, progress=False).dataset)
+
+
+def test_identity_at_defaults(stand_small):
+    base, lagged = CircuitModel(), CircuitModel().with_effects("reg_pilot_lag")
+    tr = stand_small[0]
+    p0 = simulate(base, base.default_params(), tr).pressure_bar
+    p1 = simulate(lagged, lagged.default_params(), tr).pressure_bar
+    assert np.max(np.abs(p1 - p0)) < 1e-9
+
+
+def test_the_lag_widens_the_band_and_leaves_the_latch(stand_small):
+    fast, slow = stand_small
+    base = CircuitModel()
+    lagged = base.with_effects("reg_pilot_lag")
+    on = lagged.params(rlag_w=1.0, rlag_tau=100.0)
+
+    def pred(model, params):
+        return {t.name: simulate(model, params, t).pressure_bar for t in (fast, slow)}
+
+    sig0 = lag_signature([fast], [slow], pred(base, base.default_params()))
+    sig1 = lag_signature([fast], [slow], pred(lagged, on))
+    assert sig1["tau_band_ms"] - sig0["tau_band_ms"] > 60.0, (sig0, sig1)
+    assert abs(sig1["tau_latch_ms"] - sig0["tau_latch_ms"]) < 15.0, (sig0, sig1)
+    w0 = regulated_band(fast, pred(base, base.default_params())[fast.name])[0]
+    w1 = regulated_band(fast, pred(lagged, on)[fast.name])[0]
+    assert w1 > w0 + 0.5, (w0, w1)
+
+
+@pytest.mark.parametrize("which, expected", [("stand", False), ("zoo", True)])
+def test_staged_start_asks_for_the_lag_only_when_the_data_do(which, expected, request):
+    traces = request.getfixturevalue(f"{which}_small")
+    model, settings = CircuitModel(), FitSettings(progress=False, regulator_lag="auto")
+    free = resolve_free(model, settings)
+    _, info = staged_start(model, traces, settings, model.default_params(), free, 20.0)
+    sig = info.lag_signature
+    assert set(sig) == {
+        "data_tau_band_ms",
+        "data_tau_latch_ms",
+        "model_tau_band_ms",
+        "model_tau_latch_ms",
+    }
+    assert (info.regulator_lag_ms is not None) is expected, info.summary()
+    assert "lag signature" in info.summary()
+    if expected:
+        assert "reg_pilot_lag" in info.summary()
+        lag_model, start = regulator_lag_structure(model, model.default_params(), info)
+        assert start["rlag_w"] == 1.0 and start["rlag_tau"] == pytest.approx(info.regulator_lag_ms)
+        assert "rlag_tau" in resolve_free(lag_model, settings)
+        assert "rlag_w" not in resolve_free(lag_model, settings)
+    off = FitSettings(progress=False, regulator_lag="off")
+    _, info_off = staged_start(model, traces, off, model.default_params(), free, 20.0)
+    assert info_off.regulator_lag_ms is None and not info_off.lag_signature
+
+
+def test_settings_refuse_an_unknown_regulator_lag():
+    with pytest.raises(Exception, match="regulator_lag"):
+        FitSettings(regulator_lag="maybe")
+
+
+def test_signature_needs_two_rates_and_a_latch(zoo_small):
+    fast, slow = zoo_small
+    assert lag_signature([fast], [fast]) is None
+    flat = {t.name: np.minimum(t.get("clutch_pressure_bar"), 12.0) for t in (fast, slow)}
+    assert lag_signature([fast], [slow], flat) is None
+
+
+def test_unknown_law_parameter_is_refused():
+    with pytest.raises(ModelError):
+        CircuitModel().with_effects("reg_pilot_lag").params(rlag_x=1.0)
