@@ -128,17 +128,19 @@ def pipeline(train, everything, runs: int) -> SVCPartitionedGP:
 def single(model, trace, calls: int = 20000) -> None:
     step = step_predictor(model)
     F = model._trace_matrix(trace)
-    rows = F[np.linspace(0, len(F) - 1, calls).astype(int)]
-    for x in rows[:100]:
-        step(x)
+    pick = np.linspace(0, len(F) - 1, calls).astype(int)
+    rows, line = F[pick], trace.get("line_pressure_bar")[pick]
+    for x, v in zip(rows[:100], line[:100], strict=True):
+        step(x, v)
     times = np.empty(calls)
-    for k, x in enumerate(rows):
+    for k, (x, v) in enumerate(zip(rows, line, strict=True)):
         t0 = time.perf_counter()
-        step(x)
+        step(x, v)
         times[k] = time.perf_counter() - t0
     med = float(np.median(times)) * 1e6
-    exact = model._predict_matrix(rows[:500], path=False, return_std=False)
-    steps = np.array([step(x) for x in rows[:500]])
+    ref = {"ref": line[:500]} if step.latched_line else {}
+    exact = model._predict_matrix(rows[:500], path=False, return_std=False, **ref)
+    steps = np.array([step(x, v) for x, v in zip(rows[:500], line[:500], strict=True)])
     print(f"\n4. single-sample prediction (step_predictor), {calls} calls")
     print(
         f"    median {med:.1f} µs, p90 {np.percentile(times, 90) * 1e6:.1f} µs; budget ≤ 50 µs, "

@@ -172,7 +172,7 @@ def test_path_prediction_matches_exact_evaluation(fitted, tiny):
     model = fitted["paper_svc_gp"]
     tr = tiny["medium_70Hz_B"]
     F = model._trace_matrix(tr)
-    exact = model._predict_matrix(F, path=False, return_std=False)
+    exact = model._predict_matrix(F, path=False, return_std=False, ref=model._trace_ref(tr))
     fast = model.predict(tr)
     n = dither_period_samples(tr)  # knots: interpolation error of the scored signal, bar
     diff = np.abs(dither_period_mean(fast, n) - dither_period_mean(exact, n))
@@ -223,7 +223,8 @@ def test_hybrid_needs_physics_outputs_it_cannot_get(train):
     with pytest.raises(ModelError, match="pilot"):
         HybridModel(physics=PressureOnly(), residual=pilot).fit(train)
     default = SVCPartitionedGP(features=HYBRID_FEATURES, **SMALL)
-    ok = HybridModel(physics=PressureOnly(), residual=default).fit(train)
+    # (residual form pinned: against a constant "physics" the standalone form rightly wins)
+    ok = HybridModel(physics=PressureOnly(), residual=default, form="residual").fit(train)
     assert ok.feature_names_ == list(HYBRID_FEATURES)  # the default needs no pilot pressure
 
 
@@ -265,9 +266,18 @@ def test_step_predictor_matches_batch(fitted, tiny):
         model = fitted[name]
         step = step_predictor(model)
         F = model._trace_matrix(tr)[::97]
-        exact = model._predict_matrix(F, path=False, return_std=False)
-        got = np.array([step(x) for x in F])
+        line = tr.get("line_pressure_bar")[::97]
+        ref = line if getattr(model, "latched_reference_", "none") == "line" else None
+        exact = model._predict_matrix(
+            F, path=False, return_std=False, **({"ref": ref} if ref is not None else {})
+        )
+        got = np.array([step(x, line_bar=v) for x, v in zip(F, line, strict=True)])
         np.testing.assert_allclose(got, exact, atol=1e-9)
+    # paper_svc_gp follows line pressure on its latched plateau: the step needs it.
+    assert fitted["paper_svc_gp"].latched_reference_ == "line"
+    with pytest.raises(ModelError, match="line_bar"):
+        for x in model._trace_matrix(tr):
+            step(x)
 
 
 def test_classifier_comparison_table_and_figure(train, tmp_path):

@@ -94,6 +94,9 @@ class Block:
         n latch labels (1 latched, 0 unlatched, −1 latch event).
     state : numpy.ndarray
         n latched (1) / unlatched (0) Schmitt-trigger state, events included.
+    ref : numpy.ndarray or None
+        n reference pressures (bar) the latched regime's target is taken relative to
+        (line pressure), or None.
     """
 
     name: str
@@ -102,6 +105,7 @@ class Block:
     weight: np.ndarray
     labels: np.ndarray
     state: np.ndarray
+    ref: np.ndarray | None = None
 
 
 class TraceEstimator(RegressorMixin, BaseEstimator):
@@ -291,6 +295,7 @@ class TraceEstimator(RegressorMixin, BaseEstimator):
     def _stack(blocks: list[Block]) -> Block:
         if len(blocks) == 1:
             return blocks[0]
+        refs = [b.ref for b in blocks]
         return Block(
             "+".join(b.name for b in blocks),
             np.concatenate([b.X for b in blocks]),
@@ -298,4 +303,5 @@ class TraceEstimator(RegressorMixin, BaseEstimator):
             np.concatenate([b.weight for b in blocks]),
             np.concatenate([b.labels for b in blocks]),
             np.concatenate([b.state for b in blocks]),
+            None if any(r is None for r in refs) else np.concatenate(refs),
         )

@@ -17,10 +17,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import ModelError
+from ..data import Trace
+from ..errors import DataError, ModelError
 from .base import Block, TraceEstimator
 from .classifiers import lean_decision, make_classifier
-from .features import BASE_FEATURES, LAG_DIDT_FEATURES
+from .features import BASE_FEATURES, LAG_DIDT_FEATURES, target_pressure
 from .labels import LatchLabelRule
 from .local_gp import LocalGPRegressor
 from .paths import knot_indices, piecewise_classes, predict_on_path
@@ -208,6 +209,13 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         RBF-SVC penalty and width (on weighted standardized features; defaults 100, 1).
     svc_max_points : int
         Most training bins of the RBF SVC (default 4000).
+    latched_reference : {"line", "none"}
+        ``line`` (default): the latched GP learns the clutch pressure *below line
+        pressure* (the latched plateau is line pressure less a small offset that
+        depends on the operating point) and adds the experiment's line pressure back, so
+        the plateau follows line-pressure wander the features cannot see. Used when
+        every training experiment logs ``line_pressure_bar``; prediction then needs it
+        too. ``none``: the latched GP learns the clutch pressure itself (the paper).
 
     Attributes
     ----------
@@ -219,6 +227,9 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         Lean decision function of the classifier (> 0: latched).
     classifier_train_accuracy_ : float
         Classifier accuracy on its (non-event) training samples.
+    latched_reference_ : {"line", "none"}
+        The latched GP's reference as fitted (``none`` when a training experiment has no
+        line pressure, or on array input).
     """
 
     _default_features = LAG_DIDT_FEATURES
@@ -236,6 +247,7 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         svc_C: float = 100.0,
         svc_gamma: float = 1.0,
         svc_max_points: int = 4000,
+        latched_reference: str = "line",
         kernel: str | None = None,
         ard: bool = True,
         bin_width: float = 0.01,
@@ -258,6 +270,7 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         self.svc_C = svc_C
         self.svc_gamma = svc_gamma
         self.svc_max_points = svc_max_points
+        self.latched_reference = latched_reference
         self.kernel = kernel
         self.ard = ard
         self.bin_width = bin_width
@@ -292,12 +305,38 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
     def _decide(self, X: np.ndarray) -> np.ndarray:
         return self.decision_(X[:, self.classifier_columns_])
 
+    def _block(self, trace: Trace, physics: dict[str, np.ndarray] | None = None) -> Block:
+        b = super()._block(trace, physics)
+        if self.latched_reference == "line" and trace.has("line_pressure_bar"):
+            b.ref = target_pressure(trace, self.target, "line_pressure_bar")
+        return b
+
+    def _trace_ref(self, trace: Trace) -> np.ndarray | None:
+        """The latched reference of ``trace`` (bar) when the model was fitted with one."""
+        if getattr(self, "latched_reference_", "none") != "line":
+            return None
+        if not trace.has("line_pressure_bar"):
+            raise DataError(
+                f"{trace.name}: no line_pressure_bar; this model predicts the latched plateau "
+                "relative to line pressure (latched_reference='line', as fitted): log line "
+                "pressure or fit with latched_reference='none'"
+            )
+        # As logged (not period-averaged), as the FMU and the step predictor see it: the
+        # prediction stays causal, and its period mean is the period-mean reference.
+        return np.asarray(trace.get("line_pressure_bar"), dtype=float)
+
     def _fit_blocks(self, blocks: list[Block]) -> None:
         if self.event_points not in ("assign", "exclude"):
             raise ModelError(
                 f"event_points must be 'assign' or 'exclude', got {self.event_points!r}"
             )
+        if self.latched_reference not in ("line", "none"):
+            raise ModelError(
+                f"latched_reference must be 'line' or 'none', got {self.latched_reference!r}"
+            )
         b = self._stack(blocks)
+        use_ref = self.latched_reference == "line" and b.ref is not None
+        self.latched_reference_ = "line" if use_ref else "none"
         clean = b.labels >= 0
         present = sorted(set(np.unique(b.labels[clean]).tolist()))
         self.classifier_columns_ = self._clf_cols()
@@ -319,7 +358,8 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         for g in (0, 1):
             rows = group == g
             if rows.sum() >= 2:
-                self.gps_[g] = self._gp().fit(b.X[rows], b.y[rows], sample_weight=b.weight[rows])
+                y = b.y[rows] - b.ref[rows] if (use_ref and g == 1) else b.y[rows]
+                self.gps_[g] = self._gp().fit(b.X[rows], y, sample_weight=b.weight[rows])
         if not self.gps_:
             raise ModelError(
                 f"too few training samples for any latch state (n_samples={b.y.size}; each "
@@ -345,7 +385,20 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         self._check_fitted()
         return np.min([gp.resolution_ for gp in self.gps_.values()], axis=0)
 
-    def _predict_matrix(self, X: np.ndarray, path: bool, return_std: bool):
+    def _predict_matrix(
+        self, X: np.ndarray, path: bool, return_std: bool, ref: np.ndarray | None = None
+    ):
+        """Prediction per row of ``X``; ``ref`` (bar, per row) is added where latched.
+
+        A model fitted with ``latched_reference_ == "line"`` needs ``ref`` (the line
+        pressure): feature rows alone do not carry it.
+        """
+        if getattr(self, "latched_reference_", "none") == "line" and ref is None:
+            raise ModelError(
+                "this SVCPartitionedGP predicts the latched plateau relative to line pressure: "
+                "predict on traces (with line_pressure_bar), or fit with "
+                "latched_reference='none' to predict on feature arrays"
+            )
         fns = self._fns(return_std)
         if not path:
             classes = self._classes(X, None)
@@ -359,10 +412,19 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
                         mean[rows], std[rows] = out
                     else:
                         mean[rows] = out
-            return (mean, std) if return_std else mean
-        knots = knot_indices(X, self.resolution(), self.knot_tol, self.max_knot_gap)
-        classes = self._classes(X, knots)
-        return predict_on_path(X, classes, knots, fns, return_std)
+        else:
+            knots = knot_indices(X, self.resolution(), self.knot_tol, self.max_knot_gap)
+            classes = self._classes(X, knots)
+            out = predict_on_path(X, classes, knots, fns, return_std)
+            mean, std = out if return_std else (out, None)
+        if getattr(self, "latched_reference_", "none") == "line":
+            mean = mean + np.where(classes == 1, ref, 0.0)
+        return (mean, std) if return_std else mean
+
+    def _predict_trace(self, trace: Trace, return_std: bool):
+        return self._predict_matrix(
+            self._trace_matrix(trace), path=True, return_std=return_std, ref=self._trace_ref(trace)
+        )
 
     def predict_latch(self, X) -> np.ndarray | list[np.ndarray]:
         """Predicted latch state (1 latched, 0 unlatched) per sample of a trace or matrix."""

@@ -307,7 +307,9 @@ def direction_of_travel(didt_mA_s: np.ndarray, deadband_mA_s: float = 10.0) -> n
     return np.where(last >= 0, sig[np.maximum(last, 0)], 0.0)
 
 
-def target_pressure(trace: Trace, smoothing: str = "period_mean") -> np.ndarray:
+def target_pressure(
+    trace: Trace, smoothing: str = "period_mean", signal: str = "clutch_pressure_bar"
+) -> np.ndarray:
     """Regression target of a trace: its clutch pressure, bar.
 
     Parameters
@@ -318,13 +320,16 @@ def target_pressure(trace: Trace, smoothing: str = "period_mean") -> np.ndarray:
         ``period_mean`` (default): averaged over one dither period
         (:func:`clutchlab.data.dither_period_mean`), the primary scored signal; the features
         carry no dither phase, so the ripple is noise to the regression. ``raw``: as logged.
+    signal : str
+        Pressure signal to smooth (default ``clutch_pressure_bar``; ``line_pressure_bar`` for
+        the latched plateau's reference).
 
     Returns
     -------
     numpy.ndarray
         Clutch pressure per sample, bar.
     """
-    p = np.asarray(trace.get("clutch_pressure_bar"), dtype=float)
+    p = np.asarray(trace.get(signal), dtype=float)
     if smoothing == "raw":
         return p
     if smoothing != "period_mean":

@@ -43,7 +43,9 @@ HYBRID_CLASSIFIER_FEATURES: tuple[str, ...] | None = None
 def default_residual() -> SVCPartitionedGP:
     """The default residual model: SVC-partitioned GP on :data:`HYBRID_FEATURES`."""
     return SVCPartitionedGP(
-        features=HYBRID_FEATURES, classifier_features=HYBRID_CLASSIFIER_FEATURES
+        features=HYBRID_FEATURES,
+        classifier_features=HYBRID_CLASSIFIER_FEATURES,
+        latched_reference="none",  # the physics already follows line pressure
     )
 
 
@@ -121,7 +123,7 @@ class HybridModel(TraceEstimator):
         """
         res = self._residual()
         if self.residual is None:
-            return res.set_params(features=None, classifier_features=None)
+            return res.set_params(features=None, classifier_features=None, latched_reference="line")
         params = res.get_params(deep=False)
         update = {
             key: tuple(f for f in params[key] if f not in PHYSICS_FEATURES)
@@ -138,6 +140,7 @@ class HybridModel(TraceEstimator):
             b = res._block(t, smooth)
             ref = smooth["clutch_pressure_bar"] if res.target == "period_mean" else raw
             b.y = b.y - ref
+            b.ref = None  # a residual on the physics: its latched plateau follows line already
             blocks.append(b)
         res.n_features_in_ = len(res.feature_names_)
         res.train_experiments_ = [t.name for t in traces]

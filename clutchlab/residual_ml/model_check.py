@@ -401,6 +401,7 @@ class _Checker:
                 "classifier_columns",
                 "classifier_train_accuracy",
                 "single_state",
+                "latched_reference",
                 "decision",
                 "gps",
             ),
@@ -478,6 +479,7 @@ class _Checker:
         cols = self.key(state, "classifier_columns", where, _column_list(d))
         self.key(state, "classifier_train_accuracy", where, _fraction)
         single = self.key(state, "single_state", where, _optional(_integer(0, 1)))
+        self.key(state, "latched_reference", where, _one_of(("line", "none")), required=False)
         kind = self.key(state, "decision", where, _optional(_one_of(_DECISIONS)))
         if kind is None and single is None:
             self.add(f"{where}.single_state", "must be 0 or 1 when there is no decision")

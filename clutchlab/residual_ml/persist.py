@@ -143,6 +143,7 @@ def _state(est, arrays: dict, prefix: str) -> dict:
         state["classifier_columns"] = [int(c) for c in est.classifier_columns_]
         state["classifier_train_accuracy"] = est.classifier_train_accuracy_
         state["single_state"] = est.single_state_
+        state["latched_reference"] = getattr(est, "latched_reference_", "none")
         dec = est.decision_
         if dec is None:
             state["decision"] = None
@@ -184,6 +185,8 @@ def _restore(est, state: dict, arrays, prefix: str) -> None:
         est.classifier_columns_ = list(state["classifier_columns"])
         est.classifier_train_accuracy_ = float(state["classifier_train_accuracy"])
         est.single_state_ = state["single_state"]
+        # Files written before the line reference: the latched GP learned the pressure.
+        est.latched_reference_ = state.get("latched_reference", "none")
         est.classifier_ = None
         kind = state["decision"]
         if kind is None:

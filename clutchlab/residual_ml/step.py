@@ -85,6 +85,8 @@ class StepPredictor:
     ----------
     feature_names : list of str
         Expected feature order (units as in :data:`~clutchlab.residual_ml.features.FEATURES`).
+    latched_line : bool
+        The latched prediction is line pressure (``line_bar``) less the GP's offset.
     """
 
     def __init__(
@@ -94,20 +96,25 @@ class StepPredictor:
         single: int | None,
         physics_col: int | None,
         feature_names: list[str],
+        latched_line: bool = False,
     ) -> None:
         self._gps = gps
         self._decide = decide
         self._single = single
         self._phys = physics_col
         self.feature_names = feature_names
+        self.latched_line = latched_line
 
-    def __call__(self, x) -> float:
+    def __call__(self, x, line_bar: float | None = None) -> float:
         """Prediction at one sample.
 
         Parameters
         ----------
         x : array_like
             One value per feature, in :attr:`feature_names` order and their units.
+        line_bar : float, optional
+            Line pressure (bar); required when :attr:`latched_line` (the model predicts
+            the latched plateau relative to line pressure).
 
         Returns
         -------
@@ -122,6 +129,12 @@ class StepPredictor:
         out = self._gps[g](x)
         if self._phys is not None:
             out += x[self._phys]
+        if self.latched_line and g == 1:
+            if line_bar is None:
+                raise ModelError(
+                    "this model's latched plateau follows line pressure: pass line_bar"
+                )
+            out += line_bar
         return out
 
 
@@ -167,5 +180,6 @@ def step_predictor(model) -> StepPredictor:
             def decide(x):
                 return float(est(x[cols][None, :])[0])
 
-        return StepPredictor(gps, decide, model.single_state_, phys, names)
+        line = getattr(model, "latched_reference_", "none") == "line"
+        return StepPredictor(gps, decide, model.single_state_, phys, names, line)
     raise ModelError(f"no step predictor for a {type(model).__name__}")

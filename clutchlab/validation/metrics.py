@@ -18,6 +18,12 @@ key                             unit  definition
                                       current (:func:`~clutchlab.validation.latch.latch_currents`;
                                       a missing snap counts at the peak current)
 ``latch_off_err_mA``            mA    the same for the latch-off current
+``latched_plateau_rmse_bar``    bar   (in ``details``) √mean(e²) over the samples where both
+                                      the measured and the predicted pressure are within the
+                                      latch margin of line pressure, at least
+                                      ``plateau_guard_s`` (50 ms) from a snap or release of
+                                      either: the plateau's level, apart from the latch
+                                      timing the latch errors score
 ``fit_s``                       s     wall time of ``fit`` on the training experiments (for a
                                       model built on another variant, including that one's)
 ``predict_s``                   s     wall time of ``predict`` on all test experiments
@@ -81,6 +87,9 @@ class ExperimentComparison:
         Predicted minus measured hysteresis width in each counted current bin, bar.
     latch_measured, latch_predicted : LatchCurrents
         Latch currents of the two signals, mA.
+    plateau : numpy.ndarray or None
+        Samples where both signals are on the latched plateau (within the latch margin of
+        line pressure).
     """
 
     name: str
@@ -89,6 +98,7 @@ class ExperimentComparison:
     width_err_bar: np.ndarray
     latch_measured: LatchCurrents
     latch_predicted: LatchCurrents
+    plateau: np.ndarray | None = None
 
     def latch_errors(self) -> dict[str, tuple[float, bool]]:
         """``{"on": (error_mA, censored), "off": (...)}``, see :func:`latch_error`."""
@@ -123,6 +133,7 @@ def compare_experiment(
     measured_bar: np.ndarray,
     predicted_bar: np.ndarray,
     settings: AnalysisSettings | None = None,
+    time_s: np.ndarray | None = None,
 ) -> ExperimentComparison:
     """Compare one experiment's predicted clutch pressure with the measured one.
 
@@ -140,6 +151,8 @@ def compare_experiment(
         Clutch pressure, bar, same signal kind (both period means, or both raw).
     settings : AnalysisSettings, optional
         Bins and latch margin.
+    time_s : numpy.ndarray, optional
+        Sample time (s), for the latched plateau's guard around snaps (no guard without).
 
     Returns
     -------
@@ -150,6 +163,7 @@ def compare_experiment(
     curve_m = hysteresis_curve(current_mA, measured_bar, direction, line_bar, s, bins=bins)
     curve_p = hysteresis_curve(current_mA, predicted_bar, direction, line_bar, s, bins=bins)
     werr, _ = hysteresis_width_error(curve_m, curve_p)
+    plateau = _plateau(measured_bar, predicted_bar, line_bar, s, time_s)
     return ExperimentComparison(
         name=name,
         measured_bar=np.asarray(measured_bar, dtype=float),
@@ -157,7 +171,25 @@ def compare_experiment(
         width_err_bar=werr,
         latch_measured=latch_currents(current_mA, measured_bar, direction, line_bar, s),
         latch_predicted=latch_currents(current_mA, predicted_bar, direction, line_bar, s),
+        plateau=plateau,
     )
+
+
+def _plateau(measured, predicted, line, s: AnalysisSettings, time_s) -> np.ndarray:
+    """Samples where both signals are latched, ``plateau_guard_s`` from any snap of either."""
+    floor = np.asarray(line, dtype=float) - s.latch_margin_bar
+    lm, lp = np.asarray(measured) >= floor, np.asarray(predicted) >= floor
+    both = lm & lp
+    if time_s is None or s.plateau_guard_s <= 0 or both.size < 2:
+        return both
+    t = np.asarray(time_s, dtype=float)
+    j = np.flatnonzero((np.diff(lm.astype(np.int8)) != 0) | (np.diff(lp.astype(np.int8)) != 0))
+    if not j.size:
+        return both
+    edges = 0.5 * (t[j] + t[j + 1])  # between the last sample before and the first after
+    k = np.clip(np.searchsorted(edges, t), 1, edges.size) - 1
+    near = np.minimum(np.abs(t - edges[k]), np.abs(t - edges[np.minimum(k + 1, edges.size - 1)]))
+    return both & (near >= s.plateau_guard_s)
 
 
 def pool_comparisons(comparisons: list[ExperimentComparison]) -> dict[str, float]:
@@ -173,6 +205,8 @@ def pool_comparisons(comparisons: list[ExperimentComparison]) -> dict[str, float
     dict
         :data:`ACCURACY_KEYS` → value (bar, %, mA; NaN when undefined, e.g. no experiment
         latches in either signal), plus ``hysteresis_bins`` (bins counted),
+        ``latched_plateau_rmse_bar`` / ``latched_plateau_samples`` (where both signals
+        are on the latched plateau),
         ``latch_on_bias_mA`` / ``latch_off_bias_mA`` (mean signed error) and
         ``latch_censored`` (experiments where one signal never snapped).
     """
@@ -185,6 +219,10 @@ def pool_comparisons(comparisons: list[ExperimentComparison]) -> dict[str, float
     w = np.concatenate([c.width_err_bar for c in comparisons])
     out["hysteresis_width_err_bar"] = float(np.sqrt(np.mean(w * w))) if w.size else np.nan
     extra: dict[str, float] = {"hysteresis_bins": int(w.size), "latch_censored": 0}
+    plat = [c for c in comparisons if c.plateau is not None]
+    e = np.concatenate([(c.predicted_bar - c.measured_bar)[c.plateau] for c in plat] or [[]])
+    extra["latched_plateau_rmse_bar"] = float(np.sqrt(np.mean(e * e))) if e.size else np.nan
+    extra["latched_plateau_samples"] = int(e.size)
     for which in ("on", "off"):
         errs = [c.latch_errors()[which] for c in comparisons]
         vals = np.array([e for e, _ in errs if np.isfinite(e)])

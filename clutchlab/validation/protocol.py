@@ -439,6 +439,7 @@ class Protocol:
                     ref.signal(kind, ref.measured_bar),
                     ref.signal(kind, predictions[n].mean_bar),
                     self.settings,
+                    ref.time_s,
                 )
                 comps.append(c)
                 per_exp[n][kind] = c.summary()

@@ -32,6 +32,10 @@ class AnalysisSettings:
         The clutch pressure counts as latched (snapped to line pressure) when it is within
         this margin of the measured line pressure, bar (default 1.0; the stand's regulated
         pressure stays ≥ 2.5 bar below line pressure before the snap).
+    plateau_guard_s : float
+        The latched-plateau error leaves out samples this close to a latch snap or release
+        of either signal (s, default 0.05): the snap itself is latch timing, which the
+        latch-current errors score.
     """
 
     bin_mA: float = 25.0
@@ -40,6 +44,7 @@ class AnalysisSettings:
     min_rate_mA_s: float = 2.0
     rel_rate: float = 0.1
     latch_margin_bar: float = 1.0
+    plateau_guard_s: float = 0.05
 
     def __post_init__(self) -> None:
         problems = []
@@ -53,5 +58,7 @@ class AnalysisSettings:
             problems.append("min_rate_mA_s must be > 0 and rel_rate ≥ 0")
         if not self.latch_margin_bar > 0:
             problems.append(f"latch_margin_bar must be > 0, got {self.latch_margin_bar!r}")
+        if not self.plateau_guard_s >= 0:
+            problems.append(f"plateau_guard_s must be ≥ 0, got {self.plateau_guard_s!r}")
         if problems:
             raise ValueError("invalid analysis settings: " + "; ".join(problems))

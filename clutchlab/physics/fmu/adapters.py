@@ -235,4 +235,5 @@ def ml_program_from(
         with_std=with_std,
         name=ident,
         lag=lag,
+        latched_line=getattr(est, "latched_reference_", "none") == "line",
     )

@@ -354,11 +354,16 @@ def _rows(x: ca.MX, a: int, b: int) -> ca.MX:
     return x[a:b] if b > a else ca.MX(0, 1)
 
 
-def _inputs(physics: FmuProgram | None) -> tuple[FmuVariable, ...]:
+def _inputs(physics: FmuProgram | None, latched_line: bool = False) -> tuple[FmuVariable, ...]:
     if physics is not None:
         return physics.inputs
+    line = (
+        "line pressure: the latched plateau is line pressure less the latched GP's offset"
+        if latched_line
+        else "line pressure (not used by this model)"
+    )
     spec = FMU_INPUTS["command"] + (
-        ("line_pressure_bar", "bar", "line pressure (not used by this model)", 17.7),
+        ("line_pressure_bar", "bar", line, 17.7),
         ("prime_pressure_bar", "bar", "prime pressure (not used by this model)", 0.5),
         ("oil_temp_C", "°C", "oil temperature (not used by this model)", 40.0),
     )
@@ -375,6 +380,7 @@ def ml_program(
     name: str = "clutch_gp",
     description: str = "",
     lag: LagSpec | None = None,
+    latched_line: bool = False,
 ) -> FmuProgram:
     """The FMU program of a GP model (one GP, or one per latch state with a decision).
 
@@ -398,6 +404,9 @@ def ml_program(
         Model identifier and description.
     lag : LagSpec, optional
         First-order lag of the current (required when ``current_lag_mA`` is a feature).
+    latched_line : bool
+        The latched GP predicts the offset below line pressure: the latched output is the
+        ``line_pressure_bar`` input plus its mean (standalone models with a decision only).
 
     Returns
     -------
@@ -421,10 +430,13 @@ def ml_program(
         problems.append(f"every GP must take the {len(features)} features {features}")
     if with_std and any(g.l_inv is None for g in gps.values()):
         problems.append("with_std needs l_inv in every GPSpec")
+    if latched_line and (physics is not None or decision is None):
+        problems.append("latched_line needs a latch decision and no physics program")
     if problems:
         raise ModelError("cannot build the ML program:\n  - " + "\n  - ".join(problems))
 
-    inputs = _inputs(physics)
+    inputs = _inputs(physics, latched_line)
+    i_line = [u.name for u in inputs].index("line_pressure_bar")
     nv = len(inputs)
     use_didt = didt is not None and bool(slopes)
     nb = didt.max_samples if use_didt else 0
@@ -460,7 +472,7 @@ def ml_program(
         }
         return ca.horzcat(*(cols[f] for f in features)), direction
 
-    def residual(feat: ca.MX):
+    def residual(feat: ca.MX, vv: ca.MX):
         if decision is None:
             g = next(iter(gps.values()))
             mean, std = g.mean_std(feat, const, with_std)
@@ -468,6 +480,8 @@ def ml_program(
         latched = decision(feat, const) > 0
         g0, g1 = gps.get(0, gps.get(1)), gps.get(1, gps.get(0))
         m1, s1 = g1.mean_std(feat, const, with_std)
+        if latched_line:
+            m1 = m1 + vv[i_line]
         m0, s0 = g0.mean_std(feat, const, with_std)
         if with_std:
             both0, both1 = ca.vertcat(m0, s0), ca.vertcat(m1, s1)
@@ -478,7 +492,7 @@ def ml_program(
     def outputs(y_phys: ca.MX | None, vv: ca.MX, buffer: ca.MX, previous: ca.MX, lagged):
         phys_bar = y_phys[0] if y_phys is not None else None
         feat, direction = features_at(vv, buffer, previous, lagged, phys_bar)
-        mean, std, latched = residual(feat)
+        mean, std, latched = residual(feat, vv)
         out = [y_phys[0] + mean if y_phys is not None else mean]
         if std is not None:
             out.append(std)
