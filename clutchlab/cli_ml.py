@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -128,6 +129,20 @@ def _cmd_train(args: argparse.Namespace) -> int:
         f"{o['max_abs_bar']:12.4f} {o['fit_pct']:7.2f}"
     )
     print(f"fit {fit_s:.1f} s; model written to {out / 'model.json'} (+ model.npz)")
+    for part, h in model.gp_hyperparameters().items():
+        ell = ", ".join(f"{v:.3g}" for v in h["length_scales"])
+        print(
+            f"GP {part}: {h['kernel']}, length scales [{ell}] (feature units), "
+            + (f"alpha {h['alpha']:.3g}, " if h["alpha"] is not None else "")
+            + f"noise var {h['noise_var']:.3g} bar²"
+        )
+    bound = model.hyperparameters_at_bounds()
+    if bound:
+        print(
+            "warning: GP hyperparameter(s) on a bound of their range (the likelihood wanted a "
+            "value outside it): " + "; ".join(bound),
+            file=sys.stderr,
+        )
     if args.json:
         doc = {
             "variant": args.variant,
@@ -139,6 +154,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
             "predict_s": overall["predict_s"],
             "training": {"overall": o, "per_experiment": per},
             "model": str(out / "model.json"),
+            "gp_hyperparameters": model.gp_hyperparameters(),
+            "hyperparameters_at_bounds": bound,
         }
         from .cli import write_json_output
 

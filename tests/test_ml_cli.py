@@ -66,7 +66,10 @@ def test_classifiers_and_train_cli(tmp_path):
         "--quiet",
     )
     assert "all training" in res.stdout and "model written to" in res.stdout
+    assert "GP gp: rbf, length scales [" in res.stdout  # the fit summary
     doc = json.loads(mj.read_text())
+    assert set(doc["gp_hyperparameters"]) == {"gp"}
+    assert doc["hyperparameters_at_bounds"] == doc["gp_hyperparameters"]["gp"]["at_bounds"]
     assert doc["variant"] == "gp_base" and set(doc["training"]["per_experiment"]) == {
         "fast_50Hz_A",
         "fast_70Hz_C",

@@ -229,3 +229,17 @@ def test_state_round_trip_keeps_the_std_bins_and_reads_older_states(tmp_path):
     m3, s3 = legacy.predict(Xt, return_std=True)
     np.testing.assert_array_equal(m3, mean)
     np.testing.assert_allclose(s3, _explicit_std(gp, Xt, gp.X_bins_, gp.w_bins_), atol=1e-9)
+
+
+def test_hyperparameters_on_a_bound_are_reported():
+    rng = np.random.default_rng(4)
+    x = rng.uniform(0, 10, (400, 1))
+    y = np.sin(x[:, 0]) + rng.normal(0, 0.3, 400)  # noise far above the allowed range
+    gp = LocalGPRegressor(kernel="rq", noise_var_bounds=(1e-8, 1e-4), noise_var=1e-5).fit(x, y)
+    assert any(e.startswith("noise_var (upper bound 0.0001)") for e in gp.at_bounds_)
+    h = gp.hyperparameters()
+    assert h["at_bounds"] == gp.at_bounds_ and h["alpha"] is not None
+    json.dumps(h, allow_nan=False)  # JSON-ready
+    free = LocalGPRegressor(kernel="rbf").fit(x, y)
+    assert free.at_bounds_ == [] and free.hyperparameters()["alpha"] is None
+    json.dumps(free.hyperparameters(), allow_nan=False)

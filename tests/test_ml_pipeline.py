@@ -291,3 +291,14 @@ def test_classifier_comparison_table_and_figure(train, tmp_path):
     assert len(fig.axes) == 2 and "0." in fig.axes[0].texts[0].get_text()
     with pytest.raises(DataError, match="at least 2"):
         compare_classifiers([train[0]])
+
+
+def test_gp_hyperparameters_by_part(fitted):
+    assert set(fitted["gp_base"].gp_hyperparameters()) == {"gp"}
+    assert set(fitted["paper_svc_gp"].gp_hyperparameters()) == {"unlatched", "latched"}
+    parts = fitted["hybrid"].gp_hyperparameters()
+    assert set(parts) == {"residual.unlatched", "residual.latched"}
+    for h in parts.values():
+        assert {"kernel", "length_scales", "noise_var", "at_bounds"} <= set(h)
+    flat = fitted["hybrid"].hyperparameters_at_bounds()
+    assert len(flat) == sum(len(h["at_bounds"]) for h in parts.values())

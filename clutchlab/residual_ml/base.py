@@ -289,6 +289,32 @@ class TraceEstimator(RegressorMixin, BaseEstimator):
             raise ModelError(f"{path} holds a {type(model).__name__}, not a {cls.__name__}")
         return model
 
+    def gp_hyperparameters(self) -> dict[str, dict]:
+        """Fitted hyperparameters of every GP of the model, by part, JSON-ready.
+
+        Parts: ``gp`` (one GP), ``unlatched`` / ``latched`` (one per latch state), a
+        hybrid's prefixed ``residual.``. Each entry is
+        :meth:`~clutchlab.residual_ml.local_gp.LocalGPRegressor.hyperparameters`, with
+        ``at_bounds`` listing those that ended on a bound of their range.
+        """
+        self._check_fitted()
+        inner = getattr(self, "residual_", None)
+        if inner is not None:
+            return {f"residual.{k}": v for k, v in inner.gp_hyperparameters().items()}
+        if hasattr(self, "gps_"):
+            names = {0: "unlatched", 1: "latched"}
+            return {names[g]: gp.hyperparameters() for g, gp in sorted(self.gps_.items())}
+        gp = getattr(self, "gp_", None)
+        return {"gp": gp.hyperparameters()} if gp is not None else {}
+
+    def hyperparameters_at_bounds(self) -> list[str]:
+        """``"part: name (side bound value)"`` for every GP hyperparameter on a bound."""
+        return [
+            f"{part}: {entry}"
+            for part, h in self.gp_hyperparameters().items()
+            for entry in h.get("at_bounds", [])
+        ]
+
     # -- helpers for subclasses --------------------------------------------------------------
 
     @staticmethod

@@ -597,17 +597,41 @@ class LocalGPRegressor(RegressorMixin, BaseEstimator):
         check_is_fitted(self, "theta_")
         return math.exp(self.theta_[0]) * self.y_scale_**2
 
+    @property
+    def at_bounds_(self) -> list[str]:
+        """Hyperparameters that ended on (within 1 % of) a bound of their search range.
+
+        A hyperparameter on its bound means the likelihood wanted a value outside the
+        range (an RQ α on its lower bound: a heavier-tailed mixture of length scales than
+        allowed; a noise variance on its lower bound: the bins look noise-free). Entries
+        read ``"alpha (lower bound 0.01)"``; length scales are named by input index.
+        """
+        check_is_fitted(self, "theta_")
+        spec = self.kernel_
+        names = ["signal_var"] + [f"length_scale[{j}]" for j in range(spec.n_length)]
+        if spec.name == "rq":
+            names.append("alpha")
+        names.append("noise_var")
+        bounds = self._bounds(spec)
+        out = []
+        for name, th, (lo, hi) in zip(names, self.theta_, bounds, strict=True):
+            for side, b in (("lower", lo), ("upper", hi)):
+                if abs(th - b) <= math.log(1.01):
+                    out.append(f"{name} ({side} bound {math.exp(b):.3g})")
+        return out
+
     def hyperparameters(self) -> dict[str, float | list[float]]:
         """Fitted hyperparameters in engineering units, JSON-ready."""
         check_is_fitted(self, "theta_")
         return {
             "kernel": self.kernel_.name,
             "length_scales": [float(v) for v in self.length_scales_],
-            "alpha": float(self.alpha_),
+            "alpha": float(self.alpha_) if math.isfinite(self.alpha_) else None,  # None: RBF
             "signal_var": float(self.signal_var_),
             "noise_var": float(self.noise_var_),
             "log_marginal_likelihood": float(self.log_marginal_likelihood_value_),
             "n_bins": int(self.n_bins_),
+            "at_bounds": self.at_bounds_,
         }
 
     # -- predict -----------------------------------------------------------------------------

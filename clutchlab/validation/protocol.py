@@ -452,6 +452,9 @@ class Protocol:
         }
         if callable(getattr(model, "predict_latch", None)):
             details["classifier_accuracy"] = self._latch_accuracy(model)
+        if callable(getattr(model, "gp_hyperparameters", None)):
+            details["gp_hyperparameters"] = model.gp_hyperparameters()
+            details["gp_at_bounds"] = model.hyperparameters_at_bounds()
         if getattr(model, "form_", None) is not None:  # a hybrid's residual form, and why
             details["residual_form"] = model.form_
             details["residual_form_loeo_rmse_bar"] = dict(getattr(model, "form_scores_", {}))

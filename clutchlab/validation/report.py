@@ -330,6 +330,8 @@ def _describe(name: str, d: dict[str, Any], html_: bool) -> str:
         text += f"; form: {d['residual_form']}" + (
             f" (leave-one-experiment-out RMSE on the training ramps: {why})" if why else ""
         )
+    if d.get("gp_at_bounds"):
+        text += "; GP hyperparameters on a bound of their range: " + "; ".join(d["gp_at_bounds"])
     if html_:
         return f"<code>{_e(name)}</code>: {_e(text)}<br>"
     return f"- `{name}`: {text}"
