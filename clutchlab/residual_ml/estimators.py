@@ -23,6 +23,7 @@ from .base import Block, TraceEstimator
 from .classifiers import lean_decision, make_classifier
 from .features import BASE_FEATURES, LAG_DIDT_FEATURES, target_pressure
 from .labels import LatchLabelRule
+from .latch_event import event_features, fit_event_decision, latch_events
 from .local_gp import LocalGPRegressor
 from .paths import knot_indices, piecewise_classes, predict_on_path
 
@@ -209,6 +210,13 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         RBF-SVC penalty and width (on weighted standardized features; defaults 100, 1).
     svc_max_points : int
         Most training bins of the RBF SVC (default 4000).
+    latch_model : {"classifier", "event"}
+        What decides the latch state: ``classifier`` (the paper: ``classifier`` on the
+        classifier features) or ``event``, the latch-event law of
+        :mod:`~clutchlab.residual_ml.latch_event` (latch currents linear in the ramp rate,
+        thresholds linear in the dither; needs a current, a dI/dt and a direction feature
+        among the classifier features; without them, e.g. on feature arrays, the
+        classifier decides).
     latched_reference : {"line", "none"}
         ``line`` (default): the latched GP learns the clutch pressure *below line
         pressure* (the latched plateau is line pressure less a small offset that
@@ -227,6 +235,9 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         Lean decision function of the classifier (> 0: latched).
     classifier_train_accuracy_ : float
         Classifier accuracy on its (non-event) training samples.
+    latch_model_ : {"classifier", "event", "none"}
+        What decides the latch state as fitted (``none``: the training data hold one latch
+        state, which is then predicted everywhere).
     latched_reference_ : {"line", "none"}
         The latched GP's reference as fitted (``none`` when a training experiment has no
         line pressure, or on array input).
@@ -247,6 +258,7 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         svc_C: float = 100.0,
         svc_gamma: float = 1.0,
         svc_max_points: int = 4000,
+        latch_model: str = "classifier",
         latched_reference: str = "line",
         kernel: str | None = None,
         ard: bool = True,
@@ -270,6 +282,7 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         self.svc_C = svc_C
         self.svc_gamma = svc_gamma
         self.svc_max_points = svc_max_points
+        self.latch_model = latch_model
         self.latched_reference = latched_reference
         self.kernel = kernel
         self.ard = ard
@@ -340,15 +353,30 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         clean = b.labels >= 0
         present = sorted(set(np.unique(b.labels[clean]).tolist()))
         self.classifier_columns_ = self._clf_cols()
+        if self.latch_model not in ("classifier", "event"):
+            raise ModelError(
+                f"latch_model must be 'classifier' or 'event', got {self.latch_model!r}"
+            )
         if len(present) >= 2:
             Xc = b.X[:, self.classifier_columns_]
-            clf = self._make_classifier().fit(Xc[clean], b.labels[clean])
-            self.classifier_ = clf
-            self.decision_ = lean_decision(clf)
+            names = [self.feature_names_[j] for j in self.classifier_columns_]
+            self.latch_model_ = (
+                "event" if self.latch_model == "event" and event_features(names) else "classifier"
+            )
+            if self.latch_model_ == "event":
+                cols = self.classifier_columns_
+                events = [e for blk in blocks for e in latch_events(blk.X[:, cols], blk.state)]
+                self.classifier_ = None
+                self.decision_ = fit_event_decision(events, names)
+            else:
+                clf = self._make_classifier().fit(Xc[clean], b.labels[clean])
+                self.classifier_ = clf
+                self.decision_ = lean_decision(clf)
             pred = (self.decision_(Xc[clean]) > 0).astype(int)
             self.classifier_train_accuracy_ = float(np.mean(pred == b.labels[clean]))
             self.single_state_ = None
         else:
+            self.latch_model_ = "none"
             self.classifier_ = None
             self.decision_ = None
             self.classifier_train_accuracy_ = 1.0

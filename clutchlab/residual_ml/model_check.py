@@ -37,6 +37,7 @@ from .features import FEATURES
 from .hybrid import HybridModel
 from .kernels import KERNELS, kernel_spec
 from .labels import LatchLabelRule
+from .latch_event import EventDecision
 from .local_gp import LocalGPRegressor
 from .physics import PhysicsPredictor
 
@@ -60,7 +61,11 @@ MAX_STANDARDIZED = 1e6
 _SCALE_FLOOR = 1e-12
 
 _MISSING = object()
-_DECISIONS = {KernelDecision.kind: KernelDecision, LinearDecision.kind: LinearDecision}
+_DECISIONS = {
+    KernelDecision.kind: KernelDecision,
+    LinearDecision.kind: LinearDecision,
+    EventDecision.kind: EventDecision,
+}
 
 
 def _real(value) -> float | None:
@@ -503,6 +508,13 @@ class _Checker:
 
     def decision(self, kind: str, prefix: str, c: int) -> None:
         a = self.array
+        if kind == EventDecision.kind:
+            cols = a(prefix + "columns", (5,))
+            if cols is not None and not all(-1 <= v < c and v == int(v) for v in cols):
+                self.add(prefix + "columns", f"must be column indices below {c} or -1")
+            a(prefix + "on", (5,))
+            a(prefix + "off", (5,))
+            return
         a(prefix + "mean", (c,))
         a(prefix + "scale", (c,), positive=True, inf_ok=True)  # inf: a feature weighted 0
         a(prefix + "intercept", (1,))

@@ -28,6 +28,7 @@ from .classifiers import KernelDecision, LinearDecision
 from .estimators import SVCPartitionedGP
 from .hybrid import HybridModel
 from .labels import LatchLabelRule
+from .latch_event import EventDecision
 from .local_gp import LocalGPRegressor
 from .model_check import (
     FORMAT,
@@ -148,7 +149,7 @@ def _state(est, arrays: dict, prefix: str) -> dict:
         if dec is None:
             state["decision"] = None
         else:
-            if not isinstance(dec, KernelDecision | LinearDecision):
+            if not isinstance(dec, KernelDecision | LinearDecision | EventDecision):
                 dec.arrays()  # raises ModelError naming the classifier
             state["decision"] = dec.kind
             _put(arrays, prefix + "clf", dec.arrays())
@@ -192,8 +193,15 @@ def _restore(est, state: dict, arrays, prefix: str) -> None:
         if kind is None:
             est.decision_ = None
         else:
-            cls = KernelDecision if kind == KernelDecision.kind else LinearDecision
+            cls = {
+                KernelDecision.kind: KernelDecision,
+                LinearDecision.kind: LinearDecision,
+                EventDecision.kind: EventDecision,
+            }[kind]
             est.decision_ = cls.from_arrays(_get(arrays, prefix + "clf"))
+        est.latch_model_ = (
+            "none" if kind is None else "event" if kind == EventDecision.kind else "classifier"
+        )
         est.gps_ = {}
         for g, meta in state["gps"].items():
             gp = LocalGPRegressor().set_params(kernel=meta["kernel"], ard=meta["ard"])

@@ -98,9 +98,21 @@ def decision_spec(decision, columns=None) -> DecisionSpec:
             weights=decision.weights,
             columns=cols,
         )
+    if kind == "event":
+        n = len(cols) if cols is not None else int(max(decision.columns)) + 1
+        return DecisionSpec(
+            "event",
+            np.zeros(n),
+            np.ones(n),
+            0.0,
+            columns=cols,
+            event_columns=tuple(int(c) for c in decision.columns),
+            event_on=np.asarray(decision.on, dtype=float),
+            event_off=np.asarray(decision.off, dtype=float),
+        )
     raise FmuError(
-        f"cannot export the latch classifier {type(decision).__name__}: only RBF-SVC and "
-        "linear decision functions are exported"
+        f"cannot export the latch classifier {type(decision).__name__}: only RBF-SVC, "
+        "linear and latch-event decision functions are exported"
     )
 
 

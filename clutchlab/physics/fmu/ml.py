@@ -246,7 +246,11 @@ class DecisionSpec:
 
     ``kind="rbf"``: ``Σ_i coef_i exp(−γ |z − support_i|²) + intercept``; ``kind="linear"``:
     ``weights · z + intercept``; ``z = (x[columns] − mean) / scale`` (``columns``: the
-    features the classifier uses, all when None).
+    features the classifier uses, all when None). ``kind="event"``: the latch-event law of
+    :class:`~clutchlab.residual_ml.latch_event.EventDecision` on ``x[columns]``, with its
+    ``event_columns`` (current, dI/dt, direction, dither amplitude, dither frequency; −1:
+    absent) and coefficients ``event_on`` / ``event_off`` (``mean``, ``scale`` and
+    ``intercept`` unused).
     """
 
     kind: str
@@ -258,18 +262,30 @@ class DecisionSpec:
     gamma: float = 1.0
     weights: np.ndarray | None = None
     columns: tuple[int, ...] | None = None
+    event_columns: tuple[int, ...] | None = None
+    event_on: np.ndarray | None = None
+    event_off: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        ok = (self.kind == "rbf" and self.support is not None and self.coef is not None) or (
-            self.kind == "linear" and self.weights is not None
+        ok = (
+            (self.kind == "rbf" and self.support is not None and self.coef is not None)
+            or (self.kind == "linear" and self.weights is not None)
+            or (
+                self.kind == "event"
+                and self.event_columns is not None
+                and len(self.event_columns) == 5
+                and self.event_on is not None
+                and self.event_off is not None
+            )
         )
         if not ok:
             raise ModelError(
-                "invalid DecisionSpec: kind 'rbf' needs support and coef, 'linear' needs weights"
+                "invalid DecisionSpec: kind 'rbf' needs support and coef, 'linear' needs "
+                "weights, 'event' needs event_columns (5), event_on and event_off"
             )
         problems = _number_problems(
             self,
-            finite=("mean", "intercept", "support", "coef", "weights"),
+            finite=("mean", "intercept", "support", "coef", "weights", "event_on", "event_off"),
             positive=("gamma",),
             positive_or_inf=("scale",),  # inf: a feature the classifier weights 0
         )
@@ -280,6 +296,8 @@ class DecisionSpec:
         """Decision value at the row vector ``x`` (1 × d)."""
         if self.columns is not None:
             x = ca.horzcat(*(x[:, c] for c in self.columns))
+        if self.kind == "event":
+            return self._event(x)
         z = (x - const(self.mean).T) / const(self.scale).T
         if self.kind == "linear":
             return ca.dot(z.T, const(self.weights)) + self.intercept
@@ -289,6 +307,21 @@ class DecisionSpec:
         n = self.support.shape[0]
         k = kern.map(n, "serial")(z.T, const(np.ascontiguousarray(self.support.T)))
         return ca.mtimes(k, const(self.coef)) + self.intercept
+
+    def _event(self, x: ca.MX) -> ca.MX:
+        """The latch-event law (mA): its rising / held branch where direction ≥ 0."""
+
+        def col(k):
+            c = self.event_columns[k]
+            return x[:, c] if c >= 0 else ca.MX(0)
+
+        i, di, direction, a, f = (col(k) for k in range(5))
+
+        def branch(c):
+            c = [float(v) for v in c]
+            return i - c[4] * di - (c[0] + c[1] * a + c[2] * f + c[3] * a * f)
+
+        return ca.if_else(direction >= 0, branch(self.event_on), branch(self.event_off))
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,135 @@
+"""Latch timing: the latch-event law against the classifier, chosen on held-back ramp rates.
+
+Issue 20: with two training ramp rates no criterion inside the usual training set can
+rank latch models for a new rate (leave-one-experiment-out only moves across dither
+settings). This study writes, for the default stand and every zoo plant and seeds 0–2, a
+dataset with *training-side* ramps only — fast (2.5 s), 5 s, 20 s and slow (40 s) — fits
+``SVCPartitionedGP`` on fast + slow with ``latch_model="classifier"`` (RBF SVC) and
+``"event"`` (the latch-event law), and scores the latch currents and the pressure on the
+held-back 5 s and 20 s ramps. The 10 s medium ramp is not in these datasets: it is only
+ever scored (``studies/latched_reference.py``, ``clutchlab evaluate``).
+
+Prints the decision rule first, then one row per circuit and seed, then the mean per
+circuit and the decision. Usage:
+``python studies/latch_event.py --data DIR --out latch_event.json [--seeds 0,1,2]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+RULE = """\
+Decision rule (fixed before the run; the 10 s medium ramp is not used):
+  latch_model="event" becomes the default of SVCPartitionedGP if, on the held-back 5 s and
+  20 s ramps, its mean |latch-on| + |latch-off| error (mA, mean over seeds) is lower than
+  the classifier's on at least 4 of the 5 circuits, and its RMSE (mean over seeds) is not
+  above 1.05 x the classifier's on any circuit.
+Metrics on the 18 held-back experiments (5 s and 20 s ramps x 9 dither settings):
+  on / off   mean |latch-on| / |latch-off| current error (mA)
+  rmse       dither-period-mean clutch pressure (bar)"""
+
+PLANTS = ("stand", "saturating_lugre", "quadratic_play", "stribeck_supply", "preisach_accumulator")
+MODELS = ("classifier", "event")
+
+
+def rates_dataset(root: Path, plant: str, seed: int) -> Path:
+    """The plant's dataset with ramps fast / r5 / r20 / slow (written once, then reused)."""
+    from clutchlab.data import save_dataset
+    from clutchlab.physics.stand import StandConfig, run_stand
+    from clutchlab.physics.stand.plants import PlantConfig, run_plant
+    from clutchlab.physics.stand.scenarios import RampProfile
+
+    path = root / f"{plant}_rates_s{seed}"
+    if not (path / "manifest.json").exists():
+        ramps = tuple(
+            RampProfile(label, s)
+            for label, s in (("fast", 2.5), ("r5", 5.0), ("r20", 20.0), ("slow", 40.0))
+        )
+        if plant == "stand":
+            run = run_stand(StandConfig(ramps=ramps, seed=seed), progress=False)
+        else:
+            run = run_plant(PlantConfig(plant, ramps=ramps, seed=seed), progress=False)
+        save_dataset(run.dataset, path)
+    return path
+
+
+def score(path: Path) -> dict:
+    from clutchlab.data import load_dataset
+    from clutchlab.residual_ml import SVCPartitionedGP
+    from clutchlab.validation import Protocol
+
+    protocol = Protocol(load_dataset(path), train=("fast", "slow"), test=("r5", "r20"))
+    out = {}
+    for kind in MODELS:
+        model, fit_s = protocol.fit(SVCPartitionedGP(latch_model=kind))
+        s = protocol.score(kind, model, fit_s=fit_s, std_for=())
+        out[kind] = {
+            "latch_on_err_mA": s.metrics["latch_on_err_mA"],
+            "latch_off_err_mA": s.metrics["latch_off_err_mA"],
+            "latch_on_bias_mA": s.details["period_mean"]["latch_on_bias_mA"],
+            "latch_off_bias_mA": s.details["period_mean"]["latch_off_bias_mA"],
+            "rmse_bar": s.metrics["rmse_bar"],
+            "fit_s": fit_s,
+            "fitted": model.latch_model_,
+        }
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", type=Path, required=True, help="dataset cache folder")
+    ap.add_argument("--out", type=Path, required=True, help="JSON results")
+    ap.add_argument("--seeds", default="0,1,2")
+    ap.add_argument("--plants", default=",".join(PLANTS))
+    args = ap.parse_args(argv)
+    print(RULE, flush=True)
+    print(f"\n{'circuit':22s} seed   on clf/event   off clf/event   rmse clf/event")
+    rows = []
+    for plant in args.plants.split(","):
+        for seed in (int(s) for s in args.seeds.split(",")):
+            r = score(rates_dataset(args.data, plant, seed))
+            c, e = r["classifier"], r["event"]
+            rows.append({"plant": plant, "seed": seed, **r})
+            print(
+                f"{plant:22s} {seed:4d}  {c['latch_on_err_mA']:5.1f} / {e['latch_on_err_mA']:5.1f}"
+                f"   {c['latch_off_err_mA']:5.1f} / {e['latch_off_err_mA']:5.1f}"
+                f"    {c['rmse_bar']:.3f} / {e['rmse_bar']:.3f}",
+                flush=True,
+            )
+            args.out.write_text(json.dumps(rows, indent=1))
+    print("\nper circuit, mean over seeds (worst): on+off error clf -> event; rmse clf -> event")
+    better, ok_rmse = 0, True
+    for plant in dict.fromkeys(r["plant"] for r in rows):
+        mine = [r for r in rows if r["plant"] == plant]
+
+        def err(kind, mine=mine):
+            return np.array(
+                [r[kind]["latch_on_err_mA"] + r[kind]["latch_off_err_mA"] for r in mine]
+            )
+
+        def rmse(kind, mine=mine):
+            return np.array([r[kind]["rmse_bar"] for r in mine])
+
+        ec, ee, rc, re_ = err("classifier"), err("event"), rmse("classifier"), rmse("event")
+        better += int(ee.mean() < ec.mean())
+        ok_rmse &= bool(re_.mean() <= 1.05 * rc.mean())
+        print(
+            f"  {plant:22s} {ec.mean():6.1f} ({ec.max():5.1f}) -> "
+            f"{ee.mean():6.1f} ({ee.max():5.1f});  {rc.mean():.3f} ({rc.max():.3f}) -> "
+            f"{re_.mean():.3f} ({re_.max():.3f})"
+        )
+    n = len(dict.fromkeys(r["plant"] for r in rows))
+    met = better >= min(4, n) and ok_rmse
+    print(
+        f"\nevent better on {better} of {n} circuits; RMSE within 1.05x on all: {ok_rmse} -> "
+        f"rule {'met: event becomes the default' if met else 'NOT met: the classifier stays'}"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,125 @@
+"""The latch-event law: latch currents linear in the ramp rate, thresholds in the dither."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from clutchlab.errors import ModelError
+from clutchlab.physics.fmu import build_fmu, ml_program_from
+from clutchlab.physics.fmu.adapters import decision_spec
+from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
+from clutchlab.residual_ml import SVCPartitionedGP, load_model, step_predictor
+from clutchlab.residual_ml.features import causal_features
+from clutchlab.residual_ml.latch_event import EventDecision, fit_event_decision, latch_events
+
+SMALL = {"n_hyper": 300, "max_points": 300}
+NAMES = ["current_lag_mA", "dither_amp_mA", "dither_freq_Hz", "didt_mA_s", "direction"]
+
+
+def _events(rng, n=40):
+    """Synthetic events of a known law: on 900 + 0.2 A − 0.5 f + 0.15 İ, off 780 + … − 0.25 |İ|."""
+    rows = []
+    for _ in range(n):
+        a, f = rng.choice([40.0, 80.0, 120.0]), rng.choice([30.0, 50.0, 70.0])
+        r = rng.choice([27.5, 440.0])
+        on = 900 + 0.2 * a - 0.5 * f + 0.15 * r + rng.normal(0, 0.5)
+        off = 780 + 0.1 * a - 0.3 * f - 0.25 * r + rng.normal(0, 0.5)
+        rows.append((np.array([on, a, f, r, 1.0]), 1))
+        rows.append((np.array([off, a, f, -r, -1.0]), -1))
+    return rows
+
+
+def test_fit_recovers_a_known_law_and_ignores_an_outlier():
+    rng = np.random.default_rng(0)
+    events = _events(rng)
+    events.append((np.array([600.0, 80.0, 50.0, 440.0, 1.0]), 1))  # a mis-detected snap
+    dec = fit_event_decision(events, NAMES)
+    np.testing.assert_allclose(dec.on[[1, 2, 4]], [0.2, -0.5, 0.15], atol=0.03)
+    np.testing.assert_allclose(dec.off[[1, 2, 4]], [0.1, -0.3, 0.25], atol=0.03)
+    on0, off0 = dec.thresholds(80.0, 50.0)
+    assert on0 == pytest.approx(900 + 16 - 25, abs=2) and off0 == pytest.approx(780 + 8 - 15, abs=2)
+    # Between the two trained rates the law interpolates: at 220 mA/s rising, latched
+    # from 900 + 16 − 25 + 33 mA on.
+    x = np.array([[924.0 - 2, 80, 50, 220, 1], [924.0 + 2, 80, 50, 220, 1]])
+    assert list(dec(x) > 0) == [False, True]
+    # Falling (direction −1): latched above 780 + 8 − 15 − 55 mA at that rate.
+    x = np.array([[718.0 + 2, 80, 50, -220, -1], [718.0 - 2, 80, 50, -220, -1]])
+    assert list(dec(x) > 0) == [True, False]
+    back = EventDecision.from_arrays(dec.arrays())
+    np.testing.assert_array_equal(back(x), dec(x))
+
+
+def test_fit_needs_its_features_and_events():
+    rng = np.random.default_rng(1)
+    with pytest.raises(ModelError, match="a dI/dt, a direction"):
+        fit_event_decision(_events(rng), ["current_mA", "dither_amp_mA", "dither_freq_Hz"])
+    with pytest.raises(ModelError, match="two latch-off events"):
+        fit_event_decision([e for e in _events(rng) if e[1] == 1], NAMES)
+    state = np.array([0, 0, 1, 1, 1, 0, 0])
+    ev = latch_events(np.arange(7.0)[:, None], state)
+    assert [(float(r[0]), s) for r, s in ev] == [(2.0, 1), (5.0, -1)]
+
+
+@pytest.fixture(scope="module")
+def data():
+    config = StandConfig(
+        settings=(DitherSetting(30.0, "A"), DitherSetting(70.0, "B")),
+        ramps=(
+            RampProfile("fast", 1.0, 0.3),
+            RampProfile("medium", 2.0, 0.3),
+            RampProfile("slow", 4.0, 0.3),
+        ),
+        substeps=2,
+        seed=1,
+    )
+    return run_stand(config, progress=False).dataset
+
+
+@pytest.fixture(scope="module")
+def event_model(data):
+    train = data.select(ramps=["fast", "slow"])
+    return SVCPartitionedGP(latch_model="event", **SMALL).fit(train)
+
+
+def test_partitioned_gp_with_the_event_law(event_model, data, tmp_path):
+    assert event_model.latch_model_ == "event" and event_model.classifier_ is None
+    assert event_model.classifier_train_accuracy_ > 0.99
+    tr = data["medium_30Hz_A"]
+    latch = event_model.predict_latch(tr)
+    assert 0 < latch.mean() < 1  # it latches and releases on the unseen ramp
+    event_model.save(tmp_path / "m.json")
+    back = load_model(tmp_path / "m.json")
+    assert back.latch_model_ == "event"
+    np.testing.assert_array_equal(back.predict(tr), event_model.predict(tr))
+    step = step_predictor(event_model)
+    F = event_model._trace_matrix(tr)[::53]
+    line = tr.get("line_pressure_bar")[::53]
+    exact = event_model._predict_matrix(F, path=False, return_std=False, ref=line)
+    got = np.array([step(x, line_bar=v) for x, v in zip(F, line, strict=True)])
+    np.testing.assert_allclose(got, exact, atol=1e-9)
+
+
+def test_event_law_falls_back_to_the_classifier_on_arrays(event_model, data):
+    X = event_model._trace_matrix(data["fast_30Hz_A"])
+    y = data["fast_30Hz_A"].get("clutch_pressure_bar")
+    m = SVCPartitionedGP(latch_model="event", **SMALL).fit(X[::20], y[::20])
+    assert m.latch_model_ == "classifier"
+    with pytest.raises(ModelError, match="latch_model"):
+        SVCPartitionedGP(latch_model="tree", **SMALL).fit(data.select(ramps=["fast", "slow"]))
+
+
+def test_event_law_exports_to_an_exact_fmu(data, tmp_path):
+    from clutchlab.physics.fmu import FmuPhysics
+
+    train = data.select(ramps=["fast", "slow"])
+    features = causal_features(SVCPartitionedGP()._builder().names)
+    model = SVCPartitionedGP(features=features, latch_model="event", **SMALL).fit(train)
+    spec = decision_spec(model.decision_, model.classifier_columns_)
+    assert spec.kind == "event"
+    fmu = build_fmu(ml_program_from(model, with_std=False), tmp_path / "event.fmu")
+    model.set_params(knot_tol=0.0)
+    tr = data["medium_70Hz_B"]
+    sim = FmuPhysics(fmu).simulate(tr)
+    np.testing.assert_array_equal(sim.outputs["latch_state"], model.predict_latch(tr))
+    assert np.abs(sim.pressure_bar - model.predict(tr)).max() < 0.01
