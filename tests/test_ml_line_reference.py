@@ -157,3 +157,21 @@ def test_latched_plateau_metric_counts_only_where_both_are_latched():
     first = np.flatnonzero(i > 600)[0]
     assert pooled["latched_plateau_samples"] == int(np.sum((i > 600) & (t >= t[first] + 0.045)))
     assert pooled["latched_plateau_rmse_bar"] == pytest.approx(0.1)
+
+
+def test_interval_coverage_by_region():
+    from clutchlab.validation.metrics import interval_coverage
+
+    t = np.arange(1000) * 0.01  # 10 s
+    line = np.full(1000, 17.7)
+    measured = np.where((t > 4.0) & (t < 7.0), 17.6, 5.0)
+    predicted = measured + 0.1
+    predicted[(t > 3.9) & (t < 4.1)] = 5.0  # latches 0.1 s late
+    std = np.full(1000, 0.06)  # covers the 0.1 bar offset at 2σ, not the late snap
+    got = interval_coverage(t, line, measured, predicted, std)
+    assert sum(total for _, total in got.values()) == 1000
+    assert abs(got["latch_window"][1] - 2 * 31) <= 2  # ±0.15 s around both snaps
+    assert got["regulated"][0] == got["regulated"][1] > 600  # all covered
+    assert got["latched"][0] == got["latched"][1] > 200
+    late = int(np.sum((t > 4.0) & (t < 4.1)))  # the late snap: outside ±2σ
+    assert got["latch_window"][0] == got["latch_window"][1] - late

@@ -24,6 +24,12 @@ key                             unit  definition
                                       ``plateau_guard_s`` (50 ms) from a snap or release of
                                       either: the plateau's level, apart from the latch
                                       timing the latch errors score
+``coverage_2sigma``             —     (in ``details``, for variants with a predictive std)
+                                      share of samples whose period-mean error lies within
+                                      ±2σ, per region: ``regulated`` and ``latched`` (the
+                                      measured state, more than ``latch_window_s`` from a
+                                      measured snap or release) and ``latch_window`` (within
+                                      it); see :func:`interval_coverage`
 ``fit_s``                       s     wall time of ``fit`` on the training experiments (for a
                                       model built on another variant, including that one's)
 ``predict_s``                   s     wall time of ``predict`` on all test experiments
@@ -46,11 +52,13 @@ from .settings import AnalysisSettings
 
 __all__ = [
     "ACCURACY_KEYS",
+    "COVERAGE_REGIONS",
     "METRIC_KEYS",
     "SIGNAL_KINDS",
     "TIMING_KEYS",
     "ExperimentComparison",
     "compare_experiment",
+    "interval_coverage",
     "pool_comparisons",
     "pressure_metrics",
 ]
@@ -230,3 +238,54 @@ def pool_comparisons(comparisons: list[ExperimentComparison]) -> dict[str, float
         extra[f"latch_{which}_bias_mA"] = float(np.mean(vals)) if vals.size else np.nan
         extra["latch_censored"] += sum(c for _, c in errs)
     return {k: out[k] for k in ACCURACY_KEYS} | extra
+
+
+#: Regions of :func:`interval_coverage`.
+COVERAGE_REGIONS: tuple[str, ...] = ("regulated", "latched", "latch_window")
+
+
+def interval_coverage(
+    time_s: np.ndarray,
+    line_bar: np.ndarray | float,
+    measured_bar: np.ndarray,
+    predicted_bar: np.ndarray,
+    std_bar: np.ndarray,
+    settings: AnalysisSettings | None = None,
+    k: float = 2.0,
+) -> dict[str, tuple[int, int]]:
+    """Samples whose error lies within ``±k·std``, per region: ``{region: (inside, total)}``.
+
+    Regions (:data:`COVERAGE_REGIONS`) by the *measured* pressure: ``latch_window`` within
+    ``settings.latch_window_s`` of a measured snap or release (where a wrong latch time
+    makes the largest errors), ``latched`` (within the latch margin of line pressure) and
+    ``regulated`` elsewhere.
+
+    Parameters
+    ----------
+    time_s : numpy.ndarray
+        Sample time, s.
+    line_bar : numpy.ndarray or float
+        Line pressure, bar.
+    measured_bar, predicted_bar, std_bar : numpy.ndarray
+        Measured and predicted clutch pressure and the predictive std, bar (one signal
+        kind, e.g. dither-period means).
+    settings : AnalysisSettings, optional
+        Latch margin and window.
+    k : float
+        Interval half-width in standard deviations.
+    """
+    s = settings or AnalysisSettings()
+    t = np.asarray(time_s, dtype=float)
+    meas = np.asarray(measured_bar, dtype=float)
+    latched = meas >= np.asarray(line_bar, dtype=float) - s.latch_margin_bar
+    j = np.flatnonzero(np.diff(latched.astype(np.int8)) != 0)
+    window = np.zeros(t.size, dtype=bool)
+    for e in 0.5 * (t[j] + t[j + 1]):
+        window |= np.abs(t - e) <= s.latch_window_s
+    inside = np.abs(np.asarray(predicted_bar) - meas) <= k * np.asarray(std_bar, dtype=float)
+    masks = {
+        "regulated": ~latched & ~window,
+        "latched": latched & ~window,
+        "latch_window": window,
+    }
+    return {r: (int(np.sum(inside & m)), int(np.sum(m))) for r, m in masks.items()}

@@ -34,7 +34,14 @@ from ..data import (
 )
 from ..errors import ClutchlabError, DataError
 from .hysteresis import branch_direction
-from .metrics import ACCURACY_KEYS, SIGNAL_KINDS, compare_experiment, pool_comparisons
+from .metrics import (
+    ACCURACY_KEYS,
+    COVERAGE_REGIONS,
+    SIGNAL_KINDS,
+    compare_experiment,
+    interval_coverage,
+    pool_comparisons,
+)
 from .settings import AnalysisSettings
 from .variants import supports_std
 
@@ -369,6 +376,28 @@ class Protocol:
             total += int(keep.sum())
         return hits / total if total else float("nan")
 
+    def _coverage(self, refs, predictions) -> dict[str, float]:
+        """Pooled ±2σ coverage per region of the period-mean error (empty without a std)."""
+        counts = {r: [0, 0] for r in COVERAGE_REGIONS}
+        for n, ref in refs.items():
+            pred = predictions[n]
+            if pred.std_bar is None:
+                continue
+            got = interval_coverage(
+                ref.time_s,
+                ref.period_mean(ref.line_bar),
+                ref.measured_mean_bar,
+                ref.period_mean(pred.mean_bar),
+                ref.period_mean(pred.std_bar),
+                self.settings,
+            )
+            for r, (inside, total) in got.items():
+                counts[r][0] += inside
+                counts[r][1] += total
+        if not any(total for _, total in counts.values()):
+            return {}
+        return {r: (i / t if t else float("nan")) for r, (i, t) in counts.items()}
+
     @property
     def featured(self) -> str:
         """The test experiment drawn in single-experiment figures (the middle one by name)."""
@@ -450,6 +479,9 @@ class Protocol:
             kind: {k: v for k, v in pooled[kind].items() if k not in ACCURACY_KEYS}
             for kind in SIGNAL_KINDS
         }
+        coverage = self._coverage(refs, predictions)
+        if coverage:
+            details["coverage_2sigma"] = coverage
         if callable(getattr(model, "predict_latch", None)):
             details["classifier_accuracy"] = self._latch_accuracy(model)
         if callable(getattr(model, "gp_hyperparameters", None)):

@@ -330,6 +330,11 @@ def _describe(name: str, d: dict[str, Any], html_: bool) -> str:
         text += f"; form: {d['residual_form']}" + (
             f" (leave-one-experiment-out RMSE on the training ramps: {why})" if why else ""
         )
+    cov = d.get("coverage_2sigma") or {}
+    if cov:
+        text += "; ±2σ coverage " + ", ".join(
+            f"{k.replace('_', ' ')} {100 * v:.0f} %" for k, v in cov.items() if v is not None
+        )
     if d.get("gp_at_bounds"):
         text += "; GP hyperparameters on a bound of their range: " + "; ".join(d["gp_at_bounds"])
     if html_:

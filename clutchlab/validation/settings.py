@@ -36,6 +36,9 @@ class AnalysisSettings:
         The latched-plateau error leaves out samples this close to a latch snap or release
         of either signal (s, default 0.05): the snap itself is latch timing, which the
         latch-current errors score.
+    latch_window_s : float
+        Half-width of the latch window of the coverage metric (s, default 0.15): the
+        samples around a measured snap or release, where a wrong latch time lands.
     """
 
     bin_mA: float = 25.0
@@ -45,6 +48,7 @@ class AnalysisSettings:
     rel_rate: float = 0.1
     latch_margin_bar: float = 1.0
     plateau_guard_s: float = 0.05
+    latch_window_s: float = 0.15
 
     def __post_init__(self) -> None:
         problems = []
@@ -58,6 +62,8 @@ class AnalysisSettings:
             problems.append("min_rate_mA_s must be > 0 and rel_rate ≥ 0")
         if not self.latch_margin_bar > 0:
             problems.append(f"latch_margin_bar must be > 0, got {self.latch_margin_bar!r}")
+        if not self.latch_window_s >= 0:
+            problems.append(f"latch_window_s must be ≥ 0, got {self.latch_window_s!r}")
         if not self.plateau_guard_s >= 0:
             problems.append(f"plateau_guard_s must be ≥ 0, got {self.plateau_guard_s!r}")
         if problems:
