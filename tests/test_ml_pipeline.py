@@ -65,6 +65,7 @@ def fitted(train):
         "gp_base": GPBaseline(**SMALL).fit(train),
         "gp_didt": GPWithDerivative(**SMALL).fit(train),
         "paper_svc_gp": SVCPartitionedGP(**SMALL).fit(train),
+        "paper_faithful": make_variant("paper_faithful", **SMALL).fit(train),
         "hybrid": HybridModel(
             physics=PhysicsPredictor(substeps=2),
             residual=SVCPartitionedGP(features=HYBRID_FEATURES, **SMALL),
@@ -302,3 +303,18 @@ def test_gp_hyperparameters_by_part(fitted):
         assert {"kernel", "length_scales", "noise_var", "at_bounds"} <= set(h)
     flat = fitted["hybrid"].hyperparameters_at_bounds()
     assert len(flat) == sum(len(h["at_bounds"]) for h in parts.values())
+
+
+def test_paper_faithful_variant_is_the_published_stage_3():
+    from clutchlab.residual_ml.features import DIDT_FEATURES
+
+    m = make_variant("paper_faithful")
+    assert isinstance(m, SVCPartitionedGP)
+    assert (m.kernel, m.lag_s, m.latch_model, m.latched_reference) == (
+        "rq",
+        0.0,
+        "classifier",
+        "none",
+    )
+    assert tuple(m.features) == DIDT_FEATURES  # the nominal current, no lag
+    assert make_variant("paper_faithful", kernel="rbf").kernel == "rbf"

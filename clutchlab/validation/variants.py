@@ -429,12 +429,16 @@ _ML_CLASSES: dict[str, str] = {
     "gp_didt": "GPWithDerivative",
     "paper_svc_gp": "SVCPartitionedGP",
     "hybrid": "HybridModel",
+    "paper_faithful": "paper_faithful",
 }
 _ML_DESCRIPTIONS: dict[str, str] = {
     "gp_base": "GP on nominal current, dither amplitude and frequency (paper stage 1)",
-    "gp_didt": "GP on current, dither amplitude and frequency, dI/dt (paper stage 2)",
-    "paper_svc_gp": "RBF-SVC latch classifier + one RQ GP per latch state (paper stage 3)",
+    "gp_didt": "GP on lagged current, dither amplitude and frequency, dI/dt (paper stage 2)",
+    "paper_svc_gp": "latch decision + one GP per latch state on the lagged current, the "
+    "latched one below line pressure (paper stage 3, clutchlab's defaults)",
     "hybrid": "fitted physics + SVC-partitioned GP on its residual",
+    "paper_faithful": "paper stage 3 as published: RBF-SVC on nominal current, dI/dt and "
+    "dither, one rational-quadratic GP per latch state, no lag, no line-pressure reference",
 }
 #: Variants whose model takes the fitted physics (keyword ``physics``).
 _NEEDS_PHYSICS: dict[str, str] = {"hybrid": "physics_fitted"}
