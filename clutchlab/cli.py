@@ -33,6 +33,31 @@ def _list_plants() -> int:
     return 0
 
 
+def _ramps(text: str | None):
+    """``--ramps fast=2.5,r5=5,...`` as RampProfiles (the stand's three when None)."""
+    from .physics.stand.scenarios import RAMPS, RampProfile
+
+    if not text:
+        return tuple(RAMPS.values())
+    out, problems = [], []
+    for item in _csv_list(text):
+        label, sep, value = item.partition("=")
+        try:
+            seconds = float(value) if sep else float("nan")
+        except ValueError:
+            seconds = float("nan")
+        if not label or not seconds > 0:
+            problems.append(f"{item!r} (want LABEL=SECONDS with SECONDS > 0)")
+        else:
+            out.append(RampProfile(label.strip(), seconds))
+    labels = [r.label for r in out]
+    if len(set(labels)) != len(labels):
+        problems.append(f"repeated labels in {labels}")
+    if problems:
+        raise SystemExit("--ramps: " + "; ".join(problems))
+    return tuple(out)
+
+
 def _cmd_stand(args: argparse.Namespace) -> int:
     from .physics.stand import DEFAULT_SETTINGS, StandConfig, truth_path, write_stand
     from .physics.stand.plants import PlantConfig, get_plant
@@ -47,6 +72,7 @@ def _cmd_stand(args: argparse.Namespace) -> int:
     # Spread the chosen settings over frequencies and shapes (3 → 30/A, 50/B, 70/C).
     step = max(len(DEFAULT_SETTINGS) // n, 1)
     settings = DEFAULT_SETTINGS[::step][:n] if n < len(DEFAULT_SETTINGS) else DEFAULT_SETTINGS
+    ramps = _ramps(args.ramps)
     if args.plant == "stand":
         if args.temperature != "levels":
             raise SystemExit("--temperature drift applies to the zoo's plants (--plant NAME)")
@@ -54,6 +80,7 @@ def _cmd_stand(args: argparse.Namespace) -> int:
             effects=_csv_list(args.effects),
             builtin_effects=not args.no_builtin,
             settings=settings,
+            ramps=ramps,
             seed=args.seed,
         )
         config.model()  # unknown effect names fail before any work
@@ -64,6 +91,7 @@ def _cmd_stand(args: argparse.Namespace) -> int:
             plant=args.plant,
             effects=_csv_list(args.effects),
             settings=settings,
+            ramps=ramps,
             seed=args.seed,
             temperature=args.temperature,
         )
@@ -210,6 +238,12 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         default=9,
         help="number of dither settings (1-9; default 9 = 3 frequencies × 3 shapes)",
+    )
+    p.add_argument(
+        "--ramps",
+        help="ramp labels and durations (s, each of the up and down ramps), e.g. "
+        "fast=2.5,r5=5,medium=10,r20=20,slow=40 for held-back training-side rates "
+        "(default fast=2.5,medium=10,slow=40)",
     )
     p.add_argument("--overwrite", action="store_true", help="replace an existing dataset folder")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

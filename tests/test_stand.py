@@ -104,3 +104,18 @@ def test_cli_stand_with_effects_and_unknown_effect(tmp_path):
     assert "unknown effect 'sensor_lagg'" in bad.stderr
     assert "transport_delay" in bad.stderr and "flow_force" in bad.stderr
     assert not (tmp_path / "bad").exists()
+
+
+def test_cli_stand_writes_extra_ramp_rates(tmp_path):
+    out = tmp_path / "rates"
+    res = _clutchlab(
+        "stand", "--out", str(out), "--settings", "1", "--ramps", "fast=2.5,r5=5", "--quiet"
+    )
+    assert "ramps: fast, r5" in res.stdout
+    ds = load_dataset(out)
+    assert sorted(ds.ramps) == ["fast", "r5"]
+    r5 = ds.select(ramps=["r5"])[0]
+    assert r5.duration_s == pytest.approx(3 * 1.0 + 2 * 5.0, abs=0.01)
+    bad = _clutchlab("stand", "--out", str(tmp_path / "bad"), "--ramps", "fast=0,x", check=False)
+    assert bad.returncode != 0 and "--ramps: 'fast=0'" in bad.stderr and "'x'" in bad.stderr
+    assert not (tmp_path / "bad").exists()
