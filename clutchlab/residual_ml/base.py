@@ -223,7 +223,8 @@ class TraceEstimator(RegressorMixin, BaseEstimator):
         X : Trace, Dataset, sequence of Trace, or array_like
             One trace (→ one array), several (→ a list of arrays), or an n × d feature matrix.
         return_std : bool
-            Also return the predictive standard deviation (bar) of the GP part.
+            Also return the predictive standard deviation (bar) of a measured
+            dither-period mean: the GP's latent std and its observation noise.
 
         Returns
         -------

@@ -52,10 +52,15 @@ class _GPParams:
 
     @staticmethod
     def _gp_fn(gp: LocalGPRegressor, return_std: bool):
+        """Mean, and the predictive std of a *measured* dither-period mean (bar): the GP's
+        latent std and its observation noise (the variance of one weight-1 observation,
+        i.e. one dither period's mean), so a ±2σ band is where a measurement falls."""
+        noise = float(gp.noise_var_) if return_std else 0.0
+
         def fn(x):
             xs = gp._scale(x)
             if return_std:
-                return gp._mean_scaled(xs), gp._std_scaled(xs)
+                return gp._mean_scaled(xs), np.sqrt(gp._std_scaled(xs) ** 2 + noise)
             return gp._mean_scaled(xs)
 
         return fn

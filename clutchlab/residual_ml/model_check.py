@@ -178,6 +178,8 @@ _PARAM_RULES: dict[str, Callable | None] = {
     "max_knot_gap": _integer(1),
     "random_state": _optional(_integer(0, 2**32 - 1)),
     "event_points": _one_of(("exclude", "assign")),
+    "latch_model": _one_of(("classifier", "event")),
+    "latched_reference": _one_of(("line", "none")),
     "classifier": _one_of(CLASSIFIERS),
     "svc_C": _number(0.0, strict=True),
     "svc_gamma": _number(0.0, strict=True),

@@ -48,12 +48,13 @@ _APPROXIMATE = {"didt_mA_s": "didt_causal_mA_s", "direction": "direction_causal"
 _DEFAULT_DEADBAND_MA_S = 10.0
 
 
-def gp_spec(gp, with_std: bool = True) -> GPSpec:
+def gp_spec(gp, with_std: bool = True, noise: bool = False) -> GPSpec:
     """The :class:`GPSpec` of a fitted ``LocalGPRegressor`` (its ``prediction_arrays``).
 
     With ``with_std`` the spec carries the estimator's std bins and their ``L⁻¹``: the FMU
     computes the same predictive standard deviation (bar) as ``predict(return_std=True)``,
-    the GP's std given the coarse std bins (at most ``max_std_points``).
+    the GP's std given the coarse std bins (at most ``max_std_points``); with ``noise``
+    the GP's observation noise is added, as the trace estimators' std has it.
     """
     a = gp.prediction_arrays(inverse=with_std)
     alpha = a["alpha"]
@@ -70,6 +71,7 @@ def gp_spec(gp, with_std: bool = True) -> GPSpec:
         y_scale=a["y_scale"],
         l_inv=a["std_l_inv"],
         std_points=a["std_points"] if with_std else None,
+        noise_var=float(gp.noise_var_) if noise else 0.0,
     )
     return spec
 
@@ -227,10 +229,10 @@ def ml_program_from(
     didt = _didt_spec(est, features)
     lag = LagSpec(float(getattr(est, "lag_s_", 0.0))) if "current_lag_mA" in features else None
     if hasattr(est, "gp_"):
-        gps = {0: gp_spec(est.gp_, with_std)}
+        gps = {0: gp_spec(est.gp_, with_std, noise=True)}
         decision = None
     else:
-        gps = {g: gp_spec(gp, with_std) for g, gp in est.gps_.items()}
+        gps = {g: gp_spec(gp, with_std, noise=True) for g, gp in est.gps_.items()}
         decision = None
         if est.decision_ is not None:
             decision = decision_spec(est.decision_, getattr(est, "classifier_columns_", None))

@@ -140,6 +140,10 @@ class GPSpec:
         no std output.
     std_points : ndarray (m, d) or None
         Bin points of the std's GP, standardized; None: ``points``.
+    noise_var : float
+        Observation noise variance (bar²) added under the square root of the std: 0 for
+        the latent std of a ``LocalGPRegressor``, the GP's ``noise_var_`` for the trace
+        estimators' predictive std of a measured dither-period mean.
     """
 
     kernel: str
@@ -154,6 +158,7 @@ class GPSpec:
     y_scale: float = 1.0
     l_inv: np.ndarray | None = None
     std_points: np.ndarray | None = None
+    noise_var: float = 0.0
 
     def __post_init__(self) -> None:
         n, d = np.shape(self.points)
@@ -170,6 +175,8 @@ class GPSpec:
             m = np.shape(self.std_points)[0]
             if np.shape(self.std_points) != (m, d):
                 problems.append(f"std_points must have shape (m, {d})")
+        if not (np.isfinite(self.noise_var) and self.noise_var >= 0):
+            problems.append(f"noise_var must be finite and ≥ 0, got {self.noise_var!r}")
         if self.l_inv is not None and np.shape(self.l_inv) != (m, m):
             problems.append(f"l_inv must have shape ({m}, {m}) (one row per std point)")
         problems += _number_problems(
@@ -237,7 +244,8 @@ class GPSpec:
         l_inv = ca.MX(ca.DM(lower, packed)) if isinstance(packed, ca.DM) else ca.MX(lower, packed)
         v = ca.mtimes(l_inv, self.signal_var * prof.T)
         q = ca.sumsqr(v)
-        return mean, self.y_scale * ca.sqrt(ca.fmax(self.signal_var - q, 0.0))
+        latent = self.y_scale**2 * ca.fmax(self.signal_var - q, 0.0)
+        return mean, ca.sqrt(latent + self.noise_var)
 
 
 @dataclass(frozen=True)
