@@ -414,9 +414,20 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         return fns
 
     def resolution(self) -> np.ndarray:
-        """Per-feature kernel resolution (smallest over the partitions' GPs), feature units."""
+        """Per-feature kernel resolution for the prediction knots (feature units).
+
+        The smallest over the partitions' GPs, each scaled by ``sqrt(s_max / s)`` with
+        ``s`` its signal std and ``s_max`` the largest: between knots the interpolation
+        error grows as ``s (Δ/ℓ)²``, so a GP of small amplitude (the latched plateau's
+        offset below line pressure, a few hundredths of a bar) keeps the same error bound
+        at wider knot spacing instead of setting it for both.
+        """
         self._check_fitted()
-        return np.min([gp.resolution_ for gp in self.gps_.values()], axis=0)
+        amp = {g: np.sqrt(max(gp.signal_var_, 1e-300)) for g, gp in self.gps_.items()}
+        top = max(amp.values())
+        return np.min(
+            [gp.resolution_ * np.sqrt(top / amp[g]) for g, gp in self.gps_.items()], axis=0
+        )
 
     def _predict_matrix(
         self, X: np.ndarray, path: bool, return_std: bool, ref: np.ndarray | None = None
