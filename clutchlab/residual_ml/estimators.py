@@ -23,7 +23,7 @@ from .base import Block, TraceEstimator
 from .classifiers import lean_decision, make_classifier
 from .features import BASE_FEATURES, LAG_DIDT_FEATURES, target_pressure
 from .labels import LatchLabelRule
-from .latch_event import event_features, fit_event_decision, latch_events
+from .latch_event import EventDecision, event_features, fit_event_decision, latch_events
 from .local_gp import LocalGPRegressor
 from .paths import knot_indices, piecewise_classes, predict_on_path
 
@@ -365,10 +365,7 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         if len(present) >= 2:
             Xc = b.X[:, self.classifier_columns_]
             names = [self.feature_names_[j] for j in self.classifier_columns_]
-            self.latch_model_ = (
-                "event" if self.latch_model == "event" and event_features(names) else "classifier"
-            )
-            if self.latch_model_ == "event":
+            if self.latch_model == "event" and event_features(names):
                 cols = self.classifier_columns_
                 events = [e for blk in blocks for e in latch_events(blk.X[:, cols], blk.state)]
                 self.classifier_ = None
@@ -381,7 +378,6 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
             self.classifier_train_accuracy_ = float(np.mean(pred == b.labels[clean]))
             self.single_state_ = None
         else:
-            self.latch_model_ = "none"
             self.classifier_ = None
             self.decision_ = None
             self.classifier_train_accuracy_ = 1.0
@@ -398,6 +394,14 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
                 f"too few training samples for any latch state (n_samples={b.y.size}; each "
                 "latch state needs at least 2)"
             )
+
+    @property
+    def latch_model_(self) -> str:
+        """What decides the latch state as fitted: ``event``, ``classifier`` or ``none``."""
+        dec = self.decision_
+        if dec is None:
+            return "none"
+        return "event" if isinstance(dec, EventDecision) else "classifier"
 
     def _classes(self, X: np.ndarray, knots: np.ndarray | None) -> np.ndarray:
         if self.decision_ is None:

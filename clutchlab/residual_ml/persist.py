@@ -199,9 +199,6 @@ def _restore(est, state: dict, arrays, prefix: str) -> None:
                 EventDecision.kind: EventDecision,
             }[kind]
             est.decision_ = cls.from_arrays(_get(arrays, prefix + "clf"))
-        est.latch_model_ = (
-            "none" if kind is None else "event" if kind == EventDecision.kind else "classifier"
-        )
         est.gps_ = {}
         for g, meta in state["gps"].items():
             gp = LocalGPRegressor().set_params(kernel=meta["kernel"], ard=meta["ard"])
