@@ -183,21 +183,35 @@ def compare_experiment(
     )
 
 
+def _latched(pressure, line, s: AnalysisSettings) -> np.ndarray:
+    """Samples within the latch margin of line pressure."""
+    return np.asarray(pressure, dtype=float) >= np.asarray(line, dtype=float) - s.latch_margin_bar
+
+
+def _distance_to_switch(time_s: np.ndarray, *states: np.ndarray) -> np.ndarray:
+    """Time (s) from each sample to the nearest switch of any of ``states`` (inf: none).
+
+    A switch sits between the last sample before it and the first after it.
+    """
+    t = np.asarray(time_s, dtype=float)
+    changed = np.zeros(max(t.size - 1, 0), dtype=bool)
+    for st in states:
+        changed |= np.diff(np.asarray(st, dtype=np.int8)) != 0
+    j = np.flatnonzero(changed)
+    if not j.size:
+        return np.full(t.size, np.inf)
+    edges = 0.5 * (t[j] + t[j + 1])
+    k = np.clip(np.searchsorted(edges, t), 1, edges.size) - 1
+    return np.minimum(np.abs(t - edges[k]), np.abs(t - edges[np.minimum(k + 1, edges.size - 1)]))
+
+
 def _plateau(measured, predicted, line, s: AnalysisSettings, time_s) -> np.ndarray:
     """Samples where both signals are latched, ``plateau_guard_s`` from any snap of either."""
-    floor = np.asarray(line, dtype=float) - s.latch_margin_bar
-    lm, lp = np.asarray(measured) >= floor, np.asarray(predicted) >= floor
+    lm, lp = _latched(measured, line, s), _latched(predicted, line, s)
     both = lm & lp
     if time_s is None or s.plateau_guard_s <= 0 or both.size < 2:
         return both
-    t = np.asarray(time_s, dtype=float)
-    j = np.flatnonzero((np.diff(lm.astype(np.int8)) != 0) | (np.diff(lp.astype(np.int8)) != 0))
-    if not j.size:
-        return both
-    edges = 0.5 * (t[j] + t[j + 1])  # between the last sample before and the first after
-    k = np.clip(np.searchsorted(edges, t), 1, edges.size) - 1
-    near = np.minimum(np.abs(t - edges[k]), np.abs(t - edges[np.minimum(k + 1, edges.size - 1)]))
-    return both & (near >= s.plateau_guard_s)
+    return both & (_distance_to_switch(time_s, lm, lp) >= s.plateau_guard_s)
 
 
 def pool_comparisons(comparisons: list[ExperimentComparison]) -> dict[str, float]:
@@ -275,13 +289,9 @@ def interval_coverage(
         Interval half-width in standard deviations.
     """
     s = settings or AnalysisSettings()
-    t = np.asarray(time_s, dtype=float)
     meas = np.asarray(measured_bar, dtype=float)
-    latched = meas >= np.asarray(line_bar, dtype=float) - s.latch_margin_bar
-    j = np.flatnonzero(np.diff(latched.astype(np.int8)) != 0)
-    window = np.zeros(t.size, dtype=bool)
-    for e in 0.5 * (t[j] + t[j + 1]):
-        window |= np.abs(t - e) <= s.latch_window_s
+    latched = _latched(meas, line_bar, s)
+    window = _distance_to_switch(time_s, latched) <= s.latch_window_s
     inside = np.abs(np.asarray(predicted_bar) - meas) <= k * np.asarray(std_bar, dtype=float)
     masks = {
         "regulated": ~latched & ~window,
