@@ -46,7 +46,7 @@ def _rmse(model, traces) -> float:
 
 
 def study(path: Path, fit: Path) -> dict:
-    from clutchlab.data import dither_period_mean, dither_period_samples, load_dataset
+    from clutchlab.data import load_dataset
     from clutchlab.physics.fit import PhysicsFitter
     from clutchlab.residual_ml import HybridModel, PhysicsPredictor
 
@@ -59,29 +59,11 @@ def study(path: Path, fit: Path) -> dict:
     per_exp: dict[str, list[float]] = {}
 
     class Recording(HybridModel):
-        def _loeo_scores(self, traces, outputs):
-            scores = super()._loeo_scores(traces, outputs)
-            # the same folds again, per experiment (a diagnostic: the fits are repeated)
-            for held in self._form_folds(traces):
-                keep = [i for i in range(len(traces)) if i not in held]
-                res = self._fit_residual(
-                    self._residual(), [traces[i] for i in keep], [outputs[i] for i in keep]
-                )
-                alone = self._standalone().fit([traces[i] for i in keep])
-                for i in held:
-                    t, (raw, smooth) = traces[i], outputs[i]
-                    n = dither_period_samples(t)
-                    y = dither_period_mean(t.get("clutch_pressure_bar"), n)
-                    r = res._predict_matrix(res._builder().build(t, smooth), True, False)
-                    preds = {
-                        "residual": raw + r,
-                        "standalone": alone.predict(t),
-                        "physics": raw,
-                    }
-                    for form, p in preds.items():
-                        e = dither_period_mean(p, n) - y
-                        per_exp.setdefault(form, []).append(float(np.sqrt(np.mean(e**2))))
-            return scores
+        def _loeo_errors(self, traces, outputs):
+            errors = super()._loeo_errors(traces, outputs)
+            for form, per in errors.items():
+                per_exp[form] = [float(np.sqrt(np.mean(e**2))) for e in per]
+            return errors
 
     auto = Recording(physics=phys, form="auto").fit(train)
     crit = {

@@ -174,6 +174,11 @@ class HybridModel(TraceEstimator):
 
     def _loeo_scores(self, traces, outputs) -> dict[str, float]:
         """Leave-one-group-out RMSE (bar, dither-period mean) of each form on ``traces``."""
+        errors = self._loeo_errors(traces, outputs)
+        return {f: float(np.sqrt(np.mean(np.concatenate(e) ** 2))) for f, e in errors.items() if e}
+
+    def _loeo_errors(self, traces, outputs) -> dict[str, list[np.ndarray]]:
+        """Held-out dither-period-mean errors (bar) of each form, one array per experiment."""
         errors = {f: [] for f in RESIDUAL_FORMS}
         for held in self._form_folds(traces):
             train = [i for i in range(len(traces)) if i not in held]
@@ -193,7 +198,7 @@ class HybridModel(TraceEstimator):
                 errors["residual"].append(dither_period_mean(raw + r, n) - y)
                 errors["standalone"].append(dither_period_mean(alone.predict(t), n) - y)
                 errors["physics"].append(dither_period_mean(raw, n) - y)
-        return {f: float(np.sqrt(np.mean(np.concatenate(e) ** 2))) for f, e in errors.items() if e}
+        return errors
 
     def _outputs(
         self, phys, trace: Trace, needed: tuple[str, ...] = ()

@@ -484,6 +484,21 @@ def staged_start(
     return params, info
 
 
+def _with_law(
+    model: CircuitModel, start: ParameterSet, law: str, values: dict[str, float]
+) -> tuple[CircuitModel, ParameterSet]:
+    """``model`` with flexible law ``law``: every start value kept, ``values`` set (clipped
+    to their bounds)."""
+    new_model = model.with_effects(law)
+    specs = new_model.default_params()
+    names = {p.name for p in new_model.parameters}
+    kept = {n: start[n] for n in start if n in names}
+    for n, v in values.items():
+        spec = specs.spec(n)
+        kept[n] = float(min(max(v, spec.lower), spec.upper))
+    return new_model, new_model.params(**kept)
+
+
 def free_latch_structure(
     model: CircuitModel, start: ParameterSet, info: StagedStart
 ) -> tuple[CircuitModel, ParameterSet]:
@@ -493,30 +508,19 @@ def free_latch_structure(
     the training data: the free-threshold law has the same number of parameters (two
     thresholds for preload and rate), without the tie. Every other start value is kept.
     """
-    free_model = model.with_effects("latch_free_thresholds")
-    names = {p.name for p in free_model.parameters}
-    values = {n: start[n] for n in start if n in names}
+    values = {}
     if info.thresholds_bar is not None:
-        on, off = info.thresholds_bar
-        spec_on = free_model.default_params().spec("lthr_p_on")
-        spec_off = free_model.default_params().spec("lthr_p_off")
-        values["lthr_p_on"] = float(min(max(on, spec_on.lower), spec_on.upper))
-        values["lthr_p_off"] = float(min(max(off, spec_off.lower), spec_off.upper))
+        values = {"lthr_p_on": info.thresholds_bar[0], "lthr_p_off": info.thresholds_bar[1]}
     info.notes.append(
         "structure: latch_free_thresholds (same parameter count as the datasheet latch's "
         "preload and rate, without the area-ratio tie the training data violate)"
     )
-    return free_model, free_model.params(**values)
+    return _with_law(model, start, "latch_free_thresholds", values)
 
 
 def regulator_lag_structure(
     model: CircuitModel, start: ParameterSet, info: StagedStart
 ) -> tuple[CircuitModel, ParameterSet]:
     """The model with ``reg_pilot_lag`` on (weight 1) at the staged start's time constant."""
-    lag_model = model.with_effects("reg_pilot_lag")
-    names = {p.name for p in lag_model.parameters}
-    values = {n: start[n] for n in start if n in names}
-    spec = lag_model.default_params().spec("rlag_tau")
-    values["rlag_w"] = 1.0
-    values["rlag_tau"] = float(min(max(info.regulator_lag_ms, spec.lower), spec.upper))
-    return lag_model, lag_model.params(**values)
+    values = {"rlag_w": 1.0, "rlag_tau": info.regulator_lag_ms}
+    return _with_law(model, start, "reg_pilot_lag", values)
