@@ -25,7 +25,8 @@ RULE = """\
 Decision rule (fixed before the run; the medium ramp is only scored):
   line reference kept as default if latched-plateau RMSE falls on every plant and the
   overall medium RMSE is not worse (> 1.02x) on any plant and seed.
-Metrics on the 9 medium-ramp experiments, dither-period mean:
+Metrics on the scored experiments (medium ramp, or with --rates the 5 s + 20 s ramps),
+dither-period mean:
   rmse       all samples (bar)
   plateau    samples where measured and predicted are both within 1 bar of line, at least
              50 ms from a snap or release of either (bar); edges: the same without the
@@ -44,14 +45,14 @@ def dataset(root: Path, plant: str, seed: int) -> Path:
     return path
 
 
-def score(path: Path) -> dict:
+def score(path: Path, test: tuple[str, ...] = ("medium",)) -> dict:
     from clutchlab.data import load_dataset
     from clutchlab.residual_ml import SVCPartitionedGP
     from clutchlab.validation import AnalysisSettings, Protocol
 
     data = load_dataset(path)
-    protocol = Protocol(data)
-    unguarded = Protocol(data, settings=AnalysisSettings(plateau_guard_s=0.0))
+    protocol = Protocol(data, test=test)
+    unguarded = Protocol(data, test=test, settings=AnalysisSettings(plateau_guard_s=0.0))
     out = {}
     for ref in ("none", "line"):
         model, fit_s = protocol.fit(SVCPartitionedGP(latched_reference=ref))
@@ -75,8 +76,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, required=True, help="JSON results")
     ap.add_argument("--seeds", default="0,1,2")
     ap.add_argument("--plants", default=",".join(PLANTS))
+    ap.add_argument(
+        "--rates",
+        action="store_true",
+        help="score the held-back 5 s + 20 s training-side ramps of the datasets of "
+        "studies/latch_event.py instead of the medium ramp (a check that reads no test data)",
+    )
     args = ap.parse_args(argv)
     print(RULE, flush=True)
+    print("scored: " + ("5 s + 20 s ramps (held-back training side)" if args.rates else "medium"))
     rows = []
     print(
         f"\n{'plant':22s} seed  rmse none/line   plateau none/line   edges none/line  "
@@ -84,7 +92,13 @@ def main(argv: list[str] | None = None) -> int:
     )
     for plant in args.plants.split(","):
         for seed in (int(s) for s in args.seeds.split(",")):
-            r = score(dataset(args.data, plant, seed))
+            if args.rates:
+                sys.path.insert(0, str(Path(__file__).parent))
+                from latch_event import rates_dataset
+
+                r = score(rates_dataset(args.data, plant, seed), test=("r5", "r20"))
+            else:
+                r = score(dataset(args.data, plant, seed))
             n, ln = r["none"], r["line"]
             rows.append({"plant": plant, "seed": seed, **r})
             print(
