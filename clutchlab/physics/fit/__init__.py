@@ -5,6 +5,7 @@ from .problem import FitProblem
 from .result import FitResult, identifiability
 from .sensitivity import SensitivityRun, sensitivity_chunk, simulate_sensitivities
 from .settings import DEFAULT_FREE, FitSettings
+from .stages import prefit_settings, prefit_subset, refine_settings
 from .structure import (
     STRUCTURES,
     CandidateScore,
@@ -25,6 +26,9 @@ __all__ = [
     "StructureSelection",
     "StructureSelector",
     "identifiability",
+    "prefit_settings",
+    "prefit_subset",
+    "refine_settings",
     "resolve_free",
     "select_structure",
     "sensitivity_chunk",

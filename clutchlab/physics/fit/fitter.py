@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from dataclasses import asdict, replace
+from dataclasses import asdict
 
 import numpy as np
 from sklearn.exceptions import NotFittedError
@@ -23,6 +23,7 @@ from .problem import FitProblem
 from .result import FitResult, identifiability
 from .settings import DEFAULT_FREE, FitSettings
 from .staged import free_latch_structure, regulator_lag_structure, staged_start
+from .stages import prefit_settings, prefit_subset, refine_settings
 
 __all__ = ["PhysicsFitter", "resolve_free"]
 
@@ -279,50 +280,12 @@ class PhysicsFitter:
     @staticmethod
     def _stages(traces: list[Trace], settings: FitSettings):
         """The fit's stages: a pre-fit on a subset when the data exceed ``prefit_samples``,
-        then a short refinement on every training experiment.
-
-        The subset takes experiments round-robin over the ramp labels (shortest
-        first) until the sample budget is used, so every ramp rate is represented.
-        """
-        total = sum(len(t) for t in traces)
+        then a short refinement on every training experiment (see :mod:`.stages`)."""
         budget = settings.prefit_samples
-        if not budget or total <= budget or settings.per_experiment:
+        if settings.per_experiment or not budget or sum(len(t) for t in traces) <= budget:
             return [(traces, settings)]
-        by_ramp: dict = {}
-        for t in sorted(traces, key=len):
-            by_ramp.setdefault(t.ramp, []).append(t)
-        subset, used = [], 0
-        while any(by_ramp.values()):
-            for queue in by_ramp.values():
-                if queue and (
-                    used + len(queue[0]) <= budget
-                    or not subset
-                    or all(x.ramp != queue[0].ramp for x in subset)
-                ):
-                    t = queue.pop(0)
-                    subset.append(t)
-                    used += len(t)
-                elif queue:
-                    queue.pop(0)
-        user = dict(settings.ipopt_options)
-        prefit = replace(
-            settings,
-            ipopt_options={
-                "acceptable_obj_change_tol": settings.prefit_obj_change_tol,
-                "acceptable_tol": 0.1,
-                "acceptable_iter": 2,
-                **user,
-            },
-        )
-        # The refinement starts at the pre-fit optimum, possibly on a bound: keep it
-        # there (no push into the interior) and start with a small barrier parameter.
-        refine = replace(
-            settings,
-            max_iter=settings.refine_max_iter,
-            multistart=0,
-            ipopt_options={"bound_push": 1e-8, "bound_frac": 1e-8, "mu_init": 1e-6, **user},
-        )
-        return [(subset, prefit), (traces, refine)]
+        subset = prefit_subset(traces, budget)  # may be all of them (each ramp's first)
+        return [(subset, prefit_settings(settings)), (traces, refine_settings(settings))]
 
     @staticmethod
     def _multistarts(problem: FitProblem, settings: FitSettings) -> list[np.ndarray]:
