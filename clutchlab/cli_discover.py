@@ -37,7 +37,12 @@ def _cmd_discover(args: argparse.Namespace) -> int:
         alpha=args.alpha,
         progress=not args.quiet,
     )
-    result = discover(dataset, model, settings)
+    baseline = None
+    if args.physics_model:
+        from .physics.fit import FitResult
+
+        baseline = FitResult.from_json(args.physics_model)
+    result = discover(dataset, model, settings, baseline=baseline)
     command = "clutchlab " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     report = write_report(result, args.out, command=command)
     print(result.table())
@@ -80,5 +85,12 @@ def register(sub) -> None:
     )
     p.add_argument("--max-iter", type=int, default=50, help="solver iterations per fit (50)")
     p.add_argument("--time-limit", type=float, default=900.0, help="wall limit per fit (s)")
+    p.add_argument(
+        "--physics-model",
+        metavar="FIT.json",
+        help="a fit from `clutchlab fit-physics` on this dataset's training ramps: the "
+        "discovery starts from it instead of fitting the base model again; refused if it was "
+        "fitted on other experiments or lacks --effects",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress display")
     p.set_defaults(func=_cmd_discover, report_out=True)

@@ -20,31 +20,25 @@ from __future__ import annotations
 
 import math
 import time
-import warnings
-from dataclasses import asdict, replace
+from dataclasses import asdict
 
 import numpy as np
 from tqdm.auto import tqdm
 
 from ...data import Dataset, Trace, dither_period_mean, dither_period_samples, pressure_metrics
-from ...errors import ClutchlabError, FitError, FitWarning
+from ...errors import ClutchlabError, FitError
 from ...physics import CircuitModel, simulate
 from ...physics.effects import EFFECTS
-from ...physics.fit import FitResult, PhysicsFitter, resolve_free
+from ...physics.fit import FitResult, FitSettings, resolve_free
 from ...physics.parameters import ParameterSet
 from .diagnostics import diagnose
-from .residuals import (
-    ResidualSet,
-    loeo_rss,
-    point_sums_of_squares,
-    residual_problem,
-    residual_set,
-)
+from .refit import candidate_free, judge, refit_start, residual_at, run_fit
+from .residuals import ResidualSet, loeo_rss
 from .result import DiscoveryResult, IterationRecord, ModelState
 from .scoring import CandidateScore, score_candidates
+from .screen import Screening, confirm_settings, screen_refit, screening
 from .settings import DiscoverySettings
 from .sparse import sparse_regression
-from .warm import warm_sensitivities
 
 __all__ = ["discover", "period_mean_metrics"]
 
@@ -99,20 +93,12 @@ def _run_fit(
     settings: DiscoverySettings,
     free: tuple[str, ...],
     start: ParameterSet | None,
+    fit: FitSettings | None = None,
 ) -> FitResult:
-    """Fit; a fit that stops short returns its best iterate (discovery's refits are short by
-    design, so the FitWarning saying so is not shown; the status is in the result)."""
-    warm_sensitivities(model, train, settings.fit, len(free))
-    fitter = PhysicsFitter(model, replace(settings.fit, free=free), start)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", FitWarning)
-            return fitter.fit(train).result_
-    except FitError as exc:
-        best = getattr(exc, "result", None)
-        if best is None:
-            raise
-        return best
+    """:func:`~.refit.run_fit` (a module attribute, so tests can make a refit fail)."""
+    if fit is None:
+        return run_fit(model, train, settings, free, start)
+    return run_fit(model, train, settings, free, start, fit)
 
 
 def _state(
@@ -123,74 +109,17 @@ def _state(
     jacobian: bool,
 ) -> ModelState:
     model, params = fit.model(), fit.params()
-    problem = residual_problem(model, params, tuple(fit.free), train, settings.fit)
-    if jacobian:
-        warm_sensitivities(model, train, settings.fit, len(fit.free))
-        problem.start_workers(train, settings.fit.workers)
-    try:
-        res = residual_set(problem, train, jacobian=jacobian, snap_guard_s=settings.snap_guard_s)
-    finally:
-        problem.close()
+    res = residual_at(model, params, tuple(fit.free), train, settings, jacobian)
     train_m, _ = period_mean_metrics(model, params, train)
     test_m, curves = period_mean_metrics(model, params, test)
     return ModelState(fit, res, train_m, test_m, curves)
 
 
-def _with_jacobian(state: ModelState, train, test, settings) -> ModelState:
-    if state.residual.jacobian is not None:
-        return state
-    model, params = state.fit.model(), state.fit.params()
-    problem = residual_problem(model, params, tuple(state.fit.free), train, settings.fit)
-    warm_sensitivities(model, train, settings.fit, len(state.fit.free))
-    problem.start_workers(train, settings.fit.workers)
-    try:
-        state.residual = residual_set(
-            problem, train, jacobian=True, snap_guard_s=settings.snap_guard_s
-        )
-    finally:
-        problem.close()
+def _with_jacobian(state: ModelState, train, settings) -> ModelState:
+    if state.residual.jacobian is None:
+        fit = state.fit
+        state.residual = residual_at(fit.model(), fit.params(), tuple(fit.free), train, settings)
     return state
-
-
-#: Fractions of the one-step strength estimate tried as refit starts (besides the default):
-#: the estimate is a linear extrapolation, far off when the strength enters nonlinearly
-#: (a quadratic strength probed near zero overshoots by ``s_true / (2 s_probe)``).
-START_FRACTIONS = (1.0, 0.5, 0.25, 0.1)
-
-
-def _refit_start(
-    cand: CircuitModel,
-    values: dict[str, float],
-    score: CandidateScore,
-    train: list[Trace],
-    settings: DiscoverySettings,
-    keep: np.ndarray,
-) -> ParameterSet:
-    """Start of a confirmatory refit: the current fit plus the effect.
-
-    Fitted non-strength parameters (a lag's time constant) start at the grid value where
-    the score was largest. Fitted strengths start at the best — by the kept residual sum
-    of squares, one simulation each — of :data:`START_FRACTIONS` × the one-step (score)
-    estimate and the default strength.
-    """
-    cls = EFFECTS[score.effect]
-    specs = {p.name: p for p in cand.parameters}
-    base = dict(values) | dict(score.nuisance)
-    fitted = [n for n in score.strength if n in cls.fit_parameters()]
-    if not fitted:
-        return cand.params(**base)
-    trials = [{n: f * score.strength[n] for n in fitted} for f in START_FRACTIONS]
-    trials.append({n: specs[n].default for n in fitted})
-    clipped = [
-        {n: min(max(v, specs[n].lower), specs[n].upper) for n, v in trial.items()}
-        for trial in trials
-    ]
-    try:
-        rss = point_sums_of_squares(cand, base, clipped, train, settings.fit, keep)
-    except ClutchlabError:
-        rss = [math.inf] * len(clipped)
-    k = int(np.argmin(rss)) if np.any(np.isfinite(rss)) else len(clipped) - 1
-    return cand.params(**base, **clipped[k])
 
 
 def _reference(
@@ -210,14 +139,7 @@ def _reference(
     _say(settings, "continuing the current fit (not converged) as the reference")
     try:
         fit = _run_fit(current.model, train, settings, tuple(current.fit.free), current.params)
-        model, params = fit.model(), fit.params()
-        problem = residual_problem(model, params, tuple(fit.free), train, settings.fit)
-        warm_sensitivities(model, train, settings.fit, len(fit.free))
-        problem.start_workers(train, settings.fit.workers)
-        try:
-            again = residual_set(problem, train, True, settings.snap_guard_s)
-        finally:
-            problem.close()
+        again = residual_at(fit.model(), fit.params(), tuple(fit.free), train, settings)
     except (ClutchlabError, ArithmeticError, ValueError) as exc:
         kind = f"current fit (its continuation failed: {exc})"
         return res, {"kind": kind, "rss_bar2": res.kept_rss}
@@ -240,42 +162,54 @@ def _confirm(
     train: list[Trace],
     test: list[Trace],
     settings: DiscoverySettings,
+    screened: FitResult | None = None,
 ) -> ModelState | None:
-    """Refit with the candidate; fill ``score.refit``; the new state, or None on failure."""
+    """Refit with the candidate on every training experiment; fill ``score.refit``; the
+    new state, or None on failure.
+
+    Without ``screened`` the refit is a whole fit from the current fit plus the effect;
+    with it (the candidate's refit on the screening subset), the fit's refinement stage
+    from there, and the screening verdict is kept under ``score.refit["screen"]``.
+    """
     t0 = time.perf_counter()
-    cls = EFFECTS[score.effect]
+    screen = {"screen": score.refit} if screened is not None else {}
     try:
         cand = current.model.with_effects(score.effect)
-        free = tuple(current.fit.free)
-        free += tuple(n for n in cls.fit_parameters() if n not in free)
-        keep = current.residual.keep
-        start = _refit_start(cand, current.fit.values, score, train, settings, keep)
-        fit = _run_fit(cand, train, settings, free, start)
+        free = candidate_free(tuple(current.fit.free), score.effect)
+        if screened is None:
+            keep = current.residual.keep
+            start = refit_start(cand, current.fit.values, score, train, settings, keep)
+            fit = _run_fit(cand, train, settings, free, start)
+        else:
+            start = cand.params(**screened.values)
+            fit = _run_fit(cand, train, settings, free, start, confirm_settings(settings.fit))
         state = _state(fit, train, test, settings, jacobian=True)
     except (ClutchlabError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
-        score.refit = {"status": f"failed: {exc}", "wall_s": time.perf_counter() - t0}
+        score.refit = {"status": f"failed: {exc}", "wall_s": time.perf_counter() - t0, **screen}
         return None
-    rss1 = state.residual.kept_rss
-    n_eff, _ = state.residual.effective()
-    k = len(fit.free) - len(current.fit.free)
-    if not (math.isfinite(rss1) and rss1 > 0 and rss_ref > 0):
-        score.refit = {"status": "failed: non-finite residual", "wall_s": time.perf_counter() - t0}
+    verdict = judge(state.residual, rss_ref, len(fit.free) - len(current.fit.free))
+    if verdict is None:
+        score.refit = {
+            "status": "failed: non-finite residual",
+            "wall_s": time.perf_counter() - t0,
+            **screen,
+        }
         return None
-    delta_bic = n_eff * math.log(rss1 / rss_ref) + k * math.log(max(n_eff, 1.0))
-    cv = loeo_rss(state.residual)
-    score.refit = {
-        "loeo_rss_bar2": cv,
+    score.refit = verdict | {
         "status": fit.status,
         "converged": bool(fit.success),
-        "rss_bar2": rss1,
-        "rss_ref_bar2": rss_ref,
-        "n_eff": n_eff,
-        "k": k,
-        "delta_bic": delta_bic,
         "train_rmse_bar": state.train["rmse_bar"],
         "wall_s": time.perf_counter() - t0,
+        **screen,
     }
     return state
+
+
+def _qualifies(refit: dict, cv_ref: float | None) -> bool:
+    """Lower information criterion and (when there is one) lower held-out error."""
+    if "delta_bic" not in refit or not refit["delta_bic"] < 0:
+        return False
+    return cv_ref is None or (refit["loeo_rss_bar2"] or math.inf) < cv_ref
 
 
 def _say(settings: DiscoverySettings, text: str) -> None:
@@ -294,7 +228,7 @@ def _iteration(
 ) -> IterationRecord:
     """One turn: diagnose the residual, score the candidates, confirm, decide."""
     t_it = time.perf_counter()
-    current = _with_jacobian(current, train, test, settings)
+    current = _with_jacobian(current, train, settings)
     res = current.residual
     diag = diagnose(res, settings.max_lag_s)
     sparse = sparse_regression(res, settings.sparse_threshold)
@@ -307,6 +241,8 @@ def _iteration(
     expansions = ["zero"]
 
     def record(effect, decision, scores, after, delta=None) -> IterationRecord:
+        if screen is not None and screen.info:
+            reference["screening"] = screen.info
         return IterationRecord(
             reference=reference,
             refits=states,
@@ -324,10 +260,18 @@ def _iteration(
             expansions=tuple(expansions),
         )
 
+    screen: Screening | None = None
     if not names:
         return record(None, "no candidates left", [], current)
     if n_added >= settings.max_effects:
         return record(None, "effect limit reached", [], current)
+
+    # Long training data: the evidence is gathered on the pre-fit subset and only the
+    # candidate chosen there is refitted on every training experiment (see .screen).
+    screen = screening(current, train, settings)
+    evidence_traces, evidence = (train, res) if screen is None else (screen.traces, screen.residual)
+    if screen is not None:
+        _say(settings, f"screening on {screen.describe()}")
 
     refits: dict[str, dict] = {}
     ref: list = []
@@ -338,8 +282,8 @@ def _iteration(
             names,
             current.model,
             current.params,
-            train,
-            res,
+            evidence_traces,
+            evidence,
             settings.fit,
             alpha=settings.alpha,
             min_share=settings.min_share,
@@ -353,6 +297,47 @@ def _iteration(
     _say(settings, f"scoring {len(names)} candidate effects")
     scores = score()
 
+    def full_reference() -> tuple[float, float | None]:
+        if not ref:
+            ref_res, ref_info = _reference(current, train, settings)
+            reference.update(ref_info)
+            reference["loeo_rss_bar2"] = loeo_rss(ref_res)
+            ref.append(ref_res)
+        return ref[0].kept_rss, reference["loeo_rss_bar2"]
+
+    def confirm_all(confirm: list[CandidateScore]) -> None:
+        """Refit each on every training experiment (no screening stage)."""
+        rss_ref, _ = full_reference()
+        for s in confirm:
+            _say(settings, f"refitting with {s.effect} (score {s.statistic:.1f})")
+            state = _confirm(s, current, rss_ref, train, test, settings)
+            refits[s.effect] = s.refit
+            if state is not None:
+                states[s.effect] = state
+
+    def screen_then_confirm(confirm: list[CandidateScore]) -> None:
+        """Refit each on the subset; confirm on every training experiment the ones that
+        qualify there, best held-out error first, until one qualifies on all of them."""
+        ref_sub = screen.reference_for(current, settings)
+        cv_sub = loeo_rss(ref_sub)
+        passed = []
+        for s in confirm:
+            _say(settings, f"screening refit with {s.effect} (score {s.statistic:.1f})")
+            fit = screen_refit(s, current, screen, settings)
+            refits[s.effect] = s.refit
+            if fit is not None and _qualifies(s.refit, cv_sub):
+                passed.append((s, fit))
+        passed.sort(key=lambda p: p[0].refit["loeo_rss_bar2"] or 0.0)
+        for s, fit in passed:
+            rss_ref, cv_ref = full_reference()
+            _say(settings, f"confirming {s.effect} on all {len(train)} training experiments")
+            state = _confirm(s, current, rss_ref, train, test, settings, screened=fit)
+            refits[s.effect] = s.refit
+            if state is not None:
+                states[s.effect] = state
+                if _qualifies(s.refit, cv_ref):
+                    break
+
     def attempt(scores: list[CandidateScore]) -> tuple[CandidateScore | None, str]:
         """Refit the best significant candidates (each once); the one to add, or why none."""
         significant = [s for s in scores if s.significant]
@@ -365,24 +350,23 @@ def _iteration(
         best_stat = fresh[0].statistic
         confirm = [s for s in fresh if s.statistic >= settings.confirm_ratio * best_stat]
         confirm = confirm[: settings.confirm_top]
-        if not ref:
-            ref_res, ref_info = _reference(current, train, settings)
-            reference.update(ref_info)
-            reference["loeo_rss_bar2"] = loeo_rss(ref_res)
-            ref.append(ref_res)
-        rss_ref, cv_ref = ref[0].kept_rss, reference["loeo_rss_bar2"]
-        for s in confirm:
-            _say(settings, f"refitting with {s.effect} (score {s.statistic:.1f})")
-            state = _confirm(s, current, rss_ref, train, test, settings)
-            refits[s.effect] = s.refit
-            if state is not None:
-                states[s.effect] = state
-        ok = [s for s in significant if s.effect in states and s.refit["delta_bic"] < 0]
+        if screen is None:
+            confirm_all(confirm)
+        else:
+            screen_then_confirm(confirm)
+        confirmed = [s for s in significant if s.effect in states]
+        if screen is not None and not confirmed:
+            screened = [s.refit for s in significant if "delta_bic" in s.refit]
+            if any(r["delta_bic"] < 0 for r in screened):
+                return None, "no leave-one-experiment-out improvement (screening subset)"
+            return None, "information criterion did not improve (screening subset)"
+        ok = [s for s in confirmed if s.refit["delta_bic"] < 0]
         if not ok:
             return None, "information criterion did not improve"
+        _, cv_ref = full_reference()
         if cv_ref is None:
             return min(ok, key=lambda s: s.refit["delta_bic"]), "added"
-        ok = [s for s in ok if (s.refit["loeo_rss_bar2"] or math.inf) < cv_ref]
+        ok = [s for s in ok if _qualifies(s.refit, cv_ref)]
         if not ok:
             return None, "no leave-one-experiment-out improvement"
         return min(ok, key=lambda s: s.refit["loeo_rss_bar2"]), "added"
@@ -416,6 +400,7 @@ def discover(
     model: CircuitModel | None = None,
     settings: DiscoverySettings | None = None,
     start: ParameterSet | None = None,
+    baseline: FitResult | None = None,
 ) -> DiscoveryResult:
     """Find the library effects the model lacks, add them, report error before and after.
 
@@ -431,6 +416,11 @@ def discover(
         Thresholds, limits, fit settings.
     start : ParameterSet, optional
         Starting values of the baseline fit (datasheet defaults by default).
+    baseline : FitResult, optional
+        A fit of ``model`` already made on exactly the training experiments (e.g. the
+        ``physics_fitted`` variant's, or ``clutchlab fit-physics``'s JSON): it is the
+        starting model and the baseline fit is not repeated. Its structure may hold more
+        than ``model`` (flexible laws the fit's staged start switched on).
 
     Returns
     -------
@@ -452,9 +442,15 @@ def discover(
     unknown = [c for c in pool if c not in EFFECTS]
     if unknown:
         raise FitError(f"unknown candidate effect(s) {unknown}; known: {sorted(EFFECTS)}")
-    _say(settings, f"fitting {model.effect_names or 'the base model'} on {len(train)} experiments")
-    free0 = resolve_free(model, settings.fit)
-    current = _state(_run_fit(model, train, settings, free0, start), train, test, settings, True)
+    if baseline is None:
+        what = model.effect_names or "the base model"
+        _say(settings, f"fitting {what} on {len(train)} experiments")
+        free0 = resolve_free(model, settings.fit)
+        baseline = _run_fit(model, train, settings, free0, start)
+    else:
+        _check_baseline(baseline, model, train)
+        _say(settings, f"starting from the given fit ({baseline.status})")
+    current = _state(baseline, train, test, settings, True)
     baseline = current
     iterations: list[IterationRecord] = []
     for index in range(settings.max_effects + 1):
@@ -486,6 +482,19 @@ def discover(
     )
 
 
+def _check_baseline(baseline: FitResult, model: CircuitModel, train: list[Trace]) -> None:
+    """Refuse a given baseline fit made on other experiments or without ``model``'s effects."""
+    fitted, wanted = sorted(baseline.train), sorted(t.name for t in train)
+    if fitted != wanted:
+        raise FitError(
+            "the given baseline fit was made on other experiments than the training ones: "
+            f"fitted on {fitted}, training {wanted}"
+        )
+    missing = [e for e in model.effect_names if e not in baseline.effects]
+    if missing:
+        raise FitError(f"the given baseline fit lacks the model's effect(s) {missing}")
+
+
 def _settings_dict(settings: DiscoverySettings) -> dict:
     d = asdict(settings)
     return {
@@ -499,11 +508,15 @@ def _summary(iterations: list[IterationRecord], unexplained: bool, diag) -> str:
     added = [it for it in iterations if it.effect]
     parts = []
     for it in added:
+        test = ""
+        if math.isfinite(it.before.test["rmse_bar"]):  # no test experiments: nothing to say
+            test = (
+                f", test-ramp RMSE {it.before.test['rmse_bar']:.4f} → "
+                f"{it.after.test['rmse_bar']:.4f} bar"
+            )
         parts.append(
             f"added {it.effect} (ΔBIC {it.delta_bic:.1f}): training RMSE "
-            f"{it.before.train['rmse_bar']:.4f} → {it.after.train['rmse_bar']:.4f} bar, "
-            f"test-ramp RMSE {it.before.test['rmse_bar']:.4f} → "
-            f"{it.after.test['rmse_bar']:.4f} bar"
+            f"{it.before.train['rmse_bar']:.4f} → {it.after.train['rmse_bar']:.4f} bar{test}"
         )
     last = iterations[-1]
     if unexplained:

@@ -66,6 +66,15 @@ class DiscoverySettings:
         STLSQ threshold of the sparse regression, on standardized terms (a term
         is kept when its coefficient exceeds this many residual standard
         deviations per standard deviation of the term).
+    screen_samples : int or None
+        Training data longer than this many samples are screened: candidates are scored
+        and refitted on a ramp-balanced subset of at most this many samples, and only
+        one that qualifies there is refitted on every training experiment, where the
+        decision is taken (see the ``screen`` module). None: the fit's
+        ``prefit_samples``; 0: no screening, every refit on all training experiments.
+    screen_max_iter : int
+        Solver iterations of each screening refit on the subset (and of the current fit's
+        continuation there, which it is compared with: the same budget for both).
     progress : bool
         Show a progress bar per stage.
     """
@@ -82,6 +91,8 @@ class DiscoverySettings:
     snap_guard_s: float = 0.05
     max_lag_s: float = 0.1
     sparse_threshold: float = 0.1
+    screen_samples: int | None = None
+    screen_max_iter: int = 10
     progress: bool = True
 
     def __post_init__(self) -> None:
@@ -100,6 +111,10 @@ class DiscoverySettings:
             problems.append("probe_fraction must be in (0, 1]")
         if self.snap_guard_s < 0:
             problems.append("snap_guard_s must be ≥ 0")
+        if self.screen_samples is not None and self.screen_samples < 0:
+            problems.append("screen_samples must be ≥ 0")
+        if self.screen_max_iter < 1:
+            problems.append("screen_max_iter must be ≥ 1")
         if self.max_lag_s <= 0:
             problems.append("max_lag_s must be > 0")
         overlap = set(self.test_ramps) & set(self.fit.train_ramps)

@@ -1,0 +1,140 @@
+"""Refits inside discovery: the fit itself, the residual at a fit, its start, and its verdict.
+
+Shared by the confirmatory refits on every training experiment (:mod:`.loop`) and the
+screening refits on the pre-fit subset (:mod:`.screen`).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import replace
+
+import numpy as np
+
+from ...data import Trace
+from ...errors import ClutchlabError, FitError, FitWarning
+from ...physics import CircuitModel
+from ...physics.effects import EFFECTS
+from ...physics.fit import FitResult, FitSettings, PhysicsFitter
+from ...physics.parameters import ParameterSet
+from .residuals import ResidualSet, loeo_rss, point_sums_of_squares, residual_problem, residual_set
+from .scoring import CandidateScore
+from .settings import DiscoverySettings
+from .warm import warm_sensitivities
+
+__all__ = ["START_FRACTIONS", "candidate_free", "judge", "refit_start", "residual_at", "run_fit"]
+
+#: Fractions of the one-step strength estimate tried as refit starts (besides the default):
+#: the estimate is a linear extrapolation, far off when the strength enters nonlinearly
+#: (a quadratic strength probed near zero overshoots by ``s_true / (2 s_probe)``).
+START_FRACTIONS = (1.0, 0.5, 0.25, 0.1)
+
+
+def run_fit(
+    model: CircuitModel,
+    traces: list[Trace],
+    settings: DiscoverySettings,
+    free: tuple[str, ...],
+    start: ParameterSet | None,
+    fit: FitSettings | None = None,
+) -> FitResult:
+    """Fit; a fit that stops short returns its best iterate (discovery's refits are short by
+    design, so the FitWarning saying so is not shown; the status is in the result).
+
+    ``fit`` replaces ``settings.fit`` (a screening or refinement stage's settings).
+    """
+    fit = fit or settings.fit
+    warm_sensitivities(model, traces, fit, len(free))
+    fitter = PhysicsFitter(model, replace(fit, free=free), start)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FitWarning)
+            return fitter.fit(traces).result_
+    except FitError as exc:
+        best = getattr(exc, "result", None)
+        if best is None:
+            raise
+        return best
+
+
+def residual_at(
+    model: CircuitModel,
+    params: ParameterSet,
+    free: tuple[str, ...],
+    traces: list[Trace],
+    settings: DiscoverySettings,
+    jacobian: bool = True,
+) -> ResidualSet:
+    """The training residual of ``model`` at ``params`` on ``traces`` (with the free
+    parameters' output sensitivities when ``jacobian``)."""
+    problem = residual_problem(model, params, tuple(free), traces, settings.fit)
+    if jacobian:
+        warm_sensitivities(model, traces, settings.fit, len(free))
+        problem.start_workers(traces, settings.fit.workers)
+    try:
+        return residual_set(problem, traces, jacobian=jacobian, snap_guard_s=settings.snap_guard_s)
+    finally:
+        problem.close()
+
+
+def judge(res: ResidualSet, rss_ref: float, k: int) -> dict | None:
+    """A refit's verdict against the reference residual sum of squares ``rss_ref`` (bar²).
+
+    ``ΔBIC = n_eff · ln(RSS₁/RSS₀) + k · ln(n_eff)`` for ``k`` added free parameters, and
+    the linearized leave-one-experiment-out error (bar²). None when either sum of squares
+    is not a positive number.
+    """
+    rss1 = res.kept_rss
+    if not (math.isfinite(rss1) and rss1 > 0 and rss_ref > 0):
+        return None
+    n_eff, _ = res.effective()
+    return {
+        "loeo_rss_bar2": loeo_rss(res),
+        "rss_bar2": rss1,
+        "rss_ref_bar2": rss_ref,
+        "n_eff": n_eff,
+        "k": k,
+        "delta_bic": n_eff * math.log(rss1 / rss_ref) + k * math.log(max(n_eff, 1.0)),
+    }
+
+
+def refit_start(
+    cand: CircuitModel,
+    values: dict[str, float],
+    score: CandidateScore,
+    traces: list[Trace],
+    settings: DiscoverySettings,
+    keep: np.ndarray,
+) -> ParameterSet:
+    """Start of a confirmatory refit: the current fit plus the effect.
+
+    Fitted non-strength parameters (a lag's time constant) start at the grid value where
+    the score was largest. Fitted strengths start at the best — by the kept residual sum
+    of squares on ``traces``, one simulation each — of :data:`START_FRACTIONS` × the
+    one-step (score) estimate and the default strength.
+    """
+    cls = EFFECTS[score.effect]
+    specs = {p.name: p for p in cand.parameters}
+    base = dict(values) | dict(score.nuisance)
+    fitted = [n for n in score.strength if n in cls.fit_parameters()]
+    if not fitted:
+        return cand.params(**base)
+    trials = [{n: f * score.strength[n] for n in fitted} for f in START_FRACTIONS]
+    trials.append({n: specs[n].default for n in fitted})
+    clipped = [
+        {n: min(max(v, specs[n].lower), specs[n].upper) for n, v in trial.items()}
+        for trial in trials
+    ]
+    try:
+        rss = point_sums_of_squares(cand, base, clipped, traces, settings.fit, keep)
+    except ClutchlabError:
+        rss = [math.inf] * len(clipped)
+    k = int(np.argmin(rss)) if np.any(np.isfinite(rss)) else len(clipped) - 1
+    return cand.params(**base, **clipped[k])
+
+
+def candidate_free(current_free: tuple[str, ...], effect: str) -> tuple[str, ...]:
+    """The current free parameters plus the effect's fit parameters."""
+    free = tuple(current_free)
+    return free + tuple(n for n in EFFECTS[effect].fit_parameters() if n not in free)

@@ -1,0 +1,180 @@
+"""Screening on the pre-fit subset: candidate refits that are cheap, confirmed on all data.
+
+On long training data (the default stand: 18 experiments, 819 k samples) every refit on
+all experiments costs about as much as the baseline fit. Discovery therefore screens: the
+candidates are scored and refitted on the ramp-balanced subset the fit's own pre-fit uses
+(:func:`clutchlab.physics.fit.prefit_subset`, at most ``DiscoverySettings.screen_samples``
+samples, every ramp rate represented), each against the current fit continued there with
+the same budget; a candidate that lowers both the information criterion and the
+leave-one-experiment-out error on the subset is refined on every training experiment (the
+fit's refinement stage, from its subset optimum) and judged again there, against the
+current fit — the decision is always taken on all training experiments. When the training
+data fit in the budget the subset is all of them and there is no screening stage.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+from ...data import Trace
+from ...errors import ClutchlabError
+from ...physics.fit import FitResult, FitSettings, prefit_settings, prefit_subset, refine_settings
+from .refit import candidate_free, judge, refit_start, residual_at, run_fit
+from .residuals import ResidualSet, loeo_rss
+from .result import ModelState
+from .scoring import CandidateScore
+from .settings import DiscoverySettings
+
+__all__ = [
+    "Screening",
+    "confirm_settings",
+    "screen_refit",
+    "screen_settings",
+    "screening",
+]
+
+#: What a failing screening refit may raise (reported in its evidence row, never raised).
+_FAILURES = (ClutchlabError, ArithmeticError, ValueError)
+
+
+@dataclass
+class Screening:
+    """The screening subset of one iteration.
+
+    Attributes
+    ----------
+    traces : list of Trace
+        The subset of the training experiments.
+    residual : ResidualSet
+        The current model's residual on it, with the free parameters' sensitivities
+        (what the candidates are scored against).
+    n_train : int
+        Number of training experiments.
+    reference : ResidualSet or None
+        The residual the screening refits are compared with (set by :meth:`reference_for`).
+    info : dict
+        How the reference was obtained, its sums of squares, wall time.
+    """
+
+    traces: list[Trace]
+    residual: ResidualSet
+    n_train: int
+    reference: ResidualSet | None = None
+    info: dict = field(default_factory=dict)
+
+    def describe(self) -> str:
+        """``"N of M experiments, S samples"``."""
+        n = sum(len(t) for t in self.traces)
+        return f"{len(self.traces)} of {self.n_train} experiments, {n} samples"
+
+    def reference_for(self, current: ModelState, settings: DiscoverySettings) -> ResidualSet:
+        """The current fit continued on the subset with a screening refit's budget (so that
+        an added parameter does not look useful merely because its refit moved the other
+        parameters to the subset); the better of the two by kept residual sum of squares."""
+        if self.reference is not None:
+            return self.reference
+        t0 = time.perf_counter()
+        res = self.residual
+        info = {"rss_before_bar2": res.kept_rss}
+        try:
+            fit = run_fit(
+                current.model,
+                self.traces,
+                settings,
+                tuple(current.fit.free),
+                current.params,
+                fit=screen_settings(settings),
+            )
+            again = residual_at(fit.model(), fit.params(), fit.free, self.traces, settings)
+        except _FAILURES as exc:
+            info["kind"] = f"current fit on the subset (its continuation failed: {exc})"
+        else:
+            info["status"] = fit.status
+            if again.kept_rss < res.kept_rss:
+                res = again
+                info["kind"] = "current fit continued on the subset"
+            else:
+                info["kind"] = "current fit on the subset (its continuation did not improve it)"
+        self.reference = res
+        self.info = info | {
+            "subset": self.describe(),
+            "experiments": [t.name for t in self.traces],
+            "rss_bar2": res.kept_rss,
+            "loeo_rss_bar2": loeo_rss(res),
+            "wall_s": time.perf_counter() - t0,
+        }
+        return res
+
+
+def screen_settings(settings: DiscoverySettings) -> FitSettings:
+    """A screening refit: the pre-fit stage's settings, on the subset alone, at most
+    ``settings.screen_max_iter`` iterations."""
+    fit = settings.fit
+    return replace(
+        prefit_settings(fit), prefit_samples=0, max_iter=min(fit.max_iter, settings.screen_max_iter)
+    )
+
+
+def confirm_settings(fit: FitSettings) -> FitSettings:
+    """The confirmation of a screened candidate: the fit's refinement stage on all data."""
+    return replace(refine_settings(fit), prefit_samples=0)
+
+
+def screening(
+    current: ModelState, train: list[Trace], settings: DiscoverySettings
+) -> Screening | None:
+    """The iteration's screening subset with the current model's residual on it, or None
+    when the training data fit in ``settings.screen_samples`` (no screening stage)."""
+    budget = settings.screen_samples
+    if budget is None:
+        budget = settings.fit.prefit_samples
+    subset = prefit_subset(train, budget)
+    if len(subset) == len(train):
+        return None
+    fit = current.fit
+    res = residual_at(current.model, current.params, tuple(fit.free), subset, settings)
+    return Screening(subset, res, len(train))
+
+
+def screen_refit(
+    score: CandidateScore,
+    current: ModelState,
+    screen: Screening,
+    settings: DiscoverySettings,
+) -> FitResult | None:
+    """Refit the candidate on the subset; fill ``score.refit`` (scope ``"screening"``) with
+    its verdict against the subset reference; the fit, or None when it failed."""
+    t0 = time.perf_counter()
+    ref = screen.reference_for(current, settings)
+    try:
+        cand = current.model.with_effects(score.effect)
+        free = candidate_free(tuple(current.fit.free), score.effect)
+        keep = screen.residual.keep
+        start = refit_start(cand, current.fit.values, score, screen.traces, settings, keep)
+        fit = run_fit(cand, screen.traces, settings, free, start, fit=screen_settings(settings))
+        res = residual_at(fit.model(), fit.params(), fit.free, screen.traces, settings)
+    except _FAILURES as exc:
+        score.refit = {
+            "scope": "screening",
+            "status": f"failed: {exc}",
+            "wall_s": time.perf_counter() - t0,
+        }
+        return None
+    verdict = judge(res, ref.kept_rss, len(free) - len(current.fit.free))
+    if verdict is None:
+        score.refit = {
+            "scope": "screening",
+            "status": "failed: non-finite residual",
+            "wall_s": time.perf_counter() - t0,
+        }
+        return None
+    score.refit = {
+        "scope": "screening",
+        "subset": screen.describe(),
+        **verdict,
+        "status": fit.status,
+        "converged": bool(fit.success),
+        "wall_s": time.perf_counter() - t0,
+    }
+    return fit

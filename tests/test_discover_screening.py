@@ -1,0 +1,165 @@
+"""Discovery on long data: screening on the pre-fit subset, decisions on every training
+experiment; a discovery that starts from a fit already made (issue 17: speed, the demo)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from clutchlab.cli import main
+from clutchlab.data import load_dataset
+from clutchlab.errors import FitError
+from clutchlab.physics import CircuitModel
+from clutchlab.physics.fit import FitSettings, PhysicsFitter, prefit_subset
+from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, write_stand
+from clutchlab.validation.discover import DiscoverySettings, discover
+from clutchlab.validation.discover.variant import AugmentedHybrid, AugmentedPhysics
+
+pytestmark = pytest.mark.filterwarnings("ignore::clutchlab.errors.FitWarning")
+
+RAMPS = (
+    RampProfile("fast", 1.5, 0.3),
+    RampProfile("medium", 3.0, 0.3),
+    RampProfile("slow", 6.0, 0.3),
+)
+CANDIDATES = ("supply_droop", "latch_threshold_drift")
+
+
+@pytest.fixture(scope="module")
+def stand_dir(tmp_path_factory):
+    """Three dither settings × three ramps, supply droop undeclared: six training experiments."""
+    config = StandConfig(
+        builtin_effects=False,
+        effects=("supply_droop",),
+        settings=(DitherSetting(50.0, "B"), DitherSetting(70.0, "A"), DitherSetting(30.0, "C")),
+        ramps=RAMPS,
+        seed=5,
+    )
+    out = tmp_path_factory.mktemp("screening") / "stand"
+    write_stand(out, config, progress=False, figure=False)
+    return out
+
+
+@pytest.fixture(scope="module")
+def stand(stand_dir):
+    return load_dataset(stand_dir)
+
+
+def _settings(**kw) -> DiscoverySettings:
+    fit = FitSettings(progress=False, free=("vfs_K_m", "reg_F0"), max_iter=8, workers=1)
+    return DiscoverySettings(
+        **{"fit": fit, "progress": False, "candidates": CANDIDATES, "max_effects": 1, **kw}
+    )
+
+
+def _budget(stand) -> int:
+    """One sample short of the training data: the subset leaves the longest one out."""
+    return sum(len(t) for t in stand if t.ramp in ("fast", "slow")) - 1
+
+
+@pytest.fixture(scope="module")
+def screened(stand):
+    return discover(stand, settings=_settings(screen_samples=_budget(stand)))
+
+
+def test_the_subset_takes_every_ramp_and_is_all_data_within_the_budget(stand):
+    train = [t for t in stand if t.ramp in ("fast", "slow")]
+    sub = prefit_subset(train, 1)
+    assert sorted(t.ramp for t in sub) == ["fast", "slow"]
+    assert prefit_subset(train, 0) == train
+    assert prefit_subset(train, sum(len(t) for t in train)) == train
+
+
+def test_screening_refits_on_the_subset_and_decides_on_every_training_experiment(screened):
+    it = screened.iterations[0]
+    screening = it.reference["screening"]
+    assert len(screening["experiments"]) == 5 and screening["subset"].startswith("5 of 6")
+    refitted = [c for c in it.candidates if c.refit]
+    assert refitted, "a significant candidate was refitted"
+    for c in refitted:
+        first = c.refit if c.refit.get("scope") == "screening" else c.refit["screen"]
+        assert first["scope"] == "screening" and "delta_bic" in first
+    assert it.effect == "supply_droop", it.decision
+    chosen = next(c for c in it.candidates if c.effect == it.effect)
+    # the decision's verdict is the one on all four training experiments
+    assert chosen.refit["delta_bic"] < 0 and "scope" not in chosen.refit
+    assert chosen.refit["screen"]["scope"] == "screening"
+    assert chosen.refit["loeo_rss_bar2"] < it.reference["loeo_rss_bar2"]
+    assert set(it.after.residual.experiments) == set(screened.train)
+    assert len(screened.train) == 6
+    assert it.after.test["rmse_bar"] < it.before.test["rmse_bar"]
+
+
+def test_no_screening_when_the_data_fit_in_the_budget(stand):
+    res = discover(stand, settings=_settings(screen_samples=0))
+    it = res.iterations[0]
+    assert "screening" not in it.reference
+    assert all("scope" not in c.refit and "screen" not in c.refit for c in it.candidates)
+
+
+def test_a_discovery_starts_from_a_given_fit_and_refuses_one_made_on_other_data(stand, screened):
+    settings = _settings(screen_samples=_budget(stand))
+    train = [t for t in stand if t.ramp in ("fast", "slow")]
+    fit = PhysicsFitter(CircuitModel(), settings.fit).fit(train).result_
+    res = discover(stand, settings=settings, baseline=fit)
+    assert res.baseline.fit is fit
+    assert res.added == screened.added
+    with pytest.raises(FitError, match="other experiments"):
+        discover(
+            stand,
+            settings=settings,
+            baseline=PhysicsFitter(CircuitModel(), settings.fit).fit(train[:3]).result_,
+        )
+    with pytest.raises(FitError, match="lacks the model's effect"):
+        discover(stand, CircuitModel().with_effects("sensor_lag"), settings, baseline=fit)
+
+
+class _FittedHybrid:
+    """Stands for the ``hybrid`` variant fitted on the same experiments."""
+
+    residual = None
+
+    def __init__(self, names):
+        self.train_experiments_ = sorted(names)
+
+    def predict(self, trace, return_std=False):  # pragma: no cover - not called here
+        raise AssertionError
+
+
+def test_the_augmented_hybrid_is_the_hybrid_when_nothing_is_added(stand):
+    settings = _settings(screen_samples=_budget(stand), candidates=("latch_threshold_drift",))
+    train = [t for t in stand if t.ramp in ("fast", "slow")]
+    fit = PhysicsFitter(CircuitModel(), settings.fit).fit(train).result_
+    hybrid = _FittedHybrid(t.name for t in train)
+    model = AugmentedHybrid(AugmentedPhysics(None, settings, baseline=fit), hybrid=hybrid)
+    model.fit(train)
+    assert model.physics_.effects_ == [] and model.reused_hybrid_
+    assert model.hybrid_ is hybrid
+    # a hybrid fitted on other experiments, or with another residual model, is not reused
+    model.hybrid = _FittedHybrid(t.name for t in train[:3])
+    assert not model._unchanged(train)
+    model.hybrid, model.residual = hybrid, object()
+    assert not model._unchanged(train)
+
+
+def test_cli_discover_starts_from_a_fit_physics_json(stand, stand_dir, tmp_path, capsys):
+    settings = _settings()
+    train = [t for t in stand if t.ramp in ("fast", "slow")]
+    fitter = PhysicsFitter(CircuitModel(), settings.fit).fit(train)
+    fitter.save(tmp_path / "fit.json")
+    argv = ["discover", str(stand_dir), "--out", str(tmp_path / "rep"), "--quiet"]
+    argv += ["--candidates", "latch_threshold_drift", "--max-effects", "0", "--max-iter", "3"]
+    argv += ["--free", "vfs_K_m,reg_F0", "--json", str(tmp_path / "d.json")]
+    assert main([*argv, "--physics-model", str(tmp_path / "fit.json")]) == 0
+    doc = json.loads((tmp_path / "d.json").read_text())
+    # no effect may be added (--max-effects 0): the final model is the given fit, not a refit
+    assert doc["added"] == []
+    for name, value in fitter.result_.values.items():
+        assert doc["final"]["values"][name] == pytest.approx(value, rel=1e-12, abs=1e-12)
+    other = PhysicsFitter(CircuitModel(), settings.fit).fit(train[:3])
+    other.save(tmp_path / "other.json")
+    argv[3] = str(tmp_path / "rep2")
+    assert main([*argv, "--physics-model", str(tmp_path / "other.json")]) != 0
+    assert "other experiments" in capsys.readouterr().err
+    assert not (tmp_path / "rep2").exists()
