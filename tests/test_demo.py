@@ -48,7 +48,8 @@ def test_demo_in_process_writes_report_and_reuses_stand_data(tmp_path):
 
 @pytest.mark.slow
 def test_demo_end_to_end_from_the_console_script(tmp_path):
-    """Issue 6 must-show 1 and 2: every variant that exists, within the budget."""
+    """Issue 6 must-show 1 and 2, issue 17 must-show 2: every variant that exists,
+    augmented_hybrid (a whole discovery) included, within the budget."""
     out = tmp_path / "demo"
     t0 = time.perf_counter()
     res = subprocess.run(
@@ -65,6 +66,11 @@ def test_demo_end_to_end_from_the_console_script(tmp_path):
     assert not doc["failed"]
     assert set(doc["variants"]) | set(doc["unavailable"]) == set(DESIGN_VARIANTS)
     assert doc["physics_fit"]["parameters"]
+    assert set(DESIGN_VARIANTS) <= set(doc["variants"])
+    disc = doc["discovery"]
+    assert disc["baseline_reused"] and disc["iterations"][0]["candidates"]
+    assert {"discovery_evidence", "discovery_residuals"} <= set(doc["figures"]["drawn"])
+    assert "Closing the loop" in (out / "report.html").read_text(encoding="utf-8")
     assert wall <= BUDGET_S, f"demo took {wall:.0f} s (budget {BUDGET_S:.0f} s)"
     again = subprocess.run(
         [*_cli(), "demo", "--out", str(out), "--quiet", "--variants", "physics_default"],

@@ -17,6 +17,7 @@ from typing import Any
 from ..data import Dataset, load_dataset
 from .evaluate import Evaluation, evaluate
 from .report import ReportFiles, write_report
+from .variants import available_variants
 
 __all__ = ["DEMO_FIT_TIME_LIMIT_S", "DemoResult", "run_demo", "stand_data"]
 
@@ -108,7 +109,8 @@ def run_demo(
     command : str
         Command line recorded in the report.
     variants : sequence of str, optional
-        Variants to compare; every available one by default.
+        Variants to compare; every available one by default, ``augmented_hybrid`` (closing
+        the loop: a discovery starting from ``physics_fitted``'s fit) included.
     physics_settings : FitSettings, optional
         Physics fit settings; default settings with a time limit of
         :data:`DEMO_FIT_TIME_LIMIT_S`.
@@ -134,6 +136,8 @@ def run_demo(
     settings = physics_settings or FitSettings(
         progress=progress, time_limit_s=DEMO_FIT_TIME_LIMIT_S
     )
+    if variants is None:
+        variants = available_variants()
     ev = evaluate(
         dataset,
         variants,

@@ -171,6 +171,59 @@ class Evaluation:
         first = next(iter(self.scores.values()), None)
         return first.reference if first is not None else {}
 
+    def discovery_result(self) -> Any:
+        """The closing-the-loop discovery behind ``augmented_hybrid`` (None without it)."""
+        model = self.models.get("augmented_hybrid")
+        return getattr(getattr(model, "physics_", None), "result_", None)
+
+    def discovery(self) -> dict[str, Any] | None:
+        """Summary of ``augmented_hybrid``'s discovery on the training experiments: what was
+        added, and per iteration the decision, training RMSE before / after (bar) and the
+        evidence table (score statistic, p-value, explained share, significance, ΔBIC of the
+        refits: on the screening subset and on every training experiment)."""
+        result = self.discovery_result()
+        if result is None:
+            return None
+        model = self.models["augmented_hybrid"]
+        iterations = []
+        for it in result.iterations:
+            rows = []
+            for c in it.candidates:
+                refit = c.refit or {}
+                screen = refit if refit.get("scope") == "screening" else refit.get("screen", {})
+                rows.append(
+                    {
+                        "effect": c.effect,
+                        "statistic": c.statistic,
+                        "p_value": c.p_value,
+                        "share": c.share,
+                        "significant": c.significant,
+                        "status": c.status,
+                        "delta_bic_screening": screen.get("delta_bic"),
+                        "delta_bic": None if refit is screen else refit.get("delta_bic"),
+                    }
+                )
+            iterations.append(
+                {
+                    "index": it.index,
+                    "effect": it.effect,
+                    "decision": it.decision,
+                    "train_rmse_before_bar": it.before.train["rmse_bar"],
+                    "train_rmse_after_bar": it.after.train["rmse_bar"],
+                    "screening": it.reference.get("screening", {}).get("subset"),
+                    "candidates": rows,
+                    "wall_s": it.wall_s,
+                }
+            )
+        return {
+            "summary": result.summary,
+            "added": list(result.added),
+            "wall_s": result.wall_s,
+            "baseline_reused": getattr(model.physics_, "baseline", None) is not None,
+            "hybrid_reused": bool(getattr(model, "reused_hybrid_", False)),
+            "iterations": iterations,
+        }
+
     def physics_fit(self) -> dict[str, Any] | None:
         """Summary of the ``physics_fitted`` fit: status, parameters ± standard errors."""
         model = self.models.get("physics_fitted")
@@ -242,6 +295,7 @@ class Evaluation:
             },
             "dataset": p.dataset_summary,
             "physics_fit": self.physics_fit(),
+            "discovery": self.discovery(),
             "classifier_comparison": (
                 self.classifier_comparison.to_dict()
                 if hasattr(self.classifier_comparison, "to_dict")

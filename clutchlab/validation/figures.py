@@ -299,6 +299,32 @@ class FigureSpec:
     figure: Any
 
 
+def _discovery_iteration(ev: Evaluation):
+    """The iteration of ``augmented_hybrid``'s discovery to show: the last one that added an
+    effect, else the first (what was looked at before nothing was added)."""
+    result = ev.discovery_result()
+    if result is None or not result.iterations:
+        return None
+    added = [it for it in result.iterations if it.effect]
+    return added[-1] if added else result.iterations[0]
+
+
+def plot_discovery_evidence(ev: Evaluation) -> Figure | None:
+    """Closing the loop: score statistic per candidate effect (``augmented_hybrid``)."""
+    from .discover.report import plot_evidence
+
+    it = _discovery_iteration(ev)
+    return None if it is None or not it.candidates else plot_evidence(it)
+
+
+def plot_discovery_residuals(ev: Evaluation) -> Figure | None:
+    """Closing the loop: training residual vs current before / after (``augmented_hybrid``)."""
+    from .discover.report import plot_residuals
+
+    it = _discovery_iteration(ev)
+    return None if it is None else plot_residuals(it)
+
+
 def report_figures(ev: Evaluation) -> tuple[list[FigureSpec], dict[str, str]]:
     """Every report figure that the evaluation can draw, and why the others are missing.
 
@@ -358,7 +384,28 @@ def report_figures(ev: Evaluation) -> tuple[list[FigureSpec], dict[str, str]]:
             plot_uncertainty,
             "no scored variant gives a predictive standard deviation",
         ),
+        (
+            "discovery_evidence",
+            "Closing the loop: evidence per candidate effect",
+            "augmented_hybrid's discovery on the training experiments: score statistic of "
+            "each library effect against the fitted physics (log scale; dashed: significance "
+            "threshold; green: added, orange: significant). The test ramp is not used.",
+            plot_discovery_evidence,
+            "the discovery scored no candidate",
+        ),
+        (
+            "discovery_residuals",
+            "Closing the loop: residual before / after",
+            "Physics residual (model − measured, dither-period mean, bar) vs nominal current "
+            "on the training experiments, before and after the discovery's iteration (the "
+            "test-ramp errors of physics_fitted, hybrid and augmented_hybrid are in the "
+            "table above).",
+            plot_discovery_residuals,
+            "the discovery ran no iteration",
+        ),
     ]
+    if ev.discovery_result() is None:  # no augmented_hybrid: nothing to miss
+        entries = [e for e in entries if not e[0].startswith("discovery_")]
     figures, missing = [], {}
     for key, title, caption, fn, why in entries:
         fig = fn(ev)

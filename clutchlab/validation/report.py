@@ -169,6 +169,57 @@ def _md_metrics(rows: dict[str, dict[str, Any]], keys: tuple[str, ...]) -> str:
     return _md_table(["variant", *(_head(k) for k in keys)], body)
 
 
+#: Columns of the closing-the-loop evidence table.
+_DISCOVERY_HEAD = [
+    "effect",
+    "statistic",
+    "p",
+    "share",
+    "significant",
+    "ΔBIC screening",
+    "ΔBIC all training",
+    "status",
+]
+
+
+def _discovery_rows(it: dict[str, Any]) -> list[list[str]]:
+    return [
+        [
+            c["effect"] + (" ✔" if c["effect"] == it["effect"] else ""),
+            fmt(c["statistic"]),
+            fmt(c["p_value"]),
+            fmt(c["share"]),
+            fmt(c["significant"]),
+            fmt(c["delta_bic_screening"]) if c["delta_bic_screening"] is not None else "",
+            fmt(c["delta_bic"]) if c["delta_bic"] is not None else "",
+            c["status"],
+        ]
+        for c in it["candidates"]
+    ]
+
+
+def _discovery_intro(disc: dict[str, Any]) -> str:
+    reused = []
+    if disc["baseline_reused"]:
+        reused.append("it starts from physics_fitted's fit")
+    if disc["hybrid_reused"]:
+        reused.append("no effect was added, so augmented_hybrid is the hybrid itself")
+    return (
+        f"augmented_hybrid's discovery on the training experiments ({fmt(disc['wall_s'])} s"
+        + ("; " + "; ".join(reused) if reused else "")
+        + f"): {disc['summary']}"
+    )
+
+
+def _discovery_title(it: dict[str, Any]) -> str:
+    what = it["effect"] or f"no effect added ({it['decision']})"
+    where = f"; screened on {it['screening']}" if it.get("screening") else ""
+    return (
+        f"Iteration {it['index']}: {what} — training RMSE {fmt(it['train_rmse_before_bar'])} → "
+        f"{fmt(it['train_rmse_after_bar'])} bar{where}"
+    )
+
+
 def render_markdown(doc: dict[str, Any], figure_files: list[tuple[str, str, str]]) -> str:
     """The Markdown summary of a report document.
 
@@ -254,6 +305,13 @@ def render_markdown(doc: dict[str, Any], figure_files: list[tuple[str, str, str]
             ),
             "",
         ]
+    disc = doc.get("discovery")
+    if disc:
+        out += ["## Closing the loop (augmented_hybrid)", "", _md_text(_discovery_intro(disc)), ""]
+        for it in disc["iterations"]:
+            out += [f"**{_md_text(_discovery_title(it))}**", ""]
+            if it["candidates"]:
+                out += [_md_table(_DISCOVERY_HEAD, _discovery_rows(it)), ""]
     out += ["## Figures", ""]
     for title, rel, caption in figure_files:
         out += [f"### {title}", "", f"![{title}]({rel})", "", caption, ""]
@@ -483,6 +541,16 @@ def render_html(
                 ],
             ),
         ]
+    disc = doc.get("discovery")
+    if disc:
+        s += [
+            "<h2>Closing the loop (augmented_hybrid)</h2>",
+            f"<p>{_e(_discovery_intro(disc))}</p>",
+        ]
+        for it in disc["iterations"]:
+            s.append(f"<h3>{_e(_discovery_title(it))}</h3>")
+            if it["candidates"]:
+                s.append(_html_rows(_DISCOVERY_HEAD, _discovery_rows(it)))
     s.append("<h2>Figures</h2>")
     if plotly_js:
         s.append(

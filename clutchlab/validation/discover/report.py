@@ -27,9 +27,12 @@ def _train_curves(state: ModelState):
 
 def plot_residuals(it: IterationRecord) -> Figure:
     """Residual (model − measured, dither-period mean, bar) vs nominal current (mA),
-    before and after the iteration, on the training and the test experiments."""
-    fig = Figure(figsize=(10, 6.5), layout="constrained")  # no pyplot: no global backend
-    axes = fig.subplots(2, 2, sharex=True, sharey="row")
+    before and after the iteration, on the training and (when there are any) the test
+    experiments."""
+    with_test = bool(it.before.test_residual)
+    rows = 2 if with_test else 1
+    fig = Figure(figsize=(10, 3.25 * rows + 0.5), layout="constrained")  # no pyplot
+    axes = np.asarray(fig.subplots(rows, 2, sharex=True, sharey="row")).reshape(rows, 2)
     label_after = it.effect or "unchanged"
     for col, (state, title) in enumerate(
         ((it.before, "before"), (it.after, f"after (+ {label_after})"))
@@ -38,18 +41,20 @@ def plot_residuals(it: IterationRecord) -> Figure:
         for _name, cur, r, keep in _train_curves(state):
             ax.plot(cur[keep], r[keep], ".", ms=1.5, alpha=0.6)
         ax.set_title(f"training, {title}: RMSE {state.train['rmse_bar']:.4f} bar")
-        ax = axes[1, col]
-        for name, (cur, r) in state.test_residual.items():
-            ax.plot(cur, r, lw=0.7, label=name)
-        ax.set_title(f"unseen test ramp, {title}: RMSE {state.test['rmse_bar']:.4f} bar")
-        ax.set_xlabel("nominal VFS current (mA)")
+        if with_test:
+            ax = axes[1, col]
+            for name, (cur, r) in state.test_residual.items():
+                ax.plot(cur, r, lw=0.7, label=name)
+            ax.set_title(f"unseen test ramp, {title}: RMSE {state.test['rmse_bar']:.4f} bar")
+        axes[-1, col].set_xlabel("nominal VFS current (mA)")
     for ax in axes.ravel():
         ax.axhline(0.0, color="black", lw=0.6)
         ax.grid(alpha=0.3)
     axes[0, 0].set_ylabel("residual, training (bar)")
-    axes[1, 0].set_ylabel("residual, test (bar)")
-    if it.after.test_residual:
-        axes[1, 1].legend(loc="best", fontsize=7)
+    if with_test:
+        axes[1, 0].set_ylabel("residual, test (bar)")
+        if it.after.test_residual:
+            axes[1, 1].legend(loc="best", fontsize=7)
     fig.suptitle(f"Iteration {it.index}: residual before / after")
     return fig
 

@@ -40,6 +40,9 @@ class AugmentedPhysics(BaseEstimator):
     settings : DiscoverySettings, optional
         Discovery settings. Every experiment handed to :meth:`fit` is trained on:
         ``fit.train_ramps`` is set to their ramp labels and ``test_ramps`` to none.
+    baseline : FitResult, optional
+        A physics fit of ``model`` on the same training experiments (``physics_fitted``'s):
+        the discovery starts from it instead of fitting the base model again.
 
     Attributes
     ----------
@@ -53,9 +56,12 @@ class AugmentedPhysics(BaseEstimator):
         Names of the experiments fitted on.
     """
 
-    def __init__(self, model: Any = None, settings: DiscoverySettings | None = None) -> None:
+    def __init__(
+        self, model: Any = None, settings: DiscoverySettings | None = None, baseline: Any = None
+    ) -> None:
         self.model = model
         self.settings = settings
+        self.baseline = baseline
 
     def fit(self, traces: Sequence[Trace]) -> AugmentedPhysics:
         """Discover and add the missing effects on ``traces``; returns self.
@@ -69,7 +75,7 @@ class AugmentedPhysics(BaseEstimator):
         base = self.settings or DiscoverySettings(progress=False)
         ramps = tuple(dict.fromkeys(str(t.ramp) for t in traces))
         settings = replace(base, fit=replace(base.fit, train_ramps=ramps), test_ramps=())
-        self.result_ = discover(traces, self.model, settings)
+        self.result_ = discover(traces, self.model, settings, baseline=self.baseline)
         self.effects_ = list(self.result_.added)
         self.model_ = self.result_.best_model
         self.params_ = self.result_.params
@@ -98,6 +104,10 @@ class AugmentedHybrid(BaseEstimator):
         Unfitted augmented physics (default settings by default); fitted in :meth:`fit`.
     residual : object, optional
         Residual model of :class:`clutchlab.residual_ml.HybridModel` (its default when None).
+    hybrid : HybridModel, optional
+        The ``hybrid`` variant, fitted on the same experiments on the physics fit that
+        ``physics.baseline`` is: when the discovery adds no effect, the augmented physics
+        *is* that fit, and this hybrid is taken as it is instead of being fitted again.
 
     Attributes
     ----------
@@ -107,9 +117,12 @@ class AugmentedHybrid(BaseEstimator):
         Physics plus the residual model fitted on its training residual.
     """
 
-    def __init__(self, physics: AugmentedPhysics | None = None, residual: Any = None) -> None:
+    def __init__(
+        self, physics: AugmentedPhysics | None = None, residual: Any = None, hybrid: Any = None
+    ) -> None:
         self.physics = physics
         self.residual = residual
+        self.hybrid = hybrid
 
     def fit(self, traces: Sequence[Trace]) -> AugmentedHybrid:
         """Close the loop on ``traces``, then fit the residual model; returns self."""
@@ -118,9 +131,24 @@ class AugmentedHybrid(BaseEstimator):
         traces = list(traces)
         phys = self.physics if self.physics is not None else AugmentedPhysics()
         self.physics_ = phys.fit(traces)
-        self.hybrid_ = HybridModel(physics=self.physics_, residual=self.residual).fit(traces)
+        self.reused_hybrid_ = self._unchanged(traces)
+        if self.reused_hybrid_:
+            self.hybrid_ = self.hybrid
+        else:
+            self.hybrid_ = HybridModel(physics=self.physics_, residual=self.residual).fit(traces)
         self.train_experiments_ = [t.name for t in traces]
         return self
+
+    def _unchanged(self, traces: list[Trace]) -> bool:
+        """Whether the given ``hybrid`` can stand for this one: nothing added, the discovery
+        ended at its baseline fit, and the hybrid was fitted on these experiments."""
+        base = self.physics_.baseline
+        if self.hybrid is None or base is None or self.physics_.effects_:
+            return False
+        names = sorted(t.name for t in traces)
+        trained = sorted(getattr(self.hybrid, "train_experiments_", []) or [])
+        same = dict(self.physics_.params_.values) == dict(base.params().values)
+        return same and trained == names and residual_is_default(self.hybrid, self.residual)
 
     def predict(self, trace: Trace, return_std: bool = False):
         """Clutch pressure (bar) on ``trace``; with ``return_std`` also its std (bar)."""
@@ -128,6 +156,12 @@ class AugmentedHybrid(BaseEstimator):
         if return_std:
             return self.hybrid_.predict(trace, return_std=True)
         return self.hybrid_.predict(trace)
+
+
+def residual_is_default(hybrid: Any, residual: Any) -> bool:
+    """Whether ``hybrid`` was built with the residual model ``residual`` asks for (both
+    the default, or the same object)."""
+    return getattr(hybrid, "residual", None) is residual
 
 
 def _build(ctx: VariantContext) -> AugmentedHybrid:
@@ -138,8 +172,11 @@ def _build(ctx: VariantContext) -> AugmentedHybrid:
         settings = DiscoverySettings(progress=ctx.progress)
         if fit is not None:
             settings = replace(settings, fit=fit)
-    physics = AugmentedPhysics(ctx.physics_model, settings)
-    return AugmentedHybrid(physics=physics, **options)
+    hybrid = ctx.fitted.get("hybrid")
+    physics = getattr(hybrid, "physics", None)
+    baseline = getattr(physics, "result_", None)
+    physics = AugmentedPhysics(ctx.physics_model, settings, baseline=baseline)
+    return AugmentedHybrid(physics=physics, hybrid=hybrid, **options)
 
 
 def _available() -> str | None:
@@ -167,6 +204,7 @@ def register(replace_existing: bool = False) -> VariantSpec:
         "physics after closing the loop (discover: effects added, refitted) "
         "+ SVC-partitioned GP on its residual",
         _build,
+        requires=("hybrid",),
         availability=_available,
         layer="validation.discover",
         on_request=(
