@@ -9,6 +9,12 @@ are asserted by ``tests/test_discover_effects.py`` (``pytest -m slow``).
 
 Usage: ``python benchmarks/bench_discover.py [--effects a,b] [--default-strength]
 [--set NAME=VALUE ...] [--n-settings N] [--json OUT]``
+
+``--speed STAND [--repeat N]`` (issue 17, must-show 1): on the default stand (generated into
+the folder ``STAND`` when it holds no dataset), the wall time of ``clutchlab fit-physics`` and
+of ``clutchlab discover`` (its own baseline fit included), each as a fresh console-script
+process, alternated N times; prints every run, the medians and the ratio
+discovery / fit-physics of the medians, with the effects each discovery added.
 """
 
 from __future__ import annotations
@@ -17,6 +23,12 @@ import argparse
 import json
 import os
 import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
 
 from clutchlab.physics.fit import FitSettings
 from clutchlab.validation.discover import DiscoverySettings
@@ -31,8 +43,48 @@ def run_case(effect: str, n_settings: int, overrides: dict, max_iter: int) -> di
     return row
 
 
+def _timed(argv: list[str]) -> float:
+    t0 = time.perf_counter()
+    subprocess.run(argv, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    return time.perf_counter() - t0
+
+
+def speed(stand: str, repeat: int, keep: str | None = None) -> None:
+    """Discovery vs one physics fit on the same data, measured in one run; the fit and
+    discovery JSONs are kept in ``keep`` when given."""
+    exe = [sys.executable, "-m", "clutchlab"]
+    folder = Path(stand)
+    if not (folder / "manifest.json").exists():
+        subprocess.run([*exe, "stand", "--out", str(folder)], check=True)
+    fits, discs = [], []
+    if keep:
+        Path(keep).mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=keep) as scratch:
+        tmp = keep or scratch
+        for k in range(repeat):
+            fits.append(_timed([*exe, "fit-physics", stand, "--out", f"{tmp}/fit{k}.json"]))
+            js = f"{tmp}/disc{k}.json"
+            discs.append(
+                _timed([*exe, "discover", stand, "--out", f"{tmp}/d{k}", "--json", js, "--quiet"])
+            )
+            doc = json.loads(Path(js).read_text(encoding="utf-8"))
+            fit = json.loads(Path(f"{tmp}/fit{k}.json").read_text(encoding="utf-8"))
+            print(
+                f"run {k + 1}: fit-physics {fits[-1]:.1f} s ({fit['status']}); discover "
+                f"{discs[-1]:.1f} s, added {doc['added'] or 'nothing'}, iterations "
+                + ", ".join(f"{it['wall_s']:.0f} s" for it in doc["iterations"])
+                + f"; summary: {doc['summary']}",
+                flush=True,
+            )
+    f, d = statistics.median(fits), statistics.median(discs)
+    print(f"median over {repeat}: fit-physics {f:.1f} s, discover {d:.1f} s, ratio {d / f:.2f}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--speed", metavar="STAND", help="discovery vs fit-physics on this stand")
+    ap.add_argument("--repeat", type=int, default=3, help="runs of each (--speed)")
+    ap.add_argument("--keep", metavar="DIR", help="keep the JSONs and reports here (--speed)")
     ap.add_argument("--effects", default="", help="comma-separated subset of the cases")
     ap.add_argument(
         "--default-strength",
@@ -50,6 +102,13 @@ def main() -> None:
     ap.add_argument("--max-iter", type=int, default=50, help="solver iterations per fit")
     ap.add_argument("--json", help="write the rows here")
     args = ap.parse_args()
+    if args.speed:
+        print(
+            f"machine: {platform.machine()}, {os.cpu_count()} cores, "
+            f"Python {platform.python_version()}"
+        )
+        speed(args.speed, args.repeat, args.keep)
+        return
     wanted = [e for e in args.effects.split(",") if e] or list(MUST_SHOW_CASES)
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
