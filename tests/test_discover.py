@@ -29,7 +29,12 @@ from clutchlab.validation.discover import (
     residual_problem,
     residual_set,
 )
-from clutchlab.validation.discover.residuals import effective_size, integrated_time, loeo_rss
+from clutchlab.validation.discover.residuals import (
+    effective_size,
+    integrated_time,
+    loeo_errors,
+    loeo_rss,
+)
 from clutchlab.validation.discover.scoring import Projector, profile_points, score_effect
 
 TINY_RAMPS = (
@@ -253,6 +258,8 @@ def test_loeo_rss_equals_the_exact_held_out_error_of_a_linear_model():
         e = x[a:b] @ beta - y[a:b]
         expected += float(e @ e)
     assert loeo_rss(res) == pytest.approx(expected, rel=1e-9)
+    assert loeo_errors(res).sum() == pytest.approx(expected, rel=1e-9)
+    assert len(loeo_errors(res)) == len(res.slices)
     one = ResidualSet(**{**res.__dict__, "slices": [(0, 300)], "experiments": ["a"]})
     assert loeo_rss(one) is None
 

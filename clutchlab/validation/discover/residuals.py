@@ -26,6 +26,7 @@ __all__ = [
     "ResidualSet",
     "effective_size",
     "integrated_time",
+    "loeo_errors",
     "loeo_rss",
     "point_sums_of_squares",
     "residual_problem",
@@ -369,6 +370,13 @@ def loeo_rss(res: ResidualSet, rcond: float = 3e-2) -> float | None:
     float or None
         None with fewer than two experiments or without a Jacobian.
     """
+    errors = loeo_errors(res, rcond)
+    return None if errors is None else float(errors.sum())
+
+
+def loeo_errors(res: ResidualSet, rcond: float = 3e-2) -> np.ndarray | None:
+    """The held-out error of each training experiment (bar², kept residuals) whose sum is
+    :func:`loeo_rss`; None with fewer than two experiments or without a Jacobian."""
     if res.jacobian is None:
         return None
     jac, r = res.jacobian[res.keep], res.r[res.keep]
@@ -378,11 +386,11 @@ def loeo_rss(res: ResidualSet, rcond: float = 3e-2) -> float | None:
     norms = np.linalg.norm(jac, axis=0)
     norms[norms == 0] = 1.0
     jn = jac / norms
-    total = 0.0
+    out = []
     for a, b in slices:
         others = np.ones(len(r), dtype=bool)
         others[a:b] = False
         step, *_ = np.linalg.lstsq(jn[others], -r[others], rcond=rcond)
         e = r[a:b] + jn[a:b] @ step
-        total += float(e @ e)
-    return total
+        out.append(float(e @ e))
+    return np.array(out)
