@@ -20,7 +20,8 @@ from clutchlab.data import load_dataset
 from clutchlab.physics import CircuitModel
 from clutchlab.physics.fit import resolve_free
 from clutchlab.validation.discover import DiscoverySettings
-from clutchlab.validation.discover.loop import _confirm, _run_fit, _split, _state
+from clutchlab.validation.discover.loop import _confirm, _split, _state
+from clutchlab.validation.discover.refit import run_fit
 from clutchlab.validation.discover.residuals import loeo_errors
 from clutchlab.validation.discover.scoring import score_candidates
 from clutchlab.validation.discover.screen import screen_refit, screening
@@ -34,7 +35,7 @@ def main() -> None:
     settings = DiscoverySettings(progress=False)
     train, test = _split(load_dataset(args.stand), settings)
     model = CircuitModel()
-    fit = _run_fit(model, train, settings, resolve_free(model, settings.fit), None)
+    fit = run_fit(model, train, settings, resolve_free(model, settings.fit), None)
     current = _state(fit, train, test, settings, True)
     ref = loeo_errors(current.residual)
     test_rmse = current.test["rmse_bar"]

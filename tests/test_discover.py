@@ -215,14 +215,14 @@ def test_a_candidate_that_fails_to_score_is_reported_not_raised(tiny, monkeypatc
 
 
 def test_a_candidate_whose_refit_fails_is_not_added(tiny, monkeypatch):
-    real = loop._run_fit
+    real = loop.run_fit
 
-    def failing(model, train, settings, free, start):
+    def failing(model, train, settings, free, start, fit=None):
         if "supply_droop" in model.effect_names:
             raise FitError("the model diverges at the start parameters")
-        return real(model, train, settings, free, start)
+        return real(model, train, settings, free, start, fit)
 
-    monkeypatch.setattr(loop, "_run_fit", failing)
+    monkeypatch.setattr(loop, "run_fit", failing)
     res = discover(tiny, settings=_settings(candidates=("supply_droop",), max_effects=1))
     (it,) = res.iterations
     assert it.effect is None

@@ -3,7 +3,9 @@ experiment; a discovery that starts from a fit already made (issue 17: speed, th
 
 from __future__ import annotations
 
+import copy
 import json
+from types import SimpleNamespace
 
 import pytest
 
@@ -120,8 +122,9 @@ class _FittedHybrid:
 
     residual = None
 
-    def __init__(self, names):
+    def __init__(self, names, fit):
         self.train_experiments_ = sorted(names)
+        self.physics = SimpleNamespace(result_=fit)  # the physics_fitted it stands on
 
     def predict(self, trace, return_std=False):  # pragma: no cover - not called here
         raise AssertionError
@@ -131,15 +134,18 @@ def test_the_augmented_hybrid_is_the_hybrid_when_nothing_is_added(stand):
     settings = _settings(screen_samples=_budget(stand), candidates=("latch_threshold_drift",))
     train = [t for t in stand if t.ramp in ("fast", "slow")]
     fit = PhysicsFitter(CircuitModel(), settings.fit).fit(train).result_
-    hybrid = _FittedHybrid(t.name for t in train)
+    hybrid = _FittedHybrid((t.name for t in train), fit)
     model = AugmentedHybrid(AugmentedPhysics(None, settings, baseline=fit), hybrid=hybrid)
     model.fit(train)
     assert model.physics_.effects_ == [] and model.reused_hybrid_
     assert model.hybrid_ is hybrid
     # a hybrid fitted on other experiments, or with another residual model, is not reused
-    model.hybrid = _FittedHybrid(t.name for t in train[:3])
+    model.hybrid = _FittedHybrid((t.name for t in train[:3]), fit)
     assert not model._unchanged(train)
     model.hybrid, model.residual = hybrid, object()
+    assert not model._unchanged(train)
+    # nor one standing on another physics fit
+    model.hybrid, model.residual = _FittedHybrid((t.name for t in train), copy.copy(fit)), None
     assert not model._unchanged(train)
 
 

@@ -29,7 +29,7 @@ from ...data import Dataset, Trace, dither_period_mean, dither_period_samples, p
 from ...errors import ClutchlabError, FitError
 from ...physics import CircuitModel, simulate
 from ...physics.effects import EFFECTS
-from ...physics.fit import FitResult, FitSettings, resolve_free
+from ...physics.fit import FitResult, resolve_free
 from ...physics.parameters import ParameterSet
 from .diagnostics import diagnose
 from .refit import candidate_free, judge, refit_start, residual_at, run_fit
@@ -87,20 +87,6 @@ def _split(dataset: Dataset | list[Trace], settings: DiscoverySettings):
     return train, test
 
 
-def _run_fit(
-    model: CircuitModel,
-    train: list[Trace],
-    settings: DiscoverySettings,
-    free: tuple[str, ...],
-    start: ParameterSet | None,
-    fit: FitSettings | None = None,
-) -> FitResult:
-    """:func:`~.refit.run_fit` (a module attribute, so tests can make a refit fail)."""
-    if fit is None:
-        return run_fit(model, train, settings, free, start)
-    return run_fit(model, train, settings, free, start, fit)
-
-
 def _state(
     fit: FitResult,
     train: list[Trace],
@@ -138,7 +124,7 @@ def _reference(
     t0 = time.perf_counter()
     _say(settings, "continuing the current fit (not converged) as the reference")
     try:
-        fit = _run_fit(current.model, train, settings, tuple(current.fit.free), current.params)
+        fit = run_fit(current.model, train, settings, tuple(current.fit.free), current.params)
         again = residual_at(fit.model(), fit.params(), tuple(fit.free), train, settings)
     except (ClutchlabError, ArithmeticError, ValueError) as exc:
         kind = f"current fit (its continuation failed: {exc})"
@@ -179,10 +165,10 @@ def _confirm(
         if screened is None:
             keep = current.residual.keep
             start = refit_start(cand, current.fit.values, score, train, settings, keep)
-            fit = _run_fit(cand, train, settings, free, start)
+            fit = run_fit(cand, train, settings, free, start)
         else:
             start = cand.params(**screened.values)
-            fit = _run_fit(cand, train, settings, free, start, confirm_settings(settings.fit))
+            fit = run_fit(cand, train, settings, free, start, confirm_settings(settings.fit))
         state = _state(fit, train, test, settings, jacobian=True)
     except (ClutchlabError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
         score.refit = {"status": f"failed: {exc}", "wall_s": time.perf_counter() - t0, **screen}
@@ -318,8 +304,8 @@ def _iteration(
     def screen_then_confirm(confirm: list[CandidateScore]) -> None:
         """Refit each on the subset; confirm on every training experiment the ones that
         qualify there, best held-out error first, until one qualifies on all of them."""
-        ref_sub = screen.reference_for(current, settings)
-        cv_sub = loeo_rss(ref_sub)
+        screen.reference_for(current, settings)
+        cv_sub = screen.info["loeo_rss_bar2"]
         passed = []
         for s in confirm:
             _say(settings, f"screening refit with {s.effect} (score {s.statistic:.1f})")
@@ -446,7 +432,7 @@ def discover(
         what = model.effect_names or "the base model"
         _say(settings, f"fitting {what} on {len(train)} experiments")
         free0 = resolve_free(model, settings.fit)
-        baseline = _run_fit(model, train, settings, free0, start)
+        baseline = run_fit(model, train, settings, free0, start)
     else:
         _check_baseline(baseline, model, train)
         _say(settings, f"starting from the given fit ({baseline.status})")

@@ -141,14 +141,17 @@ class AugmentedHybrid(BaseEstimator):
 
     def _unchanged(self, traces: list[Trace]) -> bool:
         """Whether the given ``hybrid`` can stand for this one: nothing added, the discovery
-        ended at its baseline fit, and the hybrid was fitted on these experiments."""
+        ended at its baseline fit, the hybrid stands on that very fit, was fitted on these
+        experiments, and with the residual model asked for here."""
         base = self.physics_.baseline
         if self.hybrid is None or base is None or self.physics_.effects_:
             return False
+        on_base = getattr(getattr(self.hybrid, "physics", None), "result_", None) is base
         names = sorted(t.name for t in traces)
         trained = sorted(getattr(self.hybrid, "train_experiments_", []) or [])
         same = dict(self.physics_.params_.values) == dict(base.params().values)
-        return same and trained == names and residual_is_default(self.hybrid, self.residual)
+        same_residual = getattr(self.hybrid, "residual", None) is self.residual
+        return on_base and same and trained == names and same_residual
 
     def predict(self, trace: Trace, return_std: bool = False):
         """Clutch pressure (bar) on ``trace``; with ``return_std`` also its std (bar)."""
@@ -156,12 +159,6 @@ class AugmentedHybrid(BaseEstimator):
         if return_std:
             return self.hybrid_.predict(trace, return_std=True)
         return self.hybrid_.predict(trace)
-
-
-def residual_is_default(hybrid: Any, residual: Any) -> bool:
-    """Whether ``hybrid`` was built with the residual model ``residual`` asks for (both
-    the default, or the same object)."""
-    return getattr(hybrid, "residual", None) is residual
 
 
 def _build(ctx: VariantContext) -> AugmentedHybrid:
