@@ -33,6 +33,7 @@ from clutchlab.validation.discover.residuals import (
     effective_size,
     integrated_time,
     loeo_errors,
+    loeo_evidence,
     loeo_rss,
 )
 from clutchlab.validation.discover.scoring import Projector, profile_points, score_effect
@@ -260,8 +261,13 @@ def test_loeo_rss_equals_the_exact_held_out_error_of_a_linear_model():
     assert loeo_rss(res) == pytest.approx(expected, rel=1e-9)
     assert loeo_errors(res).sum() == pytest.approx(expected, rel=1e-9)
     assert len(loeo_errors(res)) == len(res.slices)
+    evidence = loeo_evidence(res)
+    assert evidence["loeo_rss_bar2"] == loeo_rss(res)
+    assert list(evidence["loeo_bar2_by_experiment"]) == ["a", "b", "c"]
+    assert sum(evidence["loeo_bar2_by_experiment"].values()) == pytest.approx(expected)
     one = ResidualSet(**{**res.__dict__, "slices": [(0, 300)], "experiments": ["a"]})
     assert loeo_rss(one) is None
+    assert loeo_evidence(one) == {"loeo_rss_bar2": None, "loeo_bar2_by_experiment": None}
 
 
 def test_augmented_hybrid_factory_builds_an_unfitted_model():

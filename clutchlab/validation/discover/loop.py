@@ -33,7 +33,7 @@ from ...physics.fit import FitResult, resolve_free
 from ...physics.parameters import ParameterSet
 from .diagnostics import diagnose
 from .refit import candidate_free, judge, refit_start, residual_at, run_fit
-from .residuals import ResidualSet, loeo_rss
+from .residuals import ResidualSet, loeo_evidence
 from .result import DiscoveryResult, IterationRecord, ModelState
 from .scoring import CandidateScore, score_candidates
 from .screen import Screening, confirm_settings, screen_refit, screening
@@ -287,7 +287,7 @@ def _iteration(
         if not ref:
             ref_res, ref_info = _reference(current, train, settings)
             reference.update(ref_info)
-            reference["loeo_rss_bar2"] = loeo_rss(ref_res)
+            reference.update(loeo_evidence(ref_res))
             ref.append(ref_res)
         return ref[0].kept_rss, reference["loeo_rss_bar2"]
 

@@ -18,7 +18,13 @@ from ...physics import CircuitModel
 from ...physics.effects import EFFECTS
 from ...physics.fit import FitResult, FitSettings, PhysicsFitter
 from ...physics.parameters import ParameterSet
-from .residuals import ResidualSet, loeo_rss, point_sums_of_squares, residual_problem, residual_set
+from .residuals import (
+    ResidualSet,
+    loeo_evidence,
+    point_sums_of_squares,
+    residual_problem,
+    residual_set,
+)
 from .scoring import CandidateScore
 from .settings import DiscoverySettings
 from .warm import warm_sensitivities
@@ -90,7 +96,7 @@ def judge(res: ResidualSet, rss_ref: float, k: int) -> dict | None:
         return None
     n_eff, _ = res.effective()
     return {
-        "loeo_rss_bar2": loeo_rss(res),
+        **loeo_evidence(res),
         "rss_bar2": rss1,
         "rss_ref_bar2": rss_ref,
         "n_eff": n_eff,

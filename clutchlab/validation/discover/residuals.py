@@ -27,6 +27,7 @@ __all__ = [
     "effective_size",
     "integrated_time",
     "loeo_errors",
+    "loeo_evidence",
     "loeo_rss",
     "point_sums_of_squares",
     "residual_problem",
@@ -394,3 +395,16 @@ def loeo_errors(res: ResidualSet, rcond: float = 3e-2) -> np.ndarray | None:
         e = r[a:b] + jn[a:b] @ step
         out.append(float(e @ e))
     return np.array(out)
+
+
+def loeo_evidence(res: ResidualSet) -> dict:
+    """``{"loeo_rss_bar2": sum or None, "loeo_bar2_by_experiment": {name: error} or None}``:
+    the held-out evidence a decision records (bar²)."""
+    errors = loeo_errors(res)
+    if errors is None:
+        return {"loeo_rss_bar2": None, "loeo_bar2_by_experiment": None}
+    names = [n for n, (a, b) in zip(res.experiments, res.kept_slices, strict=True) if b > a]
+    return {
+        "loeo_rss_bar2": float(errors.sum()),
+        "loeo_bar2_by_experiment": dict(zip(names, errors.tolist(), strict=True)),
+    }

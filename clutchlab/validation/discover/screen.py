@@ -21,7 +21,7 @@ from ...data import Trace
 from ...errors import ClutchlabError
 from ...physics.fit import FitResult, FitSettings, prefit_settings, prefit_subset, refine_settings
 from .refit import candidate_free, judge, refit_start, residual_at, run_fit
-from .residuals import ResidualSet, loeo_rss
+from .residuals import ResidualSet, loeo_evidence
 from .result import ModelState
 from .scoring import CandidateScore
 from .settings import DiscoverySettings
@@ -101,7 +101,7 @@ class Screening:
             "subset": self.describe(),
             "experiments": [t.name for t in self.traces],
             "rss_bar2": res.kept_rss,
-            "loeo_rss_bar2": loeo_rss(res),
+            **loeo_evidence(res),
             "wall_s": time.perf_counter() - t0,
         }
         return res
