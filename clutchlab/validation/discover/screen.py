@@ -91,6 +91,7 @@ class Screening:
             info["kind"] = f"current fit on the subset (its continuation failed: {exc})"
         else:
             info["status"] = fit.status
+            info["iterations"] = fit.iterations
             if again.kept_rss < res.kept_rss:
                 res = again
                 info["kind"] = "current fit continued on the subset"
@@ -175,6 +176,7 @@ def screen_refit(
         **verdict,
         "status": fit.status,
         "converged": bool(fit.success),
+        "iterations": fit.iterations,
         "wall_s": time.perf_counter() - t0,
     }
     return fit
