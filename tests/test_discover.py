@@ -35,6 +35,7 @@ from clutchlab.validation.discover.residuals import (
     loeo_errors,
     loeo_evidence,
     loeo_rss,
+    loro_errors,
 )
 from clutchlab.validation.discover.scoring import Projector, profile_points, score_effect
 
@@ -265,9 +266,51 @@ def test_loeo_rss_equals_the_exact_held_out_error_of_a_linear_model():
     assert evidence["loeo_rss_bar2"] == loeo_rss(res)
     assert list(evidence["loeo_bar2_by_experiment"]) == ["a", "b", "c"]
     assert sum(evidence["loeo_bar2_by_experiment"].values()) == pytest.approx(expected)
+    assert evidence["loro_rss_bar2"] is None  # no ramp labels
     one = ResidualSet(**{**res.__dict__, "slices": [(0, 300)], "experiments": ["a"]})
     assert loeo_rss(one) is None
-    assert loeo_evidence(one) == {"loeo_rss_bar2": None, "loeo_bar2_by_experiment": None}
+    assert loeo_evidence(one)["loeo_bar2_by_experiment"] is None
+
+
+def test_leave_one_ramp_out_is_the_exact_held_out_error_of_a_linear_model_per_ramp():
+    """Block deletion over a ramp's experiments together: for a residual linear in the
+    parameters it is the exact refit on the other ramps; one experiment per ramp is
+    leave-one-experiment-out, and then not reported twice."""
+    rng = np.random.default_rng(5)
+    x = rng.standard_normal((400, 3))
+    y = x @ np.array([0.5, 1.0, -1.5]) + 0.1 * rng.standard_normal(400)
+    slices = [(0, 100), (100, 200), (200, 320), (320, 400)]
+    ramps = ["fast", "slow", "fast", "slow"]
+    res = ResidualSet(
+        r=x @ np.zeros(3) - y,
+        experiments=["f1", "s1", "f2", "s2"],
+        slices=slices,
+        signals={},
+        time_s=np.zeros(400),
+        row_dt_s=0.01,
+        n_period=1.0,
+        keep=np.ones(400, dtype=bool),
+        jacobian=x,
+        ramps=ramps,
+    )
+    expected = {}
+    for ramp in ("fast", "slow"):
+        held = np.zeros(400, dtype=bool)
+        for (a, b), lab in zip(slices, ramps, strict=True):
+            held[a:b] = lab == ramp
+        beta, *_ = np.linalg.lstsq(x[~held], y[~held], rcond=None)
+        e = x[held] @ beta - y[held]
+        expected[ramp] = float(e @ e)
+    got = loro_errors(res)
+    assert got.keys() == expected.keys()
+    for ramp in expected:
+        assert got[ramp] == pytest.approx(expected[ramp], rel=1e-9)
+    assert loeo_evidence(res)["loro_rss_bar2"] == pytest.approx(sum(expected.values()))
+    single = ResidualSet(
+        **{**res.__dict__, "slices": slices[:2], "experiments": ["f1", "s1"]}
+        | {"r": res.r[:200], "keep": res.keep[:200], "jacobian": x[:200], "ramps": ramps[:2]}
+    )
+    assert loro_errors(single) is None
 
 
 def test_augmented_hybrid_factory_builds_an_unfitted_model():
@@ -457,3 +500,22 @@ def test_a_candidate_already_refitted_keeps_its_score_in_the_second_look(monkeyp
     assert by["b"].statistic == 25.0 and by["b"].n_tests == 2
     # the family is still both candidates: level α/2 = 0.005, each divided by its tests
     assert by["a"].significant and by["b"].significant
+
+
+def test_an_effect_qualifies_only_when_the_model_with_it_predicts_left_out_experiments():
+    from clutchlab.validation.discover.loop import _qualifies, _rejection
+
+    settings = DiscoverySettings(progress=False)
+    ref = {"loeo_rss_bar2": 5714.9, "rss_bar2": 331.8}
+    # lower criterion and lower held-out error, but held out 8 times worse than fitted
+    far = {"delta_bic": -11.7, "loeo_rss_bar2": 1919.6, "rss_bar2": 240.8}
+    near = {"delta_bic": -1046.1, "loeo_rss_bar2": 5.61, "rss_bar2": 4.56}
+    assert not _qualifies(far, ref, settings)
+    assert _qualifies(near, ref, settings)
+    assert not _qualifies(near | {"delta_bic": 2.0}, ref, settings)
+    assert not _qualifies(near, {"loeo_rss_bar2": 5.0, "rss_bar2": 4.9}, settings)
+    assert _qualifies(far, {"loeo_rss_bar2": None}, settings)  # one experiment: BIC decides
+    assert "generalizes" in _rejection([far], settings) and "8.0" in _rejection([far], settings)
+    assert _rejection([near], settings) == "no leave-one-experiment-out improvement"
+    with pytest.raises(FitError, match="held_out_ratio_max"):
+        DiscoverySettings(held_out_ratio_max=0.0)

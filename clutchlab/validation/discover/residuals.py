@@ -29,6 +29,7 @@ __all__ = [
     "loeo_errors",
     "loeo_evidence",
     "loeo_rss",
+    "loro_errors",
     "point_sums_of_squares",
     "residual_problem",
     "residual_set",
@@ -136,6 +137,9 @@ class ResidualSet:
         nothing about a missing effect.
     jacobian : numpy.ndarray or None
         Output sensitivities to the scaled free parameters (bar per unit z).
+    ramps : list of str or None
+        Ramp label of each experiment (in the order of ``slices``), for the
+        leave-one-ramp-out error; None when unknown.
     """
 
     r: np.ndarray
@@ -147,6 +151,7 @@ class ResidualSet:
     n_period: float
     keep: np.ndarray
     jacobian: np.ndarray | None = None
+    ramps: list[str] | None = None
 
     @property
     def n(self) -> int:
@@ -261,13 +266,14 @@ def residual_set(
         raise FitError("the model diverges on the training experiments at the fitted parameters")
     r = np.asarray(ev["r"], dtype=float)
     by_name = {t.name: t for t in traces}
-    names, slices, times, keep = [], [], [], []
+    names, slices, times, keep, ramps = [], [], [], [], []
     signals: dict[str, list[np.ndarray]] = {k: [] for k in SIGNALS}
     dt_row = 0.0
     for seg in problem.segments:
         ex = problem.experiments[seg.exp]
         trace = by_name[ex.name]
         names.append(ex.name)
+        ramps.append(str(trace.ramp))
         slices.append((seg.row0, seg.row0 + len(seg.rows)))
         times.append(ex.t[seg.rows] - ex.t[0])
         mask = snap_mask(ex.target, ex.t, problem.settings.snap_rate_bar_s, snap_guard_s)
@@ -288,6 +294,7 @@ def residual_set(
         n_period=n_period / problem.settings.decimate,
         keep=np.concatenate(keep),
         jacobian=jac,
+        ramps=ramps,
     )
 
 
@@ -378,33 +385,67 @@ def loeo_rss(res: ResidualSet, rcond: float = 3e-2) -> float | None:
 def loeo_errors(res: ResidualSet, rcond: float = 3e-2) -> np.ndarray | None:
     """The held-out error of each training experiment (bar², kept residuals) whose sum is
     :func:`loeo_rss`; None with fewer than two experiments or without a Jacobian."""
-    if res.jacobian is None:
+    blocks = [[k] for k, (a, b) in enumerate(res.kept_slices) if b > a]
+    return _held_out_errors(res, blocks, rcond)
+
+
+def loro_errors(res: ResidualSet, rcond: float = 3e-2) -> dict[str, float] | None:
+    """Leave-one-ramp-out: the held-out error (bar², kept residuals) of each ramp rate's
+    experiments together, after one Gauss–Newton step on the other ramps' experiments
+    (the operator of :func:`loeo_rss`, with a ramp's experiments as the deleted block).
+
+    Leave-one-experiment-out only moves across dither settings at ramp rates already
+    trained on; this asks whether what a model learns from one rate holds at another,
+    as the unseen test ramp will. None without ramp labels or a Jacobian, with fewer than
+    two ramps, or when every ramp has a single experiment (then it is
+    leave-one-experiment-out).
+    """
+    if res.ramps is None:
+        return None
+    labels = sorted(set(res.ramps))
+    kept = [k for k, (a, b) in enumerate(res.kept_slices) if b > a]
+    blocks = [[k for k in kept if res.ramps[k] == lab] for lab in labels]
+    if len(labels) < 2 or all(len(b) <= 1 for b in blocks):
+        return None
+    errors = _held_out_errors(res, blocks, rcond)
+    return None if errors is None else dict(zip(labels, errors.tolist(), strict=True))
+
+
+def _held_out_errors(res: ResidualSet, blocks: list[list[int]], rcond: float) -> np.ndarray | None:
+    """For each block of experiments: one Gauss–Newton step on all the others, then the
+    sum of squares of the block's predicted residual (bar²)."""
+    if res.jacobian is None or len(blocks) < 2:
         return None
     jac, r = res.jacobian[res.keep], res.r[res.keep]
-    slices = [s for s in res.kept_slices if s[1] > s[0]]
-    if len(slices) < 2:
-        return None
+    slices = res.kept_slices
     norms = np.linalg.norm(jac, axis=0)
     norms[norms == 0] = 1.0
     jn = jac / norms
     out = []
-    for a, b in slices:
-        others = np.ones(len(r), dtype=bool)
-        others[a:b] = False
-        step, *_ = np.linalg.lstsq(jn[others], -r[others], rcond=rcond)
-        e = r[a:b] + jn[a:b] @ step
+    for block in blocks:
+        held = np.zeros(len(r), dtype=bool)
+        for k in block:
+            held[slices[k][0] : slices[k][1]] = True
+        step, *_ = np.linalg.lstsq(jn[~held], -r[~held], rcond=rcond)
+        e = r[held] + jn[held] @ step
         out.append(float(e @ e))
     return np.array(out)
 
 
 def loeo_evidence(res: ResidualSet) -> dict:
-    """``{"loeo_rss_bar2": sum or None, "loeo_bar2_by_experiment": {name: error} or None}``:
-    the held-out evidence a decision records (bar²)."""
+    """The held-out evidence a decision records (bar²): ``loeo_rss_bar2`` (sum) and
+    ``loeo_bar2_by_experiment`` (:func:`loeo_errors`), ``loro_rss_bar2`` (sum) and
+    ``loro_bar2_by_ramp`` (:func:`loro_errors`); None where not defined."""
     errors = loeo_errors(res)
-    if errors is None:
-        return {"loeo_rss_bar2": None, "loeo_bar2_by_experiment": None}
-    names = [n for n, (a, b) in zip(res.experiments, res.kept_slices, strict=True) if b > a]
-    return {
-        "loeo_rss_bar2": float(errors.sum()),
-        "loeo_bar2_by_experiment": dict(zip(names, errors.tolist(), strict=True)),
+    out = {"loeo_rss_bar2": None, "loeo_bar2_by_experiment": None}
+    if errors is not None:
+        names = [n for n, (a, b) in zip(res.experiments, res.kept_slices, strict=True) if b > a]
+        out = {
+            "loeo_rss_bar2": float(errors.sum()),
+            "loeo_bar2_by_experiment": dict(zip(names, errors.tolist(), strict=True)),
+        }
+    by_ramp = loro_errors(res)
+    return out | {
+        "loro_rss_bar2": None if by_ramp is None else float(sum(by_ramp.values())),
+        "loro_bar2_by_ramp": by_ramp,
     }
