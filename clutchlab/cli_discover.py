@@ -27,6 +27,7 @@ def _cmd_discover(args: argparse.Namespace) -> int:
         progress=False,
         time_limit_s=args.time_limit,
         max_iter=args.max_iter,
+        staged_start=False,  # as DiscoverySettings' default fit (see there)
     )
     settings = DiscoverySettings(
         fit=fit,

@@ -500,22 +500,3 @@ def test_a_candidate_already_refitted_keeps_its_score_in_the_second_look(monkeyp
     assert by["b"].statistic == 25.0 and by["b"].n_tests == 2
     # the family is still both candidates: level α/2 = 0.005, each divided by its tests
     assert by["a"].significant and by["b"].significant
-
-
-def test_an_effect_qualifies_only_when_the_model_with_it_predicts_left_out_experiments():
-    from clutchlab.validation.discover.loop import _qualifies, _rejection
-
-    settings = DiscoverySettings(progress=False)
-    ref = {"loeo_rss_bar2": 5714.9, "rss_bar2": 331.8}
-    # lower criterion and lower held-out error, but held out 8 times worse than fitted
-    far = {"delta_bic": -11.7, "loeo_rss_bar2": 1919.6, "rss_bar2": 240.8}
-    near = {"delta_bic": -1046.1, "loeo_rss_bar2": 5.61, "rss_bar2": 4.56}
-    assert not _qualifies(far, ref, settings)
-    assert _qualifies(near, ref, settings)
-    assert not _qualifies(near | {"delta_bic": 2.0}, ref, settings)
-    assert not _qualifies(near, {"loeo_rss_bar2": 5.0, "rss_bar2": 4.9}, settings)
-    assert _qualifies(far, {"loeo_rss_bar2": None}, settings)  # one experiment: BIC decides
-    assert "generalizes" in _rejection([far], settings) and "8.0" in _rejection([far], settings)
-    assert _rejection([near], settings) == "no leave-one-experiment-out improvement"
-    with pytest.raises(FitError, match="held_out_ratio_max"):
-        DiscoverySettings(held_out_ratio_max=0.0)

@@ -5,11 +5,8 @@ refitted; a refit qualifies when both its information criterion and its lineariz
 leave-one-experiment-out prediction error (DESIGN §5: selection by
 leave-one-experiment-out inside the training set) are lower than the current model's;
 the qualifying candidate with the lowest such error is added (with fewer than two training
-experiments there is no such error, and the lowest criterion decides), provided the model
-with it predicts the left-out experiments about as well as it fits them (held-out error at
-most ``DiscoverySettings.held_out_ratio_max`` times the in-sample one). The leave-one-ramp-out
-error is recorded beside it. The loop stops when none is significant, none qualifies, or at
-the effect limit. The test ramp is only scored.
+experiments there is no such error, and the lowest criterion decides). The loop stops when
+none is significant, none qualifies, or at the effect limit. The test ramp is only scored.
 
 Information criterion: ``BIC = n_eff · ln(RSS) + p · ln(n_eff)`` on the kept training
 residuals, ``n_eff`` the effective number of independent residuals of the augmented
@@ -32,7 +29,7 @@ from ...data import Dataset, Trace, dither_period_mean, dither_period_samples, p
 from ...errors import ClutchlabError, FitError
 from ...physics import CircuitModel, simulate
 from ...physics.effects import EFFECTS
-from ...physics.fit import FitResult
+from ...physics.fit import FitResult, resolve_free
 from ...physics.parameters import ParameterSet
 from .diagnostics import diagnose
 from .refit import candidate_free, judge, refit_start, residual_at, run_fit
@@ -194,46 +191,11 @@ def _confirm(
     return state
 
 
-def _qualifies(refit: dict, ref: dict, settings: DiscoverySettings) -> bool:
-    """Lower information criterion and (when there is one) lower leave-one-experiment-out
-    error than the reference ``ref`` (its ``loeo_rss_bar2``), and an augmented model that
-    predicts the held-out experiments about as well as it fits them (:func:`_generalizes`)."""
+def _qualifies(refit: dict, cv_ref: float | None) -> bool:
+    """Lower information criterion and (when there is one) lower held-out error."""
     if "delta_bic" not in refit or not refit["delta_bic"] < 0:
         return False
-    cv_ref = ref.get("loeo_rss_bar2")
-    if cv_ref is None:
-        return True
-    return (refit["loeo_rss_bar2"] or math.inf) < cv_ref and _generalizes(refit, settings)
-
-
-def _generalizes(refit: dict, settings: DiscoverySettings) -> bool:
-    """The candidate's held-out error is at most ``settings.held_out_ratio_max`` times its
-    in-sample residual sum of squares.
-
-    Lowering the current model's held-out error is not enough when that error is itself
-    many times the in-sample one (a model far from the data, e.g. a circuit whose
-    equations are not ours): any parameter that moves the fit can lower such a number. An
-    effect is claimed only when the model with it predicts left-out experiments about as
-    well as it fits them; otherwise it explains part of the residual without being its
-    explanation.
-    """
-    cv, rss = refit.get("loeo_rss_bar2"), refit.get("rss_bar2")
-    return cv is None or (bool(rss) and cv <= settings.held_out_ratio_max * rss)
-
-
-def _rejection(refits: list[dict], settings: DiscoverySettings) -> str:
-    """Why refits that lowered the criterion were not added (held-out evidence)."""
-    if any(r.get("loeo_rss_bar2") is not None and not _generalizes(r, settings) for r in refits):
-        ratio = min(
-            r["loeo_rss_bar2"] / r["rss_bar2"]
-            for r in refits
-            if r.get("loeo_rss_bar2") is not None and r.get("rss_bar2")
-        )
-        return (
-            "no leave-one-experiment-out improvement that generalizes (best held-out / "
-            f"in-sample error {ratio:.1f}, limit {settings.held_out_ratio_max:g})"
-        )
-    return "no leave-one-experiment-out improvement"
+    return cv_ref is None or (refit["loeo_rss_bar2"] or math.inf) < cv_ref
 
 
 def _say(settings: DiscoverySettings, text: str) -> None:
@@ -321,18 +283,17 @@ def _iteration(
     _say(settings, f"scoring {len(names)} candidate effects")
     scores = score()
 
-    def full_reference() -> float:
-        """The reference's kept sum of squares; its held-out errors go to ``reference``."""
+    def full_reference() -> tuple[float, float | None]:
         if not ref:
             ref_res, ref_info = _reference(current, train, settings)
             reference.update(ref_info)
             reference.update(loeo_evidence(ref_res))
             ref.append(ref_res)
-        return ref[0].kept_rss
+        return ref[0].kept_rss, reference["loeo_rss_bar2"]
 
     def confirm_all(confirm: list[CandidateScore]) -> None:
         """Refit each on every training experiment (no screening stage)."""
-        rss_ref = full_reference()
+        rss_ref, _ = full_reference()
         for s in confirm:
             _say(settings, f"refitting with {s.effect} (score {s.statistic:.1f})")
             state = _confirm(s, current, rss_ref, train, test, settings)
@@ -344,22 +305,23 @@ def _iteration(
         """Refit each on the subset; confirm on every training experiment the ones that
         qualify there, best held-out error first, until one qualifies on all of them."""
         screen.reference_for(current, settings)
+        cv_sub = screen.info["loeo_rss_bar2"]
         passed = []
         for s in confirm:
             _say(settings, f"screening refit with {s.effect} (score {s.statistic:.1f})")
             fit = screen_refit(s, current, screen, settings)
             refits[s.effect] = s.refit
-            if fit is not None and _qualifies(s.refit, screen.info, settings):
+            if fit is not None and _qualifies(s.refit, cv_sub):
                 passed.append((s, fit))
         passed.sort(key=lambda p: p[0].refit["loeo_rss_bar2"] or 0.0)
         for s, fit in passed:
-            rss_ref = full_reference()
+            rss_ref, cv_ref = full_reference()
             _say(settings, f"confirming {s.effect} on all {len(train)} training experiments")
             state = _confirm(s, current, rss_ref, train, test, settings, screened=fit)
             refits[s.effect] = s.refit
             if state is not None:
                 states[s.effect] = state
-                if _qualifies(s.refit, reference, settings):
+                if _qualifies(s.refit, cv_ref):
                     break
 
     def attempt(scores: list[CandidateScore]) -> tuple[CandidateScore | None, str]:
@@ -381,20 +343,18 @@ def _iteration(
         confirmed = [s for s in significant if s.effect in states]
         if screen is not None and not confirmed:
             screened = [s.refit for s in significant if "delta_bic" in s.refit]
-            lower = [r for r in screened if r["delta_bic"] < 0]
-            if lower:
-                return None, _rejection(lower, settings) + " (screening subset)"
+            if any(r["delta_bic"] < 0 for r in screened):
+                return None, "no leave-one-experiment-out improvement (screening subset)"
             return None, "information criterion did not improve (screening subset)"
         ok = [s for s in confirmed if s.refit["delta_bic"] < 0]
         if not ok:
             return None, "information criterion did not improve"
-        full_reference()
-        if reference["loeo_rss_bar2"] is None:
+        _, cv_ref = full_reference()
+        if cv_ref is None:
             return min(ok, key=lambda s: s.refit["delta_bic"]), "added"
-        lower = [s.refit for s in ok]
-        ok = [s for s in ok if _qualifies(s.refit, reference, settings)]
+        ok = [s for s in ok if _qualifies(s.refit, cv_ref)]
         if not ok:
-            return None, _rejection(lower, settings)
+            return None, "no leave-one-experiment-out improvement"
         return min(ok, key=lambda s: s.refit["loeo_rss_bar2"]), "added"
 
     chosen, decision = attempt(scores)
@@ -471,9 +431,8 @@ def discover(
     if baseline is None:
         what = model.effect_names or "the base model"
         _say(settings, f"fitting {what} on {len(train)} experiments")
-        # free=None unless the user named them: the fit then chooses its structure as
-        # fit-physics does (a flexible latch or lag law when the staged start asks for it)
-        baseline = run_fit(model, train, settings, settings.fit.free, start)
+        free0 = resolve_free(model, settings.fit)
+        baseline = run_fit(model, train, settings, free0, start)
     else:
         _check_baseline(baseline, model, train)
         _say(settings, f"starting from the given fit ({baseline.status})")

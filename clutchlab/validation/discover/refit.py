@@ -16,7 +16,7 @@ from ...data import Trace
 from ...errors import ClutchlabError, FitError, FitWarning
 from ...physics import CircuitModel
 from ...physics.effects import EFFECTS
-from ...physics.fit import FitResult, FitSettings, PhysicsFitter, resolve_free
+from ...physics.fit import FitResult, FitSettings, PhysicsFitter
 from ...physics.parameters import ParameterSet
 from .residuals import (
     ResidualSet,
@@ -41,7 +41,7 @@ def run_fit(
     model: CircuitModel,
     traces: list[Trace],
     settings: DiscoverySettings,
-    free: tuple[str, ...] | None,
+    free: tuple[str, ...],
     start: ParameterSet | None,
     fit: FitSettings | None = None,
 ) -> FitResult:
@@ -49,12 +49,9 @@ def run_fit(
     design, so the FitWarning saying so is not shown; the status is in the result).
 
     ``fit`` replaces ``settings.fit`` (a screening or refinement stage's settings).
-    ``free=None``: the fit's own choice (:func:`~clutchlab.physics.fit.resolve_free`, and
-    the structure the staged start may switch to).
     """
     fit = fit or settings.fit
-    n_free = len(free) if free is not None else len(resolve_free(model, fit))
-    warm_sensitivities(model, traces, fit, n_free)
+    warm_sensitivities(model, traces, fit, len(free))
     fitter = PhysicsFitter(model, replace(fit, free=free), start)
     try:
         with warnings.catch_warnings():
