@@ -235,6 +235,23 @@ def test_a_candidate_whose_refit_fails_is_not_added(tiny, monkeypatch):
     assert it.decision == "information criterion did not improve"
 
 
+def _linear_residual_set(x, r, slices, names, ramps=None) -> ResidualSet:
+    """A residual ``r`` linear in the parameters, Jacobian ``x``, every sample kept."""
+    n = len(r)
+    return ResidualSet(
+        r=r,
+        experiments=names,
+        slices=slices,
+        signals={},
+        time_s=np.zeros(n),
+        row_dt_s=0.01,
+        n_period=1.0,
+        keep=np.ones(n, dtype=bool),
+        jacobian=x,
+        ramps=ramps,
+    )
+
+
 def test_loeo_rss_equals_the_exact_held_out_error_of_a_linear_model():
     """For a residual linear in the parameters the block-deletion step is the exact refit."""
     rng = np.random.default_rng(4)
@@ -242,17 +259,7 @@ def test_loeo_rss_equals_the_exact_held_out_error_of_a_linear_model():
     y = x @ np.array([1.0, -2.0, 0.5]) + 0.1 * rng.standard_normal(300)
     theta0 = np.array([0.3, 0.1, -0.2])
     slices = [(0, 100), (100, 220), (220, 300)]
-    res = ResidualSet(
-        r=x @ theta0 - y,
-        experiments=["a", "b", "c"],
-        slices=slices,
-        signals={},
-        time_s=np.zeros(300),
-        row_dt_s=0.01,
-        n_period=1.0,
-        keep=np.ones(300, dtype=bool),
-        jacobian=x,
-    )
+    res = _linear_residual_set(x, x @ theta0 - y, slices, ["a", "b", "c"])
     expected = 0.0
     for a, b in slices:
         others = np.r_[0:a, b:300]
@@ -281,18 +288,7 @@ def test_leave_one_ramp_out_is_the_exact_held_out_error_of_a_linear_model_per_ra
     y = x @ np.array([0.5, 1.0, -1.5]) + 0.1 * rng.standard_normal(400)
     slices = [(0, 100), (100, 200), (200, 320), (320, 400)]
     ramps = ["fast", "slow", "fast", "slow"]
-    res = ResidualSet(
-        r=x @ np.zeros(3) - y,
-        experiments=["f1", "s1", "f2", "s2"],
-        slices=slices,
-        signals={},
-        time_s=np.zeros(400),
-        row_dt_s=0.01,
-        n_period=1.0,
-        keep=np.ones(400, dtype=bool),
-        jacobian=x,
-        ramps=ramps,
-    )
+    res = _linear_residual_set(x, -y, slices, ["f1", "s1", "f2", "s2"], ramps)
     expected = {}
     for ramp in ("fast", "slow"):
         held = np.zeros(400, dtype=bool)

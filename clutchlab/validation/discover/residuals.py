@@ -385,8 +385,7 @@ def loeo_rss(res: ResidualSet, rcond: float = 3e-2) -> float | None:
 def loeo_errors(res: ResidualSet, rcond: float = 3e-2) -> np.ndarray | None:
     """The held-out error of each training experiment (bar², kept residuals) whose sum is
     :func:`loeo_rss`; None with fewer than two experiments or without a Jacobian."""
-    blocks = [[k] for k, (a, b) in enumerate(res.kept_slices) if b > a]
-    return _held_out_errors(res, blocks, rcond)
+    return _held_out_errors(res, [[k] for k in _with_kept(res)], rcond)
 
 
 def loro_errors(res: ResidualSet, rcond: float = 3e-2) -> dict[str, float] | None:
@@ -403,12 +402,17 @@ def loro_errors(res: ResidualSet, rcond: float = 3e-2) -> dict[str, float] | Non
     if res.ramps is None:
         return None
     labels = sorted(set(res.ramps))
-    kept = [k for k, (a, b) in enumerate(res.kept_slices) if b > a]
-    blocks = [[k for k in kept if res.ramps[k] == lab] for lab in labels]
+    blocks = [[k for k in _with_kept(res) if res.ramps[k] == lab] for lab in labels]
     if len(labels) < 2 or all(len(b) <= 1 for b in blocks):
         return None
     errors = _held_out_errors(res, blocks, rcond)
     return None if errors is None else dict(zip(labels, errors.tolist(), strict=True))
+
+
+def _with_kept(res: ResidualSet) -> list[int]:
+    """Indices of the experiments with at least one kept residual (the held-out blocks'
+    members, in order)."""
+    return [k for k, (a, b) in enumerate(res.kept_slices) if b > a]
 
 
 def _held_out_errors(res: ResidualSet, blocks: list[list[int]], rcond: float) -> np.ndarray | None:
@@ -439,7 +443,7 @@ def loeo_evidence(res: ResidualSet) -> dict:
     errors = loeo_errors(res)
     out = {"loeo_rss_bar2": None, "loeo_bar2_by_experiment": None}
     if errors is not None:
-        names = [n for n, (a, b) in zip(res.experiments, res.kept_slices, strict=True) if b > a]
+        names = [res.experiments[k] for k in _with_kept(res)]
         out = {
             "loeo_rss_bar2": float(errors.sum()),
             "loeo_bar2_by_experiment": dict(zip(names, errors.tolist(), strict=True)),
