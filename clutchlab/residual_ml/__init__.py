@@ -26,7 +26,7 @@ from .classifiers import (
     make_classifier,
 )
 from .compare import ClassifierComparison, compare_classifiers
-from .estimators import GPBaseline, GPWithDerivative, SVCPartitionedGP
+from .estimators import LATCH_RATE_SCALE, GPBaseline, GPWithDerivative, SVCPartitionedGP
 from .evaluate import leave_one_experiment_out, score_traces
 from .features import (
     BASE_FEATURES,
@@ -41,6 +41,7 @@ from .hybrid import HYBRID_FEATURES, HybridModel
 from .kernels import KERNELS, KernelSpec, kernel_spec
 from .labels import EVENT, LATCHED, UNLATCHED, LatchLabelRule, latch_labels
 from .lag import LAG_GRID_S, LagSelection, select_lag
+from .latch_timing import LatchTiming
 from .local_gp import LocalGPRegressor, log_marginal_likelihood
 from .model_check import check_model, check_model_document
 from .persist import load_model, save_model
@@ -58,6 +59,7 @@ __all__ = [
     "KERNELS",
     "LAG_GRID_S",
     "LATCHED",
+    "LATCH_RATE_SCALE",
     "PHYSICS_FEATURES",
     "RBF_FEATURE_WEIGHTS",
     "UNLATCHED",
@@ -74,6 +76,7 @@ __all__ = [
     "KernelSpec",
     "LagSelection",
     "LatchLabelRule",
+    "LatchTiming",
     "LocalGPRegressor",
     "PhysicsPredictor",
     "SVCPartitionedGP",

@@ -23,11 +23,25 @@ from .base import Block, TraceEstimator
 from .classifiers import lean_decision, make_classifier
 from .features import BASE_FEATURES, LAG_DIDT_FEATURES, target_pressure
 from .labels import LatchLabelRule
-from .latch_event import EventDecision, event_features, fit_event_decision, latch_events
+from .latch_event import (
+    EventDecision,
+    decision_current_columns,
+    event_features,
+    fit_event_decision,
+    latch_events,
+)
+from .latch_timing import LatchTiming, mixture_interval_std, rate_anchors, switch_errors
 from .local_gp import LocalGPRegressor
 from .paths import knot_indices, piecewise_classes, predict_on_path
 
-__all__ = ["GPBaseline", "GPWithDerivative", "SVCPartitionedGP"]
+__all__ = ["LATCH_RATE_SCALE", "GPBaseline", "GPWithDerivative", "SVCPartitionedGP"]
+
+#: Default ``κ`` of :mod:`~clutchlab.residual_ml.latch_timing` (``latch_rate_scale``):
+#: calibrated by ``studies/latch_timing.py`` on held-back training-side ramps (5 s and 20 s,
+#: trained on 2.5 s + 40 s) of the stand and four zoo plants, seeds 0–2 — the smallest value
+#: of the grid 0, 0.5, 1, 1.5, 2, 3 with ≥ 90 % latch-window coverage on every circuit
+#: (BENCHMARKS.md, "Latch-timing uncertainty").
+LATCH_RATE_SCALE = 1.5
 
 
 class _GPParams:
@@ -229,6 +243,16 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         the plateau follows line-pressure wander the features cannot see. Used when
         every training experiment logs ``line_pressure_bar``; prediction then needs it
         too. ``none``: the latched GP learns the clutch pressure itself (the paper).
+    latch_uncertainty : {"mixture", "none"}
+        ``mixture`` (default): the predictive std near a predicted switch covers a wrong
+        latch state — the switch current's error is estimated inside the training set and
+        the prediction there becomes a mixture of both regimes
+        (:mod:`~clutchlab.residual_ml.latch_timing`; the mean is unchanged). ``none``: the
+        std is the GP's alone.
+    latch_rate_scale : float
+        ``κ`` of :mod:`~clutchlab.residual_ml.latch_timing` (dimensionless): how much of the
+        switch-current change between two trained ramp rates is taken as the uncertainty
+        of interpolating it at a rate between them.
 
     Attributes
     ----------
@@ -246,6 +270,9 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
     latched_reference_ : {"line", "none"}
         The latched GP's reference as fitted (``none`` when a training experiment has no
         line pressure, or on array input).
+    latch_timing_ : LatchTiming or None
+        The switch-current error model (None with ``latch_uncertainty="none"``, one latch
+        state, array input, or no current feature among the classifier features).
     """
 
     _default_features = LAG_DIDT_FEATURES
@@ -265,6 +292,8 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         svc_max_points: int = 4000,
         latch_model: str = "classifier",
         latched_reference: str = "line",
+        latch_uncertainty: str = "mixture",
+        latch_rate_scale: float = LATCH_RATE_SCALE,
         kernel: str | None = None,
         ard: bool = True,
         bin_width: float = 0.01,
@@ -289,6 +318,8 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         self.svc_max_points = svc_max_points
         self.latch_model = latch_model
         self.latched_reference = latched_reference
+        self.latch_uncertainty = latch_uncertainty
+        self.latch_rate_scale = latch_rate_scale
         self.kernel = kernel
         self.ard = ard
         self.bin_width = bin_width
@@ -362,18 +393,14 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
             raise ModelError(
                 f"latch_model must be 'classifier' or 'event', got {self.latch_model!r}"
             )
+        if self.latch_uncertainty not in ("mixture", "none"):
+            raise ModelError(
+                f"latch_uncertainty must be 'mixture' or 'none', got {self.latch_uncertainty!r}"
+            )
+        self.latch_timing_ = None
         if len(present) >= 2:
             Xc = b.X[:, self.classifier_columns_]
-            names = [self.feature_names_[j] for j in self.classifier_columns_]
-            if self.latch_model == "event" and event_features(names):
-                cols = self.classifier_columns_
-                events = [e for blk in blocks for e in latch_events(blk.X[:, cols], blk.state)]
-                self.classifier_ = None
-                self.decision_ = fit_event_decision(events, names)
-            else:
-                clf = self._make_classifier().fit(Xc[clean], b.labels[clean])
-                self.classifier_ = clf
-                self.decision_ = lean_decision(clf)
+            self.classifier_, self.decision_ = self._fit_decision(blocks, b)
             pred = (self.decision_(Xc[clean]) > 0).astype(int)
             self.classifier_train_accuracy_ = float(np.mean(pred == b.labels[clean]))
             self.single_state_ = None
@@ -394,6 +421,94 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
                 f"too few training samples for any latch state (n_samples={b.y.size}; each "
                 "latch state needs at least 2)"
             )
+        if self.latch_uncertainty == "mixture" and self.decision_ is not None:
+            self.latch_timing_ = self._estimate_latch_timing(blocks)
+
+    def _fit_decision(self, blocks: list[Block], b: Block | None = None):
+        """Classifier (or None) and lean decision function fitted on ``blocks``."""
+        b = self._stack(blocks) if b is None else b
+        cols = self.classifier_columns_
+        names = [self.feature_names_[j] for j in cols]
+        if self.latch_model == "event" and event_features(names):
+            events = [e for blk in blocks for e in latch_events(blk.X[:, cols], blk.state)]
+            return None, fit_event_decision(events, names)
+        clean = b.labels >= 0
+        clf = self._make_classifier().fit(b.X[clean][:, cols], b.labels[clean])
+        return clf, lean_decision(clf)
+
+    def _timing_columns(self) -> tuple[int, int]:
+        """Columns of the decision's current and dI/dt features (−1 when absent)."""
+        names = [self.feature_names_[j] for j in self.classifier_columns_]
+        cur, didt = decision_current_columns(names)
+        cols = self.classifier_columns_
+        return (cols[cur] if cur >= 0 else -1), (cols[didt] if didt >= 0 else -1)
+
+    def _estimate_latch_timing(self, blocks: list[Block]) -> LatchTiming | None:
+        """Switch-current errors of decisions fitted without each training experiment."""
+        cur, didt = self._timing_columns()
+        if cur < 0 or len(blocks) < 2 or blocks[0].name == "arrays":
+            return None
+        errors: dict[int, list[float]] = {1: [], -1: []}
+        missed = {1: 0, -1: 0}
+        events = []
+        res = self.resolution()
+        cols = self.classifier_columns_
+        for k, held in enumerate(blocks):
+            rest = blocks[:k] + blocks[k + 1 :]
+            present = {int(v) for blk in rest for v in np.unique(blk.labels[blk.labels >= 0])}
+            if len(present) < 2:
+                continue
+            try:
+                _, decide = self._fit_decision(rest)
+            except ModelError:  # e.g. too few latch events without this experiment
+                continue
+            knots = knot_indices(held.X, res, self.knot_tol, self.max_knot_gap)
+            pred = piecewise_classes(held.X, knots, lambda X, d=decide: d(X[:, cols]))
+            got, lost = switch_errors(held.state, pred, held.X[:, cur])
+            for d in (1, -1):
+                errors[d] += got[d]
+                missed[d] += lost[d]
+            rate = np.abs(held.X[:, didt]) if didt >= 0 else np.full(held.X.shape[0], np.nan)
+            sw = np.flatnonzero(np.diff(held.state.astype(np.int8)) != 0) + 1
+            events += [
+                (float(rate[j]), float(held.X[j, cur]), 1 if held.state[j] == 1 else -1) for j in sw
+            ]
+        if not (errors[1] or errors[-1]):
+            return None
+        anchors = rate_anchors([e for e in events if np.isfinite(e[0])])
+        return LatchTiming(
+            fit_rms_mA={
+                d: float(np.sqrt(np.mean(np.square(errors[d])))) if errors[d] else 0.0
+                for d in (1, -1)
+            },
+            log_rates={d: anchors[d][0] for d in (1, -1)},
+            currents={d: anchors[d][1] for d in (1, -1)},
+            rate_scale=float(self.latch_rate_scale),
+            n_errors={d: len(errors[d]) for d in (1, -1)},
+            n_missed=missed,
+        )
+
+    def _widen_at_switches(self, X, classes, mean, std, ref, fns) -> np.ndarray:
+        """``std`` where a wrong latch state is possible: the mixture's equivalent std."""
+        timing = getattr(self, "latch_timing_", None)
+        if timing is None or not (classes[1:] != classes[:-1]).any():
+            return std
+        cur, didt = self._timing_columns()
+        rows, p = timing.windows(classes, X[:, cur], X[:, didt] if didt >= 0 else None)
+        if rows.size == 0:
+            return std
+        other = 1 - classes[rows]
+        o_mean = np.empty(rows.size)
+        o_std = np.empty(rows.size)
+        for g in (0, 1):
+            sel = other == g
+            if sel.any():
+                o_mean[sel], o_std[sel] = fns[g](X[rows[sel]])
+        if ref is not None:
+            o_mean = o_mean + np.where(other == 1, ref[rows], 0.0)
+        out = std.copy()
+        out[rows] = mixture_interval_std(mean[rows], std[rows], o_mean, o_std, p)
+        return out
 
     @property
     def latch_model_(self) -> str:
@@ -465,8 +580,11 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
             classes = self._classes(X, knots)
             out = predict_on_path(X, classes, knots, fns, return_std)
             mean, std = out if return_std else (out, None)
-        if getattr(self, "latched_reference_", "none") == "line":
+        line = getattr(self, "latched_reference_", "none") == "line"
+        if line:
             mean = mean + np.where(classes == 1, ref, 0.0)
+        if return_std and path:
+            std = self._widen_at_switches(X, classes, mean, std, ref if line else None, fns)
         return (mean, std) if return_std else mean
 
     def _predict_trace(self, trace: Trace, return_std: bool):

@@ -32,7 +32,13 @@ from scipy.optimize import least_squares
 
 from ..errors import ModelError
 
-__all__ = ["EventDecision", "event_features", "fit_event_decision", "latch_events"]
+__all__ = [
+    "EventDecision",
+    "decision_current_columns",
+    "event_features",
+    "fit_event_decision",
+    "latch_events",
+]
 
 #: Current features (first found is used), their dI/dt and direction features.
 _CURRENT = ("current_lag_mA", "current_mA")
@@ -101,6 +107,11 @@ class EventDecision:
 def event_features(names: list[str]) -> bool:
     """Whether ``names`` hold what the law needs: a current, a dI/dt and a direction."""
     return all(_first(list(names), w) >= 0 for w in (_CURRENT, _DIDT, _DIRECTION))
+
+
+def decision_current_columns(names: list[str]) -> tuple[int, int]:
+    """Index in ``names`` of the current feature and of the dI/dt feature (−1: absent)."""
+    return _first(list(names), _CURRENT), _first(list(names), _DIDT)
 
 
 def _first(names: list[str], wanted: tuple[str, ...]) -> int:

@@ -180,6 +180,8 @@ _PARAM_RULES: dict[str, Callable | None] = {
     "event_points": _one_of(("exclude", "assign")),
     "latch_model": _one_of(("classifier", "event")),
     "latched_reference": _one_of(("line", "none")),
+    "latch_uncertainty": _one_of(("mixture", "none")),
+    "latch_rate_scale": _number(0.0),
     "classifier": _one_of(CLASSIFIERS),
     "svc_C": _number(0.0, strict=True),
     "svc_gamma": _number(0.0, strict=True),
@@ -409,6 +411,7 @@ class _Checker:
                 "classifier_train_accuracy",
                 "single_state",
                 "latched_reference",
+                "latch_timing",
                 "decision",
                 "gps",
             ),
@@ -482,11 +485,46 @@ class _Checker:
                 f"{names!r} differ from the residual model's {inner!r}",
             )
 
+    def latch_timing(self, timing, where: str) -> None:
+        """The switch-current error model (:class:`~.latch_timing.LatchTiming`)."""
+        timing = self.mapping(timing, where)
+        if timing is None:
+            return
+        per_direction = {
+            "fit_rms_mA": _number(0.0),
+            "log_rates": _number_list,
+            "currents_mA": _number_list,
+            "n_errors": _integer(0),
+            "n_missed": _integer(0),
+        }
+        self.unknown(timing, (*per_direction, "rate_scale"), where)
+        self.key(timing, "rate_scale", where, _number(0.0))
+        for key, rule in per_direction.items():
+            d = self.key(timing, key, where)
+            if d is _MISSING or (d := self.mapping(d, f"{where}.{key}")) is None:
+                continue
+            self.unknown(d, ("on", "off"), f"{where}.{key}")
+            for direction in ("on", "off"):
+                self.key(d, direction, f"{where}.{key}", rule)
+        for direction in ("on", "off"):
+            rates = timing.get("log_rates", {})
+            currents = timing.get("currents_mA", {})
+            if isinstance(rates, dict) and isinstance(currents, dict):
+                a, c = rates.get(direction), currents.get(direction)
+                if isinstance(a, list) and isinstance(c, list) and len(a) != len(c):
+                    self.add(
+                        f"{where}.currents_mA.{direction}",
+                        f"has {len(c)} values for {len(a)} log_rates",
+                    )
+
     def partitioned(self, state: dict, where: str, prefix: str, d: int | None) -> None:
         cols = self.key(state, "classifier_columns", where, _column_list(d))
         self.key(state, "classifier_train_accuracy", where, _fraction)
         single = self.key(state, "single_state", where, _optional(_integer(0, 1)))
         self.key(state, "latched_reference", where, _one_of(("line", "none")), required=False)
+        timing = self.key(state, "latch_timing", where, required=False)
+        if timing is not _MISSING and timing is not None:
+            self.latch_timing(timing, f"{where}.latch_timing")
         kind = self.key(state, "decision", where, _optional(_one_of(_DECISIONS)))
         if kind is None and single is None:
             self.add(f"{where}.single_state", "must be 0 or 1 when there is no decision")
@@ -653,6 +691,16 @@ def _pair(value) -> str | None:
 def _str_list(value) -> str | None:
     if not isinstance(value, list | tuple) or not all(isinstance(v, str) for v in value):
         return f"must be a list of strings, got {value!r}"
+    return None
+
+
+def _number_list(value) -> str | None:
+    if not isinstance(value, list | tuple):
+        return f"must be a list of numbers, got {value!r}"
+    for v in value:
+        problem = _number()(v)
+        if problem:
+            return problem
     return None
 
 

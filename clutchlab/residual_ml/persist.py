@@ -29,6 +29,7 @@ from .estimators import SVCPartitionedGP
 from .hybrid import HybridModel
 from .labels import LatchLabelRule
 from .latch_event import EventDecision
+from .latch_timing import LatchTiming
 from .local_gp import LocalGPRegressor
 from .model_check import (
     FORMAT,
@@ -145,6 +146,8 @@ def _state(est, arrays: dict, prefix: str) -> dict:
         state["classifier_train_accuracy"] = est.classifier_train_accuracy_
         state["single_state"] = est.single_state_
         state["latched_reference"] = getattr(est, "latched_reference_", "none")
+        timing = getattr(est, "latch_timing_", None)
+        state["latch_timing"] = None if timing is None else timing.to_dict()
         dec = est.decision_
         if dec is None:
             state["decision"] = None
@@ -188,6 +191,9 @@ def _restore(est, state: dict, arrays, prefix: str) -> None:
         est.single_state_ = state["single_state"]
         # Files written before the line reference: the latched GP learned the pressure.
         est.latched_reference_ = state.get("latched_reference", "none")
+        # Files written before the latch-timing mixture: the GP std alone.
+        timing = state.get("latch_timing")
+        est.latch_timing_ = None if timing is None else LatchTiming.from_dict(timing)
         est.classifier_ = None
         kind = state["decision"]
         if kind is None:

@@ -58,6 +58,7 @@ __all__ = [
     "TIMING_KEYS",
     "ExperimentComparison",
     "compare_experiment",
+    "coverage_regions",
     "interval_coverage",
     "pool_comparisons",
     "pressure_metrics",
@@ -288,14 +289,41 @@ def interval_coverage(
     k : float
         Interval half-width in standard deviations.
     """
-    s = settings or AnalysisSettings()
     meas = np.asarray(measured_bar, dtype=float)
-    latched = _latched(meas, line_bar, s)
-    window = _distance_to_switch(time_s, latched) <= s.latch_window_s
     inside = np.abs(np.asarray(predicted_bar) - meas) <= k * np.asarray(std_bar, dtype=float)
-    masks = {
+    masks = coverage_regions(time_s, line_bar, meas, settings)
+    return {r: (int(np.sum(inside & m)), int(np.sum(m))) for r, m in masks.items()}
+
+
+def coverage_regions(
+    time_s: np.ndarray,
+    line_bar: np.ndarray | float,
+    measured_bar: np.ndarray,
+    settings: AnalysisSettings | None = None,
+) -> dict[str, np.ndarray]:
+    """Sample masks of the :data:`COVERAGE_REGIONS` (see :func:`interval_coverage`).
+
+    Parameters
+    ----------
+    time_s : numpy.ndarray
+        Sample time, s.
+    line_bar : numpy.ndarray or float
+        Line pressure, bar.
+    measured_bar : numpy.ndarray
+        Measured clutch pressure, bar.
+    settings : AnalysisSettings, optional
+        Latch margin and window.
+
+    Returns
+    -------
+    dict of str to numpy.ndarray
+        Boolean mask per region.
+    """
+    s = settings or AnalysisSettings()
+    latched = _latched(np.asarray(measured_bar, dtype=float), line_bar, s)
+    window = _distance_to_switch(time_s, latched) <= s.latch_window_s
+    return {
         "regulated": ~latched & ~window,
         "latched": latched & ~window,
         "latch_window": window,
     }
-    return {r: (int(np.sum(inside & m)), int(np.sum(m))) for r, m in masks.items()}

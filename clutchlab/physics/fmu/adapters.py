@@ -193,7 +193,10 @@ def ml_program_from(
         :data:`EXACT_FEATURES` and :data:`CAUSAL_FEATURES`.
     with_std : bool
         Output the predictive standard deviation (bar): the GP's std given its coarse std
-        bins, as the estimator computes it (see :class:`~.ml.GPSpec`).
+        bins, as the estimator computes it (see :class:`~.ml.GPSpec`). A partitioned
+        model's latch-timing mixture (``latch_uncertainty="mixture"``) is not exported:
+        it widens the band *before* a predicted switch too, which a causal FMU cannot
+        know; the FMU's std is the regime GP's.
     approximate_didt : bool
         Accept the centred ``didt_mA_s`` / ``direction`` and compute causal stand-ins: the
         FMU then differs from the model at ramp reversals (approximate export).

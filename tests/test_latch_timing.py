@@ -1,0 +1,190 @@
+"""Latch-timing uncertainty (``SVCPartitionedGP(latch_uncertainty="mixture")``): the
+switch-current error model and the mixture std near a predicted switch."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from scipy.special import ndtr
+
+from clutchlab.errors import ModelFileError
+from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
+from clutchlab.residual_ml import HybridModel, SVCPartitionedGP, load_model
+from clutchlab.residual_ml.hybrid import HYBRID_FEATURES
+from clutchlab.residual_ml.latch_timing import (
+    LatchTiming,
+    bridge_variance,
+    mixture_interval_std,
+    rate_anchors,
+    switch_errors,
+    switches,
+)
+
+SMALL = {"n_hyper": 300, "max_points": 300}
+
+
+def test_switches_and_their_errors_are_matched_per_direction():
+    state = np.array([0, 0, 1, 1, 1, 0, 0, 0])
+    pred = np.array([0, 0, 0, 1, 1, 1, 0, 0])
+    current = np.array([0.0, 10, 20, 30, 40, 30, 20, 10])
+    assert switches(state) == [(2, 1), (5, -1)]
+    errors, missed = switch_errors(state, pred, current)
+    assert errors == {1: [10.0], -1: [-10.0]}  # on 10 mA late; off 10 mA early (lower)
+    assert missed == {1: 0, -1: 0}
+    errors, missed = switch_errors(state, np.zeros(8), current)
+    assert errors == {1: [], -1: []} and missed == {1: 1, -1: 1}
+
+
+def test_rate_anchors_group_rates_and_average_the_switch_currents():
+    events = [(27.0, 800.0, -1), (28.0, 804.0, -1), (440.0, 720.0, -1), (440.0, 900.0, 1)]
+    a = rate_anchors(events)
+    assert np.allclose(a[-1][1], [802.0, 720.0])
+    assert np.allclose(np.exp(a[-1][0]), [np.sqrt(27.0 * 28.0), 440.0])
+    assert a[1] == ([pytest.approx(np.log(440.0))], [900.0])
+
+
+def test_bridge_variance_is_zero_at_trained_rates_and_largest_between():
+    a, c = [np.log(25.0), np.log(400.0)], [820.0, 720.0]
+    assert bridge_variance(a[0], a, c) == 0.0 == bridge_variance(a[1], a, c)
+    mid = 0.5 * (a[0] + a[1])
+    assert bridge_variance(mid, a, c) == pytest.approx(100.0**2 / 4)
+    # outside the trained rates it grows with the distance, in units of the span
+    span = a[1] - a[0]
+    assert bridge_variance(a[1] + span, a, c) == pytest.approx(100.0**2)
+    assert bridge_variance(mid, a[:1], c[:1]) == 0.0  # one trained rate: no rate term
+    timing = LatchTiming({1: 1.0, -1: 2.0}, {1: a, -1: a}, {1: c, -1: c}, rate_scale=0.5)
+    assert timing.sigma_mA(-1, 100.0) == pytest.approx(np.sqrt(4.0 + 0.25 * 100.0**2 / 4))
+    assert timing.sigma_mA(1, 400.0) == pytest.approx(1.0)
+
+
+def test_mixture_std_reaches_the_other_regime_only_when_it_is_likely():
+    mean, std = np.zeros(3), np.full(3, 0.05)
+    other, ostd = np.full(3, 4.0), np.full(3, 0.05)
+    p = np.array([0.0, 0.01, 0.3])
+    out = mixture_interval_std(mean, std, other, ostd, p)
+    assert out[0] == pytest.approx(0.05, rel=1e-6)  # far from a switch: the GP's std
+    assert out[1] < 0.1  # 1 % of the mass can stay outside a 95 % interval
+    assert 1.96 * out[2] >= 4.0  # 30 %: the interval reaches the other regime
+    # the interval holds 95 % of the mixture's mass
+    h = 1.959964 * out[2]
+    held = 0.7 * (ndtr(h / 0.05) - ndtr(-h / 0.05)) + 0.3 * (
+        ndtr((h - 4.0) / 0.05) - ndtr((-h - 4.0) / 0.05)
+    )
+    assert held == pytest.approx(0.95, abs=1e-6)
+
+
+@pytest.fixture(scope="module")
+def data():
+    config = StandConfig(
+        settings=(DitherSetting(30.0, "A"), DitherSetting(70.0, "B")),
+        ramps=(
+            RampProfile("fast", 1.0, 0.3),
+            RampProfile("medium", 2.0, 0.3),
+            RampProfile("slow", 4.0, 0.3),
+        ),
+        substeps=2,
+        seed=5,
+    )
+    return run_stand(config, progress=False).dataset
+
+
+@pytest.fixture(scope="module")
+def fitted(data):
+    train = data.select(ramps=["fast", "slow"])
+    return {
+        kind: SVCPartitionedGP(latch_uncertainty=kind, **SMALL).fit(train)
+        for kind in ("mixture", "none")
+    }
+
+
+def test_the_std_widens_only_near_a_predicted_switch(data, fitted):
+    mix, plain = fitted["mixture"], fitted["none"]
+    assert plain.latch_timing_ is None
+    timing = mix.latch_timing_
+    assert timing.n_errors[1] + timing.n_missed[1] == 4  # one latch-on per training run
+    assert len(timing.log_rates[-1]) == 2  # two trained ramp rates
+    trace = data["medium_30Hz_A"]
+    m1, s1 = mix.predict(trace, return_std=True)
+    m0, s0 = plain.predict(trace, return_std=True)
+    np.testing.assert_array_equal(m1, m0)  # the mean is the point prediction either way
+    assert (s1 >= s0 - 1e-12).all()
+    wide = s1 > s0 + 1e-9
+    cls = mix.predict_latch(trace)
+    sw = np.flatnonzero(np.diff(cls) != 0)
+    assert sw.size >= 2 and wide.any()
+    # every widened sample lies near a predicted switch, and the std there reaches the snap
+    near = np.min(np.abs(np.arange(len(trace))[:, None] - sw[None, :]), axis=1)
+    assert near[wide].max() < 0.25 * len(trace)
+    assert (s1[sw] > 0.3).all() and (s0[sw] < 0.3).all()
+
+
+def test_the_band_covers_more_of_the_latch_window(data, fitted):
+    from clutchlab.validation import AnalysisSettings, ExperimentReference, interval_coverage
+
+    s = AnalysisSettings()
+    got = {}
+    for kind, model in fitted.items():
+        inside = total = 0
+        for trace in data.select(ramps=["medium"]):
+            ref = ExperimentReference.of(trace, s)
+            mean, std = model.predict(trace, return_std=True)
+            cov = interval_coverage(
+                ref.time_s,
+                ref.period_mean(ref.line_bar),
+                ref.measured_mean_bar,
+                ref.period_mean(mean),
+                ref.period_mean(std),
+                s,
+            )
+            inside += cov["latch_window"][0]
+            total += cov["latch_window"][1]
+        got[kind] = inside / total
+    assert got["mixture"] > got["none"] + 0.1
+
+
+def test_save_load_keeps_the_timing_model(tmp_path, data, fitted):
+    model = fitted["mixture"]
+    model.save(tmp_path / "m.json")
+    loaded = load_model(tmp_path / "m.json")
+    assert loaded.latch_timing_ == model.latch_timing_
+    trace = data["medium_70Hz_B"]
+    np.testing.assert_allclose(
+        loaded.predict(trace, return_std=True)[1], model.predict(trace, return_std=True)[1]
+    )
+    doc = json.loads((tmp_path / "m.json").read_text())
+    doc["state"]["latch_timing"]["currents_mA"]["off"] = [1.0]
+    doc["state"]["latch_timing"]["rate_scale"] = -1
+    (tmp_path / "m.json").write_text(json.dumps(doc))
+    with pytest.raises(ModelFileError) as err:
+        load_model(tmp_path / "m.json")
+    assert "latch_timing.rate_scale" in str(err.value)
+    assert "has 1 values for 2 log_rates" in str(err.value)
+
+
+def test_older_files_without_timing_load_with_the_gp_std(tmp_path, fitted):
+    fitted["mixture"].save(tmp_path / "m.json")
+    doc = json.loads((tmp_path / "m.json").read_text())
+    del doc["state"]["latch_timing"]
+    del doc["params"]["latch_uncertainty"], doc["params"]["latch_rate_scale"]
+    (tmp_path / "m.json").write_text(json.dumps(doc))
+    assert load_model(tmp_path / "m.json").latch_timing_ is None
+
+
+def test_bad_setting_is_refused(data):
+    with pytest.raises(Exception, match="latch_uncertainty must be"):
+        SVCPartitionedGP(latch_uncertainty="wide", **SMALL).fit(data.select(ramps=["fast"]))
+
+
+def test_the_hybrid_residual_carries_the_mixture(data):
+    """A hybrid's residual model is partitioned too: its band widens near a switch."""
+    train = data.select(ramps=["fast", "slow"])
+    trace = data["medium_30Hz_A"]
+    std = {}
+    for kind in ("mixture", "none"):
+        res = SVCPartitionedGP(features=HYBRID_FEATURES, latch_uncertainty=kind, **SMALL)
+        hyb = HybridModel(residual=res, form="residual").fit(train)
+        std[kind] = hyb.predict(trace, return_std=True)[1]
+    assert (std["mixture"] >= std["none"] - 1e-12).all()
+    assert std["mixture"].max() > 0.3 > std["none"].max()
