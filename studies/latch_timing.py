@@ -1,18 +1,26 @@
-"""Latch-timing uncertainty: calibrate ``κ`` (``latch_rate_scale``) on held-back
-training-side ramp rates, then report the ±2σ coverage it gives (issue 20, must-show 4).
+"""Uncertainty of interpolating between trained ramp rates: calibrate ``κ``
+(``latch_rate_scale``) and ``κ_p`` (``pressure_rate_scale``) on held-back training-side ramp
+rates, then report the ±2σ coverage they give on the medium ramp (issue 20, must-show 4).
 
-``SVCPartitionedGP(latch_uncertainty="mixture")`` widens its predictive std near a predicted
-latch switch (:mod:`clutchlab.residual_ml.latch_timing`): the switch current's error is the
-leave-one-experiment-out error inside the training set plus ``κ`` times a Brownian-bridge
-term for interpolating the switch current between the trained ramp rates. ``κ`` cannot be
-learnt from two training rates, so it is calibrated here on datasets with extra
-*training-side* ramps (fast 2.5 s, 5 s, 20 s, slow 40 s): train fast + slow, score the 5 s and
-20 s ramps. The 10 s medium ramp is not in these datasets.
+``SVCPartitionedGP`` widens its predictive std (a) near a predicted latch switch
+(``latch_uncertainty="mixture"``, :mod:`clutchlab.residual_ml.latch_timing`): the switch
+current's error is the leave-one-experiment-out error inside the training set plus ``κ``
+times a Brownian-bridge term for interpolating the switch current between the trained ramp
+rates; and (b) on every ramp sample (``rate_uncertainty="bridge"``,
+:mod:`clutchlab.residual_ml.rate_bridge`) by ``κ_p`` times the bridge of the regime GP's
+change between the trained rates. Neither scale can be learnt from two training rates, so
+each is calibrated here on datasets with extra *training-side* ramps (fast 2.5 s, 5 s, 20 s,
+slow 40 s): train fast + slow, score the 5 s and 20 s ramps. The 10 s medium ramp is not in
+these datasets.
 
-Usage: ``python studies/latch_timing.py --data DIR --out results.json [--seeds 0,1,2]
-[--plants ...] [--kappas 0,0.5,1,1.5,2,3]`` (calibration); then, with the chosen value as
-the default, ``python studies/latch_timing.py --medium DIR --data DIR --out medium.json``
-scores it on the standard datasets' medium ramp (only scored, nothing chosen).
+Usage:
+
+* ``python studies/latch_timing.py --data DIR --out F.json [--scale latch]`` calibrates
+  ``κ`` (run first, the bridge off), ``--scale pressure`` then ``κ_p`` (``κ`` at its
+  default); ``[--seeds 0,1,2] [--plants ...] [--kappas 0,0.5,1,1.5,2,3]``;
+* ``python studies/latch_timing.py --medium DIR --data DIR --out F.json`` scores the
+  defaults against the GP std alone on the standard datasets' medium ramp (only scored,
+  nothing chosen).
 """
 
 from __future__ import annotations
@@ -23,14 +31,28 @@ from pathlib import Path
 
 import numpy as np
 
-RULE = """\
+RULES = {
+    "latch": """\
 Decision rule (fixed before the run; the 10 s medium ramp is not used):
   latch_rate_scale (kappa) = the smallest value of the grid whose +-2 sigma coverage in the
   latch window (within 0.15 s of a measured snap or release), pooled over the held-back 5 s
   and 20 s ramps and averaged over seeds, is >= 90 % on every circuit; if no value reaches
-  it, the value with the highest worst-circuit window coverage.
+  it, the value with the highest worst-circuit window coverage. (The pressure's rate bridge
+  is off here, as it did not exist when this rule was run.)
 Also printed (not decided on): the regulated / latched coverage and the mean band width
-(2 sigma, bar) in the window."""
+(2 sigma, bar) in the window.""",
+    "pressure": """\
+Decision rule (fixed before the run; the 10 s medium ramp is not used):
+  pressure_rate_scale (kappa_p) = the smallest value of the grid whose +-2 sigma coverage in
+  the regulated region, pooled over the held-back 5 s and 20 s ramps and averaged over seeds,
+  is >= 90 % on every circuit; if no value reaches it, the value with the highest
+  worst-circuit regulated coverage. latch_rate_scale stays at its default.
+Also printed (not decided on): the latched / window coverage and the mean band width
+(2 sigma, bar) in the regulated region.""",
+}
+
+#: The region whose coverage the rule of each scale reads.
+RULE_REGION = {"latch": "latch_window", "pressure": "regulated"}
 
 PLANTS = ("stand", "saturating_lugre", "quadratic_play", "stribeck_supply", "preisach_accumulator")
 REGIONS = ("regulated", "latched", "latch_window")
@@ -57,8 +79,13 @@ def rates_dataset(root: Path, plant: str, seed: int) -> Path:
     return path
 
 
-def coverage(path: Path, kappas: list[float]) -> dict:
-    """Window / regulated / latched coverage and window band width per ``κ``."""
+def coverage(path: Path, kappas: list[float], scale: str) -> dict:
+    """Coverage per region and mean band width in the rule's region, per value of ``κ``.
+
+    ``scale`` is ``latch`` (``latch_rate_scale``; the pressure's rate bridge off, as when it
+    was calibrated) or ``pressure`` (``pressure_rate_scale``; the latch scale at its
+    default). ``"none"``: the GP std alone.
+    """
     from clutchlab.data import load_dataset
     from clutchlab.residual_ml import SVCPartitionedGP
     from clutchlab.validation import (
@@ -71,15 +98,20 @@ def coverage(path: Path, kappas: list[float]) -> dict:
     ds = load_dataset(path)
     train = [t for t in ds if t.ramp in ("fast", "slow")]
     test = [t for t in ds if t.ramp in ("r5", "r20")]
-    model = SVCPartitionedGP().fit(train)
+    model = SVCPartitionedGP(rate_uncertainty="none" if scale == "latch" else "bridge")
+    model.fit(train)
     timing = model.latch_timing_
     s = AnalysisSettings()
     refs = [(ExperimentReference.of(t, s), model.predict(t)) for t in test]
     out = {"timing": timing.to_dict() if timing else None, "by_kappa": {}}
-    for k in ("none", *kappas):  # "none": the GP std alone (latch_uncertainty="none")
+    for k in ("none", *kappas):
         model.latch_timing_ = None if k == "none" else timing
-        if timing is not None and k != "none":
-            timing.rate_scale = k
+        model.rate_uncertainty = "none" if k == "none" or scale == "latch" else "bridge"
+        if k != "none":
+            if scale == "latch" and timing is not None:
+                timing.rate_scale = k
+            elif scale == "pressure":
+                model.pressure_rate_scale = k
         counts = {r: [0, 0] for r in REGIONS}
         width = []
         for (ref, mean), t in zip(refs, test, strict=True):
@@ -90,11 +122,11 @@ def coverage(path: Path, kappas: list[float]) -> dict:
             for r, (i, n) in got.items():
                 counts[r][0] += i
                 counts[r][1] += n
-            win = coverage_regions(ref.time_s, line, meas, s)["latch_window"]
-            width.append(2 * pm(std)[win])
+            region = coverage_regions(ref.time_s, line, meas, s)[RULE_REGION[scale]]
+            width.append(2 * pm(std)[region])
         out["by_kappa"][str(k)] = {
             **{r: i / n if n else float("nan") for r, (i, n) in counts.items()},
-            "window_band_bar": float(np.mean(np.concatenate(width))),
+            "band_bar": float(np.mean(np.concatenate(width))),
         }
     return out
 
@@ -115,16 +147,23 @@ def standard_dataset(root: Path, plant: str, seed: int) -> Path:
     return path
 
 
+#: What ``--medium`` compares: the GP std alone, and the defaults (mixture and bridge).
+MEDIUM_KINDS = {
+    "gp": {"latch_uncertainty": "none", "rate_uncertainty": "none"},
+    "default": {},
+}
+
+
 def medium_coverage(path: Path) -> dict:
-    """``paper_svc_gp``'s ±2σ coverage on the medium ramp, with the mixture and without."""
+    """``paper_svc_gp``'s ±2σ coverage on the medium ramp: the GP std alone, the defaults."""
     from clutchlab.data import load_dataset
     from clutchlab.residual_ml import SVCPartitionedGP
     from clutchlab.validation import Protocol
 
     protocol = Protocol(load_dataset(path), train=("fast", "slow"), test=("medium",))
     out = {}
-    for kind in ("none", "mixture"):
-        model, fit_s = protocol.fit(SVCPartitionedGP(latch_uncertainty=kind))
+    for kind, params in MEDIUM_KINDS.items():
+        model, fit_s = protocol.fit(SVCPartitionedGP(**params))
         score = protocol.score(kind, model, fit_s=fit_s)
         out[kind] = {
             **score.details["coverage_2sigma"],
@@ -136,11 +175,12 @@ def medium_coverage(path: Path) -> dict:
 
 def score_medium(args) -> int:
     """Score the default ``κ`` on the medium ramp (after the calibration; nothing chosen)."""
-    from clutchlab.residual_ml import LATCH_RATE_SCALE
+    from clutchlab.residual_ml import LATCH_RATE_SCALE, PRESSURE_RATE_SCALE
 
     print(
-        f"Scoring latch_rate_scale = {LATCH_RATE_SCALE} (the default) on the medium ramp: "
-        "train fast + slow, score the 9 medium experiments; nothing is chosen here.",
+        f"Scoring the defaults (latch_rate_scale = {LATCH_RATE_SCALE}, pressure_rate_scale = "
+        f"{PRESSURE_RATE_SCALE}) against the GP std alone on the medium ramp: train fast + "
+        "slow, score the 9 medium experiments; nothing is chosen here.",
         flush=True,
     )
     args.medium.mkdir(parents=True, exist_ok=True)
@@ -155,18 +195,18 @@ def score_medium(args) -> int:
                     f"{k}: reg {v['regulated']:.3f} lat {v['latched']:.3f} "
                     f"win {v['latch_window']:.3f} rmse {v['rmse_bar']:.3f}"
                     for k, v in r.items()
-                    if k in ("none", "mixture")
+                    if k in MEDIUM_KINDS
                 ),
                 flush=True,
             )
             args.out.write_text(json.dumps(rows, indent=1))
-    print("\nper circuit, mixture (none): mean over seeds [worst]")
+    print("\nper circuit, default (GP std alone): mean over seeds [worst]")
     for plant in dict.fromkeys(r["plant"] for r in rows):
         mine = [r for r in rows if r["plant"] == plant]
         cells = []
         for region in REGIONS:
-            mix = [r["mixture"][region] for r in mine]
-            non = [r["none"][region] for r in mine]
+            mix = [r["default"][region] for r in mine]
+            non = [r["gp"][region] for r in mine]
             cells.append(f"{region} {np.mean(mix):.3f} [{min(mix):.3f}] ({np.mean(non):.3f})")
         print(f"  {plant:22s} " + "  ".join(cells))
     return 0
@@ -180,6 +220,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--plants", default=",".join(PLANTS))
     ap.add_argument("--kappas", default="0,0.5,1,1.5,2,3")
     ap.add_argument(
+        "--scale",
+        choices=tuple(RULES),
+        default="latch",
+        help="which scale to calibrate: latch_rate_scale or pressure_rate_scale",
+    )
+    ap.add_argument(
         "--medium",
         type=Path,
         help="score the default kappa on the standard datasets in this folder (medium ramp)",
@@ -188,46 +234,47 @@ def main(argv: list[str] | None = None) -> int:
     if args.medium is not None:
         return score_medium(args)
     kappas = [float(k) for k in args.kappas.split(",")]
-    print(RULE, flush=True)
+    region = RULE_REGION[args.scale]
+    print(RULES[args.scale], flush=True)
     args.data.mkdir(parents=True, exist_ok=True)
     rows = []
     for plant in args.plants.split(","):
         for seed in (int(s) for s in args.seeds.split(",")):
-            r = coverage(rates_dataset(args.data, plant, seed), kappas)
+            r = coverage(rates_dataset(args.data, plant, seed), kappas, args.scale)
             rows.append({"plant": plant, "seed": seed, **r})
             tm = r["timing"] or {}
             print(
                 f"{plant:22s} {seed}  sigma_fit on/off "
                 f"{tm.get('fit_rms_mA', {}).get('on', float('nan')):.1f} / "
-                f"{tm.get('fit_rms_mA', {}).get('off', float('nan')):.1f} mA  "
-                + "  ".join(f"k={k}: {v['latch_window']:.2f}" for k, v in r["by_kappa"].items()),
+                f"{tm.get('fit_rms_mA', {}).get('off', float('nan')):.1f} mA  {region}: "
+                + "  ".join(f"k={k}: {v[region]:.2f}" for k, v in r["by_kappa"].items()),
                 flush=True,
             )
             args.out.write_text(json.dumps(rows, indent=1))
-    print("\nwindow / regulated / latched coverage and window band (bar), mean over seeds")
+    print(f"\ncoverage per region and the band in the {region} region (bar), mean over seeds")
     worst = {}
     meets = []
     for k in ("none", *(str(k) for k in kappas)):
         per = {}
         for plant in dict.fromkeys(r["plant"] for r in rows):
             mine = [r["by_kappa"][k] for r in rows if r["plant"] == plant]
-            keys = (*REGIONS, "window_band_bar")
+            keys = (*REGIONS, "band_bar")
             per[plant] = {m: float(np.mean([x[m] for x in mine])) for m in keys}
         if k != "none":
-            worst[k] = min(v["latch_window"] for v in per.values())
+            worst[k] = min(v[region] for v in per.values())
             if worst[k] >= 0.90:
                 meets.append(k)
         print(f"kappa {k}")
         for plant, v in per.items():
             print(
                 f"  {plant:22s} window {v['latch_window']:.3f}  regulated {v['regulated']:.3f}"
-                f"  latched {v['latched']:.3f}  band {v['window_band_bar']:.2f}"
+                f"  latched {v['latched']:.3f}  band {v['band_bar']:.2f}"
             )
     pick = meets[0] if meets else max(worst, key=worst.get)
     print(
-        f"\nchosen kappa = {pick} ("
+        f"\nchosen {args.scale} scale = {pick} ("
         + ("smallest meeting 90 % everywhere" if meets else "none meets 90 %: best worst case")
-        + f"; worst-circuit window coverage {worst[pick]:.3f})"
+        + f"; worst-circuit {region} coverage {worst[pick]:.3f})"
     )
     return 0
 

@@ -93,10 +93,12 @@ def data():
 @pytest.fixture(scope="module")
 def fitted(data):
     train = data.select(ramps=["fast", "slow"])
-    return {
-        kind: SVCPartitionedGP(latch_uncertainty=kind, **SMALL).fit(train)
+    fits = {
+        kind: SVCPartitionedGP(latch_uncertainty=kind, rate_uncertainty="none", **SMALL).fit(train)
         for kind in ("mixture", "none")
     }
+    fits["bridge"] = SVCPartitionedGP(latch_uncertainty="none", **SMALL).fit(train)
+    return fits
 
 
 def test_the_std_widens_only_near_a_predicted_switch(data, fitted):
@@ -125,7 +127,8 @@ def test_the_band_covers_more_of_the_latch_window(data, fitted):
 
     s = AnalysisSettings()
     got = {}
-    for kind, model in fitted.items():
+    for kind in ("mixture", "none"):
+        model = fitted[kind]
         inside = total = 0
         for trace in data.select(ramps=["medium"]):
             ref = ExperimentReference.of(trace, s)
@@ -183,8 +186,44 @@ def test_the_hybrid_residual_carries_the_mixture(data):
     trace = data["medium_30Hz_A"]
     std = {}
     for kind in ("mixture", "none"):
-        res = SVCPartitionedGP(features=HYBRID_FEATURES, latch_uncertainty=kind, **SMALL)
+        res = SVCPartitionedGP(
+            features=HYBRID_FEATURES, latch_uncertainty=kind, rate_uncertainty="none", **SMALL
+        )
         hyb = HybridModel(residual=res, form="residual").fit(train)
         std[kind] = hyb.predict(trace, return_std=True)[1]
     assert (std["mixture"] >= std["none"] - 1e-12).all()
     assert std["mixture"].max() > 0.3 > std["none"].max()
+
+
+def test_the_rate_bridge_widens_ramps_between_the_trained_rates_only(data, fitted):
+    """Between the trained rates (medium) the band grows by the GP's change from the slow to
+    the fast rate; at a trained rate (fast) and where the current holds it stays put."""
+    bridge, plain = fitted["bridge"], fitted["none"]
+    assert len(bridge.train_log_rates_) == 2
+    assert np.exp(bridge.train_log_rates_[1]) > 3 * np.exp(bridge.train_log_rates_[0])
+    extra = {}
+    for name in ("medium_30Hz_A", "fast_30Hz_A"):
+        trace = data[name]
+        m1, s1 = bridge.predict(trace, return_std=True)
+        m0, s0 = plain.predict(trace, return_std=True)
+        np.testing.assert_array_equal(m1, m0)
+        assert (s1 >= s0 - 1e-12).all()
+        extra[name] = np.sqrt(np.maximum(s1**2 - s0**2, 0.0))
+        holds = np.abs(bridge._trace_matrix(trace)[:, bridge.feature_names_.index("didt_mA_s")])
+        assert extra[name][holds < 1.0].max() < 1e-9
+    assert np.median(extra["medium_30Hz_A"][extra["medium_30Hz_A"] > 0]) > 5 * np.median(
+        extra["fast_30Hz_A"][extra["fast_30Hz_A"] > 0]
+    )
+    with pytest.raises(Exception, match="rate_uncertainty must be"):
+        SVCPartitionedGP(rate_uncertainty="wide", **SMALL).fit(data.select(ramps=["fast"]))
+
+
+def test_rate_groups_and_bridge_weights_are_vectorized():
+    from clutchlab.residual_ml.rate_bridge import bridge_weight, group_log_rates
+
+    logs = np.log([440.0, 27.0, 450.0, 28.0, 110.0])
+    assert group_log_rates(logs) == [[1, 3], [4], [0, 2]]
+    a = [np.log(27.5), np.log(110.0), np.log(440.0)]
+    k, v = bridge_weight(np.log([27.5, 55.0, 220.0, 880.0]), a)
+    np.testing.assert_array_equal(k, [0, 0, 1, 1])
+    np.testing.assert_allclose(v, [0.0, 0.25, 0.25, 0.5])

@@ -26,7 +26,13 @@ from .classifiers import (
     make_classifier,
 )
 from .compare import ClassifierComparison, compare_classifiers
-from .estimators import LATCH_RATE_SCALE, GPBaseline, GPWithDerivative, SVCPartitionedGP
+from .estimators import (
+    LATCH_RATE_SCALE,
+    PRESSURE_RATE_SCALE,
+    GPBaseline,
+    GPWithDerivative,
+    SVCPartitionedGP,
+)
 from .evaluate import leave_one_experiment_out, score_traces
 from .features import (
     BASE_FEATURES,
@@ -61,6 +67,7 @@ __all__ = [
     "LATCHED",
     "LATCH_RATE_SCALE",
     "PHYSICS_FEATURES",
+    "PRESSURE_RATE_SCALE",
     "RBF_FEATURE_WEIGHTS",
     "UNLATCHED",
     "VARIANTS",

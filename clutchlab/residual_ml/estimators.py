@@ -33,8 +33,15 @@ from .latch_event import (
 from .latch_timing import LatchTiming, mixture_interval_std, rate_anchors, switch_errors
 from .local_gp import LocalGPRegressor
 from .paths import knot_indices, piecewise_classes, predict_on_path
+from .rate_bridge import bridge_weight, group_log_rates
 
-__all__ = ["LATCH_RATE_SCALE", "GPBaseline", "GPWithDerivative", "SVCPartitionedGP"]
+__all__ = [
+    "LATCH_RATE_SCALE",
+    "PRESSURE_RATE_SCALE",
+    "GPBaseline",
+    "GPWithDerivative",
+    "SVCPartitionedGP",
+]
 
 #: Default ``κ`` of :mod:`~clutchlab.residual_ml.latch_timing` (``latch_rate_scale``):
 #: calibrated by ``studies/latch_timing.py`` on held-back training-side ramps (5 s and 20 s,
@@ -42,6 +49,13 @@ __all__ = ["LATCH_RATE_SCALE", "GPBaseline", "GPWithDerivative", "SVCPartitioned
 #: of the grid 0, 0.5, 1, 1.5, 2, 3 with ≥ 90 % latch-window coverage on every circuit
 #: (BENCHMARKS.md, "Latch-timing uncertainty").
 LATCH_RATE_SCALE = 1.5
+#: Default ``κ_p`` of the pressure's rate bridge (``pressure_rate_scale``,
+#: :mod:`~clutchlab.residual_ml.rate_bridge`), calibrated likewise with ``LATCH_RATE_SCALE``
+#: at 1.5 (``studies/latch_timing.py --scale pressure``: the smallest value of the same grid
+#: with ≥ 90 % regulated-region coverage on every circuit).
+PRESSURE_RATE_SCALE = 0.5
+#: Below this |dI/dt| (mA/s) a sample holds: no rate to interpolate.
+_MOVING_MA_S = 10.0
 
 
 class _GPParams:
@@ -253,6 +267,15 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         ``κ`` of :mod:`~clutchlab.residual_ml.latch_timing` (dimensionless): how much of the
         switch-current change between two trained ramp rates is taken as the uncertainty
         of interpolating it at a rate between them.
+    rate_uncertainty : {"bridge", "none"}
+        ``bridge`` (default): the predictive std of a sample on a ramp also holds the
+        uncertainty of interpolating the pressure between the trained ramp rates — the
+        regime GP's change between the two bracketing trained rates (the sample's features
+        with its dI/dt set to each), times ``pressure_rate_scale``, through
+        :mod:`~clutchlab.residual_ml.rate_bridge`'s bridge. Needs a dI/dt feature and two
+        trained rates. ``none``: not added.
+    pressure_rate_scale : float
+        ``κ_p`` of that term (dimensionless).
 
     Attributes
     ----------
@@ -273,6 +296,9 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
     latch_timing_ : LatchTiming or None
         The switch-current error model (None with ``latch_uncertainty="none"``, one latch
         state, array input, or no current feature among the classifier features).
+    train_log_rates_ : list of float
+        The trained ramp rates, ``ln(|dI/dt| / (mA/s))`` per rate group (empty without a
+        dI/dt feature or on array input).
     """
 
     _default_features = LAG_DIDT_FEATURES
@@ -294,6 +320,8 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         latched_reference: str = "line",
         latch_uncertainty: str = "mixture",
         latch_rate_scale: float = LATCH_RATE_SCALE,
+        rate_uncertainty: str = "bridge",
+        pressure_rate_scale: float = PRESSURE_RATE_SCALE,
         kernel: str | None = None,
         ard: bool = True,
         bin_width: float = 0.01,
@@ -320,6 +348,8 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         self.latched_reference = latched_reference
         self.latch_uncertainty = latch_uncertainty
         self.latch_rate_scale = latch_rate_scale
+        self.rate_uncertainty = rate_uncertainty
+        self.pressure_rate_scale = pressure_rate_scale
         self.kernel = kernel
         self.ard = ard
         self.bin_width = bin_width
@@ -423,6 +453,24 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
             )
         if self.latch_uncertainty == "mixture" and self.decision_ is not None:
             self.latch_timing_ = self._estimate_latch_timing(blocks)
+        if self.rate_uncertainty not in ("bridge", "none"):
+            raise ModelError(
+                f"rate_uncertainty must be 'bridge' or 'none', got {self.rate_uncertainty!r}"
+            )
+        self.train_log_rates_ = self._trained_log_rates(blocks)
+
+    def _trained_log_rates(self, blocks: list[Block]) -> list[float]:
+        """Log ramp rate of each trained rate group (one median |dI/dt| per experiment)."""
+        didt = decision_current_columns(self.feature_names_)[1]
+        if didt < 0 or blocks[0].name == "arrays":
+            return []
+        per_exp = []
+        for blk in blocks:
+            rate = np.abs(blk.X[:, didt])
+            moving = rate > _MOVING_MA_S
+            if moving.any():
+                per_exp.append(float(np.log(np.median(rate[moving]))))
+        return [float(np.mean([per_exp[j] for j in g])) for g in group_log_rates(per_exp)]
 
     def _fit_decision(self, blocks: list[Block], b: Block | None = None):
         """Classifier (or None) and lean decision function fitted on ``blocks``."""
@@ -487,6 +535,33 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
             n_errors={d: len(errors[d]) for d in (1, -1)},
             n_missed=missed,
         )
+
+    def _widen_for_rate(self, X, classes, knots, std, fns) -> np.ndarray:
+        """``std`` with the pressure's rate-interpolation variance (``rate_uncertainty``)."""
+        anchors = getattr(self, "train_log_rates_", [])
+        didt = decision_current_columns(self.feature_names_)[1]
+        if self.rate_uncertainty != "bridge" or len(anchors) < 2 or didt < 0:
+            return std
+        rate = np.abs(X[knots, didt])
+        moving = rate > _MOVING_MA_S
+        var = np.zeros(knots.size)
+        if moving.any():
+            kn = knots[moving]
+            k, v = bridge_weight(np.log(rate[moving]), anchors)
+            sign = np.sign(X[kn, didt])
+            ends = []
+            for side in (k, k + 1):
+                Xs = X[kn].copy()
+                Xs[:, didt] = sign * np.exp(np.asarray(anchors)[side])
+                mu = np.empty(kn.size)
+                for g in (0, 1):
+                    sel = classes[kn] == g
+                    if sel.any():
+                        mu[sel] = fns[g](Xs[sel])[0]
+                ends.append(mu)
+            var[moving] = (self.pressure_rate_scale * (ends[1] - ends[0])) ** 2 * v
+        var = np.interp(np.arange(X.shape[0]), knots, var)
+        return np.sqrt(std**2 + np.where(np.abs(X[:, didt]) > _MOVING_MA_S, var, 0.0))
 
     def _widen_at_switches(self, X, classes, mean, std, ref, fns) -> np.ndarray:
         """``std`` where a wrong latch state is possible: the mixture's equivalent std."""
@@ -580,6 +655,8 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
             classes = self._classes(X, knots)
             out = predict_on_path(X, classes, knots, fns, return_std)
             mean, std = out if return_std else (out, None)
+            if return_std:
+                std = self._widen_for_rate(X, classes, knots, std, fns)
         line = getattr(self, "latched_reference_", "none") == "line"
         if line:
             mean = mean + np.where(classes == 1, ref, 0.0)

@@ -18,13 +18,12 @@ feature)::
   stays trained through the other dither settings). It includes a systematic offset.
 * The rate term: at a ramp rate between two trained rates the decision interpolates the
   switch current, and two rates cannot tell how the switch current bends between them (the
-  default stand's latch-off current is concave in the rate). The bend is modelled as a
-  Brownian bridge in ``u = ln |dI/dt|`` between the trained rates' mean switch currents:
-  ``v(u) = (u − a)(b − u) / (b − a)²`` between trained log-rates ``a < b`` (0 at a trained
-  rate, 1/4 midway), growing as the distance / span outside them; ``ΔI`` is the change of
-  the mean switch current between the two rates. ``κ`` (``rate_scale``, dimensionless) is
-  calibrated on held-back *training-side* ramp rates (``studies/latch_timing.py``), never
-  on the test ramp.
+  default stand's latch-off current is concave in the rate). The bend is modelled as the
+  Brownian bridge of :mod:`~clutchlab.residual_ml.rate_bridge` in ``u = ln |dI/dt|``
+  through the trained rates' mean switch currents (``v(u)`` there; ``ΔI`` the change of the
+  mean switch current between the two bracketing rates). ``κ`` (``latch_rate_scale`` of the
+  estimator, ``rate_scale`` here; dimensionless) is calibrated on held-back
+  *training-side* ramp rates (``studies/latch_timing.py``), never on the test ramp.
 
 **Predictive distribution near a switch** predicted at current ``I*``: the other latch
 state has probability ``p = Φ(−|I − I*| / σ)`` at a sample of current ``I``; the predictive
@@ -42,6 +41,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.special import ndtr, ndtri
 
+from .rate_bridge import bridge_weight, group_log_rates
+
 __all__ = [
     "LatchTiming",
     "bridge_variance",
@@ -51,8 +52,6 @@ __all__ = [
     "switches",
 ]
 
-#: Two switch rates whose log differs by more than this belong to different ramp rates.
-_RATE_GAP = np.log(1.5)
 #: Floor of σ (mA): below one current-quantization step the mixture is not resolved.
 _SIGMA_FLOOR_MA = 0.5
 #: Window around a predicted switch (σ): beyond it the other state's probability is < 3e-5.
@@ -113,42 +112,27 @@ def rate_anchors(events: list[tuple[float, float, int]]) -> dict[int, tuple[list
     Returns
     -------
     dict of int to (list of float, list of float)
-        Per direction: the log-rates ``ln(mA/s)`` of the rate groups (ascending) and their
-        mean switch currents (mA). Rates whose logs lie within ``ln 1.5`` form one group.
+        Per direction: the log-rates ``ln(mA/s)`` of the rate groups (ascending,
+        :func:`~.rate_bridge.group_log_rates`) and their mean switch currents (mA).
     """
     out: dict[int, tuple[list, list]] = {}
     for d in (1, -1):
-        rows = sorted((np.log(max(r, 1e-9)), c) for r, c, e in events if e == d)
-        if not rows:
-            out[d] = ([], [])
-            continue
-        groups: list[list[tuple[float, float]]] = [[rows[0]]]
-        for row in rows[1:]:
-            if row[0] - groups[-1][-1][0] > _RATE_GAP:
-                groups.append([])
-            groups[-1].append(row)
+        rows = [(np.log(max(r, 1e-9)), c) for r, c, e in events if e == d]
+        groups = group_log_rates([u for u, _ in rows])
         out[d] = (
-            [float(np.mean([u for u, _ in g])) for g in groups],
-            [float(np.mean([c for _, c in g])) for g in groups],
+            [float(np.mean([rows[j][0] for j in g])) for g in groups],
+            [float(np.mean([rows[j][1] for j in g])) for g in groups],
         )
     return out
 
 
 def bridge_variance(u: float, log_rates: list[float], currents: list[float]) -> float:
-    """``ΔI² · v(u)`` of the module docstring (mA²) at log-rate ``u`` (``ln(mA/s)``)."""
-    a = np.asarray(log_rates, dtype=float)
+    """``ΔI² · v(u)`` (mA²) at log-rate ``u`` (``ln(mA/s)``), :mod:`~.rate_bridge`'s bridge
+    through the trained rates' mean switch currents."""
     c = np.asarray(currents, dtype=float)
-    if a.size < 2 or not np.isfinite(u):
+    if c.size < 2 or not np.isfinite(u):
         return 0.0
-    k = int(np.clip(np.searchsorted(a, u) - 1, 0, a.size - 2))
-    lo, hi = a[k], a[k + 1]
-    span = hi - lo
-    if u < lo:
-        v = (lo - u) / span
-    elif u > hi:
-        v = (u - hi) / span
-    else:
-        v = (u - lo) * (hi - u) / span**2
+    k, v = bridge_weight(u, log_rates)
     return float((c[k + 1] - c[k]) ** 2 * v)
 
 

@@ -182,6 +182,8 @@ _PARAM_RULES: dict[str, Callable | None] = {
     "latched_reference": _one_of(("line", "none")),
     "latch_uncertainty": _one_of(("mixture", "none")),
     "latch_rate_scale": _number(0.0),
+    "rate_uncertainty": _one_of(("bridge", "none")),
+    "pressure_rate_scale": _number(0.0),
     "classifier": _one_of(CLASSIFIERS),
     "svc_C": _number(0.0, strict=True),
     "svc_gamma": _number(0.0, strict=True),
@@ -412,6 +414,7 @@ class _Checker:
                 "single_state",
                 "latched_reference",
                 "latch_timing",
+                "train_log_rates",
                 "decision",
                 "gps",
             ),
@@ -522,6 +525,7 @@ class _Checker:
         self.key(state, "classifier_train_accuracy", where, _fraction)
         single = self.key(state, "single_state", where, _optional(_integer(0, 1)))
         self.key(state, "latched_reference", where, _one_of(("line", "none")), required=False)
+        self.key(state, "train_log_rates", where, _number_list, required=False)
         timing = self.key(state, "latch_timing", where, required=False)
         if timing is not _MISSING and timing is not None:
             self.latch_timing(timing, f"{where}.latch_timing")

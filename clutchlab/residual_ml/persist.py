@@ -148,6 +148,7 @@ def _state(est, arrays: dict, prefix: str) -> dict:
         state["latched_reference"] = getattr(est, "latched_reference_", "none")
         timing = getattr(est, "latch_timing_", None)
         state["latch_timing"] = None if timing is None else timing.to_dict()
+        state["train_log_rates"] = [float(u) for u in getattr(est, "train_log_rates_", [])]
         dec = est.decision_
         if dec is None:
             state["decision"] = None
@@ -194,6 +195,7 @@ def _restore(est, state: dict, arrays, prefix: str) -> None:
         # Files written before the latch-timing mixture: the GP std alone.
         timing = state.get("latch_timing")
         est.latch_timing_ = None if timing is None else LatchTiming.from_dict(timing)
+        est.train_log_rates_ = [float(u) for u in state.get("train_log_rates", [])]
         est.classifier_ = None
         kind = state["decision"]
         if kind is None:
