@@ -227,3 +227,14 @@ def test_rate_groups_and_bridge_weights_are_vectorized():
     k, v = bridge_weight(np.log([27.5, 55.0, 220.0, 880.0]), a)
     np.testing.assert_array_equal(k, [0, 0, 1, 1])
     np.testing.assert_allclose(v, [0.0, 0.25, 0.25, 0.5])
+
+
+def test_model_choice_folds_skip_the_std_only_fits():
+    """Folds that score means (LOEO, the hybrid's form choice) fit without the extra
+    decision fits; estimators without those parameters are left as they are."""
+    from clutchlab.residual_ml import GPBaseline
+    from clutchlab.residual_ml.base import mean_only
+
+    est = mean_only(SVCPartitionedGP())
+    assert est.latch_uncertainty == "none" and est.rate_uncertainty == "none"
+    assert mean_only(GPBaseline(max_points=7)).get_params() == GPBaseline(max_points=7).get_params()

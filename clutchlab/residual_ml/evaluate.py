@@ -10,6 +10,7 @@ from sklearn.base import clone
 from tqdm.auto import tqdm
 
 from ..data import Trace, dither_period_mean, dither_period_samples, pressure_metrics
+from .base import mean_only
 
 __all__ = ["leave_one_experiment_out", "score_traces"]
 
@@ -71,6 +72,6 @@ def leave_one_experiment_out(
     """
     out = {}
     for k in tqdm(range(len(traces)), desc="LOEO", disable=not progress):
-        m = clone(model).fit([t for i, t in enumerate(traces) if i != k])
+        m = mean_only(clone(model)).fit([t for i, t in enumerate(traces) if i != k])
         out[traces[k].name] = score_traces(m, [traces[k]])["overall"]
     return out

@@ -21,7 +21,7 @@ from sklearn.utils.validation import validate_data
 
 from ..data import Trace, dither_period_mean, dither_period_samples
 from ..errors import DataError, ModelError
-from .base import TraceEstimator
+from .base import TraceEstimator, mean_only
 from .estimators import SVCPartitionedGP
 from .features import DIDT_FEATURES, PHYSICS_FEATURES
 from .physics import DefaultPhysics, PhysicsPredictor
@@ -185,9 +185,11 @@ class HybridModel(TraceEstimator):
             if not train:
                 continue
             res = self._fit_residual(
-                self._residual(), [traces[i] for i in train], [outputs[i] for i in train]
+                mean_only(self._residual()),
+                [traces[i] for i in train],
+                [outputs[i] for i in train],
             )
-            alone = self._standalone().fit([traces[i] for i in train])
+            alone = mean_only(self._standalone()).fit([traces[i] for i in train])
             for i in held:
                 t = traces[i]
                 n = dither_period_samples(t)
