@@ -33,7 +33,13 @@ from .latch_event import (
     fit_event_decision,
     latch_events,
 )
-from .latch_timing import LatchTiming, mixture_interval_std, rate_anchors, switch_errors
+from .latch_timing import (
+    LatchTiming,
+    mixture_interval_std,
+    rate_anchors,
+    switch_errors,
+    switches,
+)
 from .local_gp import LocalGPRegressor
 from .paths import knot_indices, piecewise_classes, predict_on_path
 from .rate_bridge import bridge_weight, group_log_rates
@@ -430,6 +436,10 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
             raise ModelError(
                 f"latch_uncertainty must be 'mixture' or 'none', got {self.latch_uncertainty!r}"
             )
+        if self.rate_uncertainty not in ("bridge", "none"):
+            raise ModelError(
+                f"rate_uncertainty must be 'bridge' or 'none', got {self.rate_uncertainty!r}"
+            )
         self.latch_timing_ = None
         if len(present) >= 2:
             Xc = b.X[:, self.classifier_columns_]
@@ -456,10 +466,6 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
             )
         if self.latch_uncertainty == "mixture" and self.decision_ is not None:
             self.latch_timing_ = self._estimate_latch_timing(blocks)
-        if self.rate_uncertainty not in ("bridge", "none"):
-            raise ModelError(
-                f"rate_uncertainty must be 'bridge' or 'none', got {self.rate_uncertainty!r}"
-            )
         self.train_log_rates_ = self._trained_log_rates(blocks)
 
     def _trained_log_rates(self, blocks: list[Block]) -> list[float]:
@@ -532,10 +538,7 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
                 errors[d] += got[d]
                 missed[d] += lost[d]
             rate = np.abs(held.X[:, didt]) if didt >= 0 else np.full(held.X.shape[0], np.nan)
-            sw = np.flatnonzero(np.diff(held.state.astype(np.int8)) != 0) + 1
-            events += [
-                (float(rate[j]), float(held.X[j, cur]), 1 if held.state[j] == 1 else -1) for j in sw
-            ]
+            events += [(float(rate[j]), float(held.X[j, cur]), d) for j, d in switches(held.state)]
         if not (errors[1] or errors[-1]):
             return None
         anchors = rate_anchors([e for e in events if np.isfinite(e[0])])
