@@ -18,6 +18,9 @@ Usage:
 * ``python studies/latch_timing.py --data DIR --out F.json [--scale latch]`` calibrates
   ``κ`` (run first, the bridge off), ``--scale pressure`` then ``κ_p`` (``κ`` at its
   default); ``[--seeds 0,1,2] [--plants ...] [--kappas 0,0.5,1,1.5,2,3]``;
+* ``python studies/latch_timing.py --compare-noise --data DIR --out F.json`` compares the
+  per-frequency noise floor (``noise_model="frequency"``) with the GP's constant noise on
+  the same held-back ramps, under a rule printed first;
 * ``python studies/latch_timing.py --medium DIR --data DIR --out F.json`` scores the
   defaults against the GP std alone on the standard datasets' medium ramp (only scored,
   nothing chosen).
@@ -56,6 +59,7 @@ RULE_REGION = {"latch": "latch_window", "pressure": "regulated"}
 
 PLANTS = ("stand", "saturating_lugre", "quadratic_play", "stribeck_supply", "preisach_accumulator")
 REGIONS = ("regulated", "latched", "latch_window")
+SHORT = {"regulated": "reg", "latched": "lat", "latch_window": "win"}
 
 
 def rates_dataset(root: Path, plant: str, seed: int) -> Path:
@@ -149,7 +153,7 @@ def standard_dataset(root: Path, plant: str, seed: int) -> Path:
 
 #: What ``--medium`` compares: the GP std alone, and the defaults (mixture and bridge).
 MEDIUM_KINDS = {
-    "gp": {"latch_uncertainty": "none", "rate_uncertainty": "none"},
+    "gp": {"latch_uncertainty": "none", "rate_uncertainty": "none", "noise_model": "constant"},
     "default": {},
 }
 
@@ -179,8 +183,9 @@ def score_medium(args) -> int:
 
     print(
         f"Scoring the defaults (latch_rate_scale = {LATCH_RATE_SCALE}, pressure_rate_scale = "
-        f"{PRESSURE_RATE_SCALE}) against the GP std alone on the medium ramp: train fast + "
-        "slow, score the 9 medium experiments; nothing is chosen here.",
+        f"{PRESSURE_RATE_SCALE}, noise_model = 'frequency') against the GP std alone on the "
+        "medium ramp: train fast + slow, score the 9 medium experiments; nothing is chosen "
+        "here.",
         flush=True,
     )
     args.medium.mkdir(parents=True, exist_ok=True)
@@ -212,6 +217,77 @@ def score_medium(args) -> int:
     return 0
 
 
+NOISE_RULE = """\
+Decision rule (fixed before the run; the 10 s medium ramp is not used):
+  noise_model="frequency" (the noise floor c + s*f per regime) stays the default if, on the
+  held-back 5 s and 20 s ramps (mean over seeds), its latched coverage is higher than
+  noise_model="constant"'s on at least 4 of the 5 circuits and no region's coverage is lower
+  by more than 0.5 points on any circuit; otherwise "constant" is the default."""
+
+
+def noise_coverage(path: Path) -> dict:
+    """Coverage per region on the held-back ramps with each noise model (else defaults)."""
+    from clutchlab.data import load_dataset
+    from clutchlab.residual_ml import SVCPartitionedGP
+    from clutchlab.validation import Protocol
+
+    protocol = Protocol(load_dataset(path), train=("fast", "slow"), test=("r5", "r20"))
+    out = {}
+    for kind in ("constant", "frequency"):
+        model, fit_s = protocol.fit(SVCPartitionedGP(noise_model=kind))
+        score = protocol.score(kind, model, fit_s=fit_s)
+        out[kind] = {**score.details["coverage_2sigma"], "fit_s": fit_s}
+        out[kind]["noise_by_freq"] = {str(g): v for g, v in model.noise_by_freq_.items()}
+    return out
+
+
+def compare_noise(args) -> int:
+    """``--compare-noise``: the noise models on the held-back ramps, and the rule."""
+    print(NOISE_RULE, flush=True)
+    rows = []
+    for plant in args.plants.split(","):
+        for seed in (int(s) for s in args.seeds.split(",")):
+            r = noise_coverage(rates_dataset(args.data, plant, seed))
+            rows.append({"plant": plant, "seed": seed, **r})
+            print(
+                f"{plant:22s} {seed}  "
+                + "   ".join(
+                    f"{k}: " + " ".join(f"{SHORT[reg]} {r[k][reg]:.3f}" for reg in REGIONS)
+                    for k in ("constant", "frequency")
+                ),
+                flush=True,
+            )
+            args.out.write_text(json.dumps(rows, indent=1))
+    print("\nper circuit, mean over seeds: constant -> frequency")
+    higher, worse = 0, []
+    for plant in dict.fromkeys(r["plant"] for r in rows):
+        mine = [r for r in rows if r["plant"] == plant]
+        mean = {
+            k: {reg: float(np.mean([r[k][reg] for r in mine])) for reg in REGIONS}
+            for k in ("constant", "frequency")
+        }
+        higher += mean["frequency"]["latched"] > mean["constant"]["latched"]
+        worse += [
+            f"{plant} {reg}"
+            for reg in REGIONS
+            if mean["frequency"][reg] < mean["constant"][reg] - 0.005
+        ]
+        print(
+            f"  {plant:22s} "
+            + "  ".join(
+                f"{reg} {mean['constant'][reg]:.3f} -> {mean['frequency'][reg]:.3f}"
+                for reg in REGIONS
+            )
+        )
+    met = higher >= 4 and not worse
+    print(
+        f"\nlatched higher on {higher} of {len(set(r['plant'] for r in rows))} circuits; "
+        f"lower by > 0.5 points: {worse or 'none'} -> rule {'met' if met else 'NOT met'}: "
+        f"default noise_model = {'frequency' if met else 'constant'}"
+    )
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, required=True, help="dataset cache folder")
@@ -230,9 +306,16 @@ def main(argv: list[str] | None = None) -> int:
         type=Path,
         help="score the default kappa on the standard datasets in this folder (medium ramp)",
     )
+    ap.add_argument(
+        "--compare-noise",
+        action="store_true",
+        help="compare noise_model='frequency' with 'constant' on the held-back ramps",
+    )
     args = ap.parse_args(argv)
     if args.medium is not None:
         return score_medium(args)
+    if args.compare_noise:
+        return compare_noise(args)
     kappas = [float(k) for k in args.kappas.split(",")]
     region = RULE_REGION[args.scale]
     print(RULES[args.scale], flush=True)

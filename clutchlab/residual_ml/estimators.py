@@ -65,6 +65,8 @@ LATCH_RATE_SCALE = 1.5
 PRESSURE_RATE_SCALE = 0.5
 #: Below this |dI/dt| (mA/s) a sample holds: no rate to interpolate.
 _MOVING_MA_S = 10.0
+#: Median of a χ² variable with one degree of freedom: median(r²) / this estimates σ².
+_MEDIAN_CHI2_1 = 0.454936
 
 
 class _GPParams:
@@ -88,16 +90,18 @@ class _GPParams:
         )
 
     @staticmethod
-    def _gp_fn(gp: LocalGPRegressor, return_std: bool):
+    def _gp_fn(gp: LocalGPRegressor, return_std: bool, noise=None):
         """Mean, and the predictive std of a *measured* dither-period mean (bar): the GP's
         latent std and its observation noise (the variance of one weight-1 observation,
-        i.e. one dither period's mean), so a ±2σ band is where a measurement falls."""
-        noise = float(gp.noise_var_) if return_std else 0.0
+        i.e. one dither period's mean; or ``noise(x)``, bar² per row, when given), so a
+        ±2σ band is where a measurement falls."""
+        const = float(gp.noise_var_) if return_std else 0.0
 
         def fn(x):
             xs = gp._scale(x)
             if return_std:
-                return gp._mean_scaled(xs), np.sqrt(gp._std_scaled(xs) ** 2 + noise)
+                var = const if noise is None else noise(x)
+                return gp._mean_scaled(xs), np.sqrt(gp._std_scaled(xs) ** 2 + var)
             return gp._mean_scaled(xs)
 
         return fn
@@ -285,6 +289,12 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         trained rates. ``none``: not added.
     pressure_rate_scale : float
         ``κ_p`` of that term (dimensionless).
+    noise_model : {"frequency", "constant"}
+        Observation noise in the predictive std of a measured dither-period mean:
+        ``frequency`` (default) at least the noise floor ``c + s·f`` per latch regime,
+        fitted to the training residuals against the dither frequency ``f`` (a period
+        mean of white noise has a variance proportional to ``f``); ``constant``: the GP's
+        noise variance. Needs a ``dither_freq_Hz`` feature; the mean is unchanged.
 
     Attributes
     ----------
@@ -308,6 +318,9 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
     train_log_rates_ : list of float
         The trained ramp rates, ``ln(|dI/dt| / (mA/s))`` per rate group (empty without a
         dI/dt feature or on array input).
+    noise_by_freq_ : dict of int to (float, float)
+        Per regime, ``(c, s)`` of the noise floor ``c + s·f``: bar², bar²/Hz (empty
+        with ``noise_model="constant"``, no dither-frequency feature, or array input).
     """
 
     _default_features = LAG_DIDT_FEATURES
@@ -331,6 +344,7 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         latch_rate_scale: float = LATCH_RATE_SCALE,
         rate_uncertainty: str = "bridge",
         pressure_rate_scale: float = PRESSURE_RATE_SCALE,
+        noise_model: str = "frequency",
         kernel: str | None = None,
         ard: bool = True,
         bin_width: float = 0.01,
@@ -359,6 +373,7 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         self.latch_rate_scale = latch_rate_scale
         self.rate_uncertainty = rate_uncertainty
         self.pressure_rate_scale = pressure_rate_scale
+        self.noise_model = noise_model
         self.kernel = kernel
         self.ard = ard
         self.bin_width = bin_width
@@ -440,6 +455,10 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
             raise ModelError(
                 f"rate_uncertainty must be 'bridge' or 'none', got {self.rate_uncertainty!r}"
             )
+        if self.noise_model not in ("frequency", "constant"):
+            raise ModelError(
+                f"noise_model must be 'frequency' or 'constant', got {self.noise_model!r}"
+            )
         self.latch_timing_ = None
         if len(present) >= 2:
             Xc = b.X[:, self.classifier_columns_]
@@ -464,9 +483,63 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
                 f"too few training samples for any latch state (n_samples={b.y.size}; each "
                 "latch state needs at least 2)"
             )
+        self.noise_by_freq_ = self._fit_noise_by_freq(blocks, use_ref)
         if self.latch_uncertainty == "mixture" and self.decision_ is not None:
             self.latch_timing_ = self._estimate_latch_timing(blocks)
         self.train_log_rates_ = self._trained_log_rates(blocks)
+
+    def _freq_column(self) -> int:
+        names = self.feature_names_
+        return names.index("dither_freq_Hz") if "dither_freq_Hz" in names else -1
+
+    def _observation_noise(self, g: int):
+        """Per-row observation-noise variance (bar²) of regime ``g``, or None (the GP's)."""
+        coef = (getattr(self, "noise_by_freq_", None) or {}).get(g)
+        col = self._freq_column()
+        if coef is None or col < 0:
+            return None
+        c, slope = coef
+        gp_noise = float(self.gps_[g].noise_var_)
+        return lambda x: np.maximum(gp_noise, c + slope * np.asarray(x)[:, col])
+
+    def _fit_noise_by_freq(self, blocks: list[Block], use_ref: bool) -> dict:
+        """``(c, s)`` of the noise floor ``c + s·f`` per regime from the training residuals.
+
+        The target is a dither-period mean: white measurement noise averaged over one
+        period has a variance proportional to the dither frequency ``f`` (fewer samples per
+        period), which one constant noise of the GP cannot follow (on a zoo plant's latched
+        plateau the error grew 0.0059 / 0.0075 / 0.0089 bar at 30 / 50 / 70 Hz while the
+        std stayed 0.0057 bar). Per training experiment a robust noise variance of each
+        regime's in-sample residual (every 10th sample; median of r² / 0.455, the median of
+        χ²₁, so transients do not count) is taken; per dither frequency the smallest of them
+        is the floor (the experiment the GP fits best); ``c, s ≥ 0`` are fitted to the
+        floors by non-negative least squares (``s = 0`` with one frequency). The predictive
+        noise is then ``max(GP noise, c + s·f)``.
+        """
+        from scipy.optimize import nnls
+
+        col = self._freq_column()
+        if self.noise_model != "frequency" or col < 0 or blocks[0].name == "arrays":
+            return {}
+        group_of = (lambda b: b.state) if self.event_points == "assign" else (lambda b: b.labels)
+        out = {}
+        for g, gp in self.gps_.items():
+            floor: dict[float, float] = {}
+            for blk in blocks:
+                rows = np.flatnonzero(group_of(blk) == g)[::10]
+                if rows.size < 20:
+                    continue
+                y = blk.y[rows] - (blk.ref[rows] if (use_ref and g == 1) else 0.0)
+                var = float(np.median((y - gp.predict(blk.X[rows])) ** 2) / _MEDIAN_CHI2_1)
+                f = round(float(np.median(blk.X[rows, col])), 3)
+                floor[f] = min(var, floor.get(f, np.inf))
+            if not floor:
+                continue
+            f = np.array(sorted(floor))
+            design = np.column_stack([np.ones_like(f), f if f.size > 1 else np.zeros_like(f)])
+            coef, _ = nnls(design, np.array([floor[k] for k in sorted(floor)]))
+            out[g] = (float(coef[0]), float(coef[1]))
+        return out
 
     def _trained_log_rates(self, blocks: list[Block]) -> list[float]:
         """Log ramp rate of each trained rate group (one median |dI/dt| per experiment)."""
@@ -619,7 +692,10 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         return piecewise_classes(X, knots, self._decide)
 
     def _fns(self, return_std: bool) -> dict:
-        fns = {g: self._gp_fn(gp, return_std) for g, gp in self.gps_.items()}
+        fns = {
+            g: self._gp_fn(gp, return_std, self._observation_noise(g))
+            for g, gp in self.gps_.items()
+        }
         for g in (0, 1):  # a state without its own GP borrows the other's
             if g not in fns:
                 fns[g] = fns[1 - g]

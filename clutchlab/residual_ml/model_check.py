@@ -184,6 +184,7 @@ _PARAM_RULES: dict[str, Callable | None] = {
     "latch_rate_scale": _number(0.0),
     "rate_uncertainty": _one_of(("bridge", "none")),
     "pressure_rate_scale": _number(0.0),
+    "noise_model": _one_of(("frequency", "constant")),
     "classifier": _one_of(CLASSIFIERS),
     "svc_C": _number(0.0, strict=True),
     "svc_gamma": _number(0.0, strict=True),
@@ -415,6 +416,7 @@ class _Checker:
                 "latched_reference",
                 "latch_timing",
                 "train_log_rates",
+                "noise_by_freq",
                 "decision",
                 "gps",
             ),
@@ -526,6 +528,7 @@ class _Checker:
         single = self.key(state, "single_state", where, _optional(_integer(0, 1)))
         self.key(state, "latched_reference", where, _one_of(("line", "none")), required=False)
         self.key(state, "train_log_rates", where, _number_list, required=False)
+        self.key(state, "noise_by_freq", where, _noise_by_freq, required=False)
         timing = self.key(state, "latch_timing", where, required=False)
         if timing is not _MISSING and timing is not None:
             self.latch_timing(timing, f"{where}.latch_timing")
@@ -695,6 +698,20 @@ def _pair(value) -> str | None:
 def _str_list(value) -> str | None:
     if not isinstance(value, list | tuple) or not all(isinstance(v, str) for v in value):
         return f"must be a list of strings, got {value!r}"
+    return None
+
+
+def _noise_by_freq(value) -> str | None:
+    if not isinstance(value, dict):
+        return f"must be a JSON object, got {value!r}"
+    for g, pair in value.items():
+        if g not in ("0", "1"):
+            return f"keys must be latch states '0' / '1', got {g!r}"
+        problem = _pair(pair)
+        if problem is None and min(pair) < 0:
+            problem = f"must be two numbers >= 0, got {pair!r}"
+        if problem:
+            return f"{g}: {problem}"
     return None
 
 

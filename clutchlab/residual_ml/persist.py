@@ -149,6 +149,9 @@ def _state(est, arrays: dict, prefix: str) -> dict:
         timing = getattr(est, "latch_timing_", None)
         state["latch_timing"] = None if timing is None else timing.to_dict()
         state["train_log_rates"] = [float(u) for u in getattr(est, "train_log_rates_", [])]
+        state["noise_by_freq"] = {
+            str(g): [float(c), float(v)] for g, (c, v) in getattr(est, "noise_by_freq_", {}).items()
+        }
         dec = est.decision_
         if dec is None:
             state["decision"] = None
@@ -196,6 +199,9 @@ def _restore(est, state: dict, arrays, prefix: str) -> None:
         timing = state.get("latch_timing")
         est.latch_timing_ = None if timing is None else LatchTiming.from_dict(timing)
         est.train_log_rates_ = [float(u) for u in state.get("train_log_rates", [])]
+        est.noise_by_freq_ = {
+            int(g): (float(c), float(v)) for g, (c, v) in state.get("noise_by_freq", {}).items()
+        }
         est.classifier_ = None
         kind = state["decision"]
         if kind is None:

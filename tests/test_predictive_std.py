@@ -1,5 +1,6 @@
-"""Latch-timing uncertainty (``SVCPartitionedGP(latch_uncertainty="mixture")``): the
-switch-current error model and the mixture std near a predicted switch."""
+"""The predictive std of ``SVCPartitionedGP`` beyond the GP's own: the latch-timing mixture
+near a predicted switch (``latch_uncertainty``), the rate bridge between trained ramp rates
+(``rate_uncertainty``) and the per-frequency noise floor of a period mean (``noise_model``)."""
 
 from __future__ import annotations
 
@@ -93,11 +94,17 @@ def data():
 @pytest.fixture(scope="module")
 def fitted(data):
     train = data.select(ramps=["fast", "slow"])
+    only = {"rate_uncertainty": "none", "noise_model": "constant"}
     fits = {
-        kind: SVCPartitionedGP(latch_uncertainty=kind, rate_uncertainty="none", **SMALL).fit(train)
+        kind: SVCPartitionedGP(latch_uncertainty=kind, **only, **SMALL).fit(train)
         for kind in ("mixture", "none")
     }
-    fits["bridge"] = SVCPartitionedGP(latch_uncertainty="none", **SMALL).fit(train)
+    fits["bridge"] = SVCPartitionedGP(
+        latch_uncertainty="none", noise_model="constant", **SMALL
+    ).fit(train)
+    fits["noise"] = SVCPartitionedGP(
+        latch_uncertainty="none", rate_uncertainty="none", **SMALL
+    ).fit(train)
     return fits
 
 
@@ -187,7 +194,11 @@ def test_the_hybrid_residual_carries_the_mixture(data):
     std = {}
     for kind in ("mixture", "none"):
         res = SVCPartitionedGP(
-            features=HYBRID_FEATURES, latch_uncertainty=kind, rate_uncertainty="none", **SMALL
+            features=HYBRID_FEATURES,
+            latch_uncertainty=kind,
+            rate_uncertainty="none",
+            noise_model="constant",
+            **SMALL,
         )
         hyb = HybridModel(residual=res, form="residual").fit(train)
         std[kind] = hyb.predict(trace, return_std=True)[1]
@@ -238,3 +249,40 @@ def test_model_choice_folds_skip_the_std_only_fits():
     est = mean_only(SVCPartitionedGP())
     assert est.latch_uncertainty == "none" and est.rate_uncertainty == "none"
     assert mean_only(GPBaseline(max_points=7)).get_params() == GPBaseline(max_points=7).get_params()
+
+
+def test_the_noise_floor_follows_the_dither_frequency(data, fitted):
+    """A period mean of white noise is noisier at a higher dither frequency (fewer samples
+    per period): the floor grows with f, and the std is never below the GP's."""
+    noise, plain = fitted["noise"], fitted["none"]
+    assert plain.noise_by_freq_ == {}
+    assert set(noise.noise_by_freq_) == {0, 1}
+    for c, slope in noise.noise_by_freq_.values():
+        assert c >= 0 and slope >= 0
+    assert noise.noise_by_freq_[1][1] > 0  # the stand's sensor noise is white
+    std = {}
+    for name in ("medium_30Hz_A", "medium_70Hz_B"):
+        trace = data[name]
+        m1, s1 = noise.predict(trace, return_std=True)
+        m0, s0 = plain.predict(trace, return_std=True)
+        np.testing.assert_array_equal(m1, m0)
+        assert (s1 >= s0 - 1e-12).all()
+        latched = noise.predict_latch(trace) == 1
+        std[name] = np.median(s1[latched])
+    assert std["medium_70Hz_B"] > std["medium_30Hz_A"]
+
+
+def test_the_noise_floor_is_saved_and_checked(tmp_path, data, fitted):
+    model = fitted["noise"]
+    model.save(tmp_path / "m.json")
+    loaded = load_model(tmp_path / "m.json")
+    assert loaded.noise_by_freq_ == model.noise_by_freq_
+    trace = data["medium_70Hz_B"]
+    np.testing.assert_allclose(
+        loaded.predict(trace, return_std=True)[1], model.predict(trace, return_std=True)[1]
+    )
+    doc = json.loads((tmp_path / "m.json").read_text())
+    doc["state"]["noise_by_freq"]["1"] = [-1.0, 0.0]
+    (tmp_path / "m.json").write_text(json.dumps(doc))
+    with pytest.raises(ModelFileError, match="noise_by_freq"):
+        load_model(tmp_path / "m.json")
