@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import pandas as pd
 
 __all__ = ["Bins", "grid_bins"]
 
@@ -59,12 +60,19 @@ class Bins:
         )
 
 
+def _sorted_codes(values: np.ndarray) -> np.ndarray:
+    """``np.unique(values, return_inverse=True)[1]`` (int64), by hashing: pandas'
+    factorization with sorted codes gives the same codes without sorting all ~10⁶ values
+    (only the distinct ones), several times faster on a training set's samples."""
+    return pd.factorize(np.asarray(values), sort=True)[0].astype(np.int64)
+
+
 def _codes(column: np.ndarray, width: float) -> np.ndarray:
     """Integer grid cell of every value (exact-value classes when ``width`` is 0)."""
     if width > 0:
         k = np.floor(column / width)
         return (k - k.min()).astype(np.int64)
-    return np.unique(column, return_inverse=True)[1].astype(np.int64)
+    return _sorted_codes(column)
 
 
 def grid_bins(
@@ -123,15 +131,20 @@ def grid_bins(
         return Bins(empty, z, z, z.astype(np.int64), z.astype(np.int64), index)
     xs, ws, ls = x[use], w[use], lab[use]
     cols = [_codes(xs[:, j], float(width[j])) for j in range(d)]
-    cols.append(np.unique(ls, return_inverse=True)[1].astype(np.int64))
+    cols.append(_sorted_codes(ls))
     spans = [int(c.max()) + 1 for c in cols]
     if float(np.prod(np.asarray(spans, dtype=np.float64))) < 2.0**62:
         key = np.zeros(xs.shape[0], dtype=np.int64)
         for c, s in zip(cols, spans, strict=True):
             key = key * s + c
-        _, inv = np.unique(key, return_inverse=True)
-    else:  # too many cells for one int64 key: lexicographic unique of the code rows
-        _, inv = np.unique(np.stack(cols, axis=1), axis=0, return_inverse=True)
+        inv = _sorted_codes(key)
+    else:  # too many cells for one int64 key: the lexicographic rank of the code rows,
+        # built column by column (each partial key is re-coded to its sorted rank, < n, so
+        # the next product stays small): the same cells in the same order as
+        # np.unique(rows, axis=0), without its lexicographic sort of n rows
+        inv = cols[0]
+        for c, s in zip(cols[1:], spans[1:], strict=True):
+            inv = _sorted_codes(inv * s + c)
     inv = inv.ravel()
     m = int(inv.max()) + 1
     wsum = np.bincount(inv, weights=ws, minlength=m)
