@@ -14,8 +14,9 @@ from .hybrid import HybridModel
 __all__ = ["PAPER_FAITHFUL", "VARIANTS", "make_variant", "paper_faithful"]
 
 #: Settings of the paper's stage 3 as published, beside clutchlab's defaults: the nominal
-#: current (no lag), the rational-quadratic kernel, the RBF-SVC classifier and the
-#: latched GP on the pressure itself (no line-pressure reference).
+#: current (no lag), the rational-quadratic kernel, the RBF-SVC classifier, the latched GP
+#: on the pressure itself (no line-pressure reference) and the GPs' own predictive std (no
+#: latch-timing mixture, rate bridge or per-frequency noise floor).
 PAPER_FAITHFUL: MappingProxyType[str, object] = MappingProxyType(
     {
         "features": DIDT_FEATURES,
@@ -23,6 +24,9 @@ PAPER_FAITHFUL: MappingProxyType[str, object] = MappingProxyType(
         "kernel": "rq",
         "latch_model": "classifier",
         "latched_reference": "none",
+        "latch_uncertainty": "none",
+        "rate_uncertainty": "none",
+        "noise_model": "constant",
     }
 )
 
