@@ -286,3 +286,19 @@ def test_the_noise_floor_is_saved_and_checked(tmp_path, data, fitted):
     (tmp_path / "m.json").write_text(json.dumps(doc))
     with pytest.raises(ModelFileError, match="noise_by_freq"):
         load_model(tmp_path / "m.json")
+
+
+def test_the_scored_coverage_names_the_experiments_it_pools(data, fitted):
+    """``evaluate`` draws the band of one featured experiment and scores its coverage there:
+    the details and the report's variant line say on which experiments."""
+    from clutchlab.validation import Protocol
+    from clutchlab.validation.report import _describe
+
+    protocol = Protocol(data, train=("fast", "slow"), test=("medium",))
+    one = protocol.featured
+    score = protocol.score("paper_svc_gp", fitted["mixture"], std_for=(one,))
+    assert score.details["coverage_experiments"] == [one]
+    line = _describe("paper_svc_gp", {"description": "d", **score.details}, html_=False)
+    assert f"±2σ coverage ({one})" in line
+    every = protocol.score("paper_svc_gp", fitted["mixture"])
+    assert every.details["coverage_experiments"] == sorted(protocol.test_names)

@@ -29,7 +29,10 @@ key                             unit  definition
                                       ±2σ, per region: ``regulated`` and ``latched`` (the
                                       measured state, more than ``latch_window_s`` from a
                                       measured snap or release) and ``latch_window`` (within
-                                      it); see :func:`interval_coverage`
+                                      it); see :func:`interval_coverage`. Pooled over
+                                      the test experiments listed in
+                                      ``coverage_experiments`` (``evaluate``: the featured
+                                      one, whose band the report draws)
 ``fit_s``                       s     wall time of ``fit`` on the training experiments (for a
                                       model built on another variant, including that one's)
 ``predict_s``                   s     wall time of ``predict`` on all test experiments

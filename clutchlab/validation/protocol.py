@@ -482,6 +482,9 @@ class Protocol:
         coverage = self._coverage(refs, predictions)
         if coverage:
             details["coverage_2sigma"] = coverage
+            details["coverage_experiments"] = sorted(
+                n for n, pr in predictions.items() if pr.std_bar is not None
+            )
         if callable(getattr(model, "predict_latch", None)):
             details["classifier_accuracy"] = self._latch_accuracy(model)
         if callable(getattr(model, "gp_hyperparameters", None)):

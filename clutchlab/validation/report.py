@@ -390,8 +390,14 @@ def _describe(name: str, d: dict[str, Any], html_: bool) -> str:
         )
     cov = d.get("coverage_2sigma") or {}
     if cov:
-        text += "; ±2σ coverage " + ", ".join(
-            f"{k.replace('_', ' ')} {100 * v:.0f} %" for k, v in cov.items() if v is not None
+        on = d.get("coverage_experiments") or []
+        text += (
+            "; ±2σ coverage"
+            + (f" ({', '.join(on)})" if on else "")
+            + " "
+            + ", ".join(
+                f"{k.replace('_', ' ')} {100 * v:.0f} %" for k, v in cov.items() if v is not None
+            )
         )
     if d.get("gp_at_bounds"):
         text += "; GP hyperparameters on a bound of their range: " + "; ".join(d["gp_at_bounds"])
