@@ -112,8 +112,8 @@ def coverage(path: Path, kappas: list[float], scale: str) -> dict:
         model.latch_timing_ = None if k == "none" else timing
         model.rate_uncertainty = "none" if k == "none" or scale == "latch" else "bridge"
         if k != "none":
-            if scale == "latch" and timing is not None:
-                timing.rate_scale = k
+            if scale == "latch":
+                model.latch_rate_scale = k
             elif scale == "pressure":
                 model.pressure_rate_scale = k
         counts = {r: [0, 0] for r in REGIONS}

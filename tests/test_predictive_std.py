@@ -55,9 +55,9 @@ def test_bridge_variance_is_zero_at_trained_rates_and_largest_between():
     span = a[1] - a[0]
     assert bridge_variance(a[1] + span, a, c) == pytest.approx(100.0**2)
     assert bridge_variance(mid, a[:1], c[:1]) == 0.0  # one trained rate: no rate term
-    timing = LatchTiming({1: 1.0, -1: 2.0}, {1: a, -1: a}, {1: c, -1: c}, rate_scale=0.5)
-    assert timing.sigma_mA(-1, 100.0) == pytest.approx(np.sqrt(4.0 + 0.25 * 100.0**2 / 4))
-    assert timing.sigma_mA(1, 400.0) == pytest.approx(1.0)
+    timing = LatchTiming({1: 1.0, -1: 2.0}, {1: a, -1: a}, {1: c, -1: c})
+    assert timing.sigma_mA(-1, 100.0, 0.5) == pytest.approx(np.sqrt(4.0 + 0.25 * 100.0**2 / 4))
+    assert timing.sigma_mA(1, 400.0, 0.5) == pytest.approx(1.0)
 
 
 def test_mixture_std_reaches_the_other_regime_only_when_it_is_likely():
@@ -165,11 +165,11 @@ def test_save_load_keeps_the_timing_model(tmp_path, data, fitted):
     )
     doc = json.loads((tmp_path / "m.json").read_text())
     doc["state"]["latch_timing"]["currents_mA"]["off"] = [1.0]
-    doc["state"]["latch_timing"]["rate_scale"] = -1
+    doc["params"]["latch_rate_scale"] = -1  # κ is a parameter, read at prediction
     (tmp_path / "m.json").write_text(json.dumps(doc))
     with pytest.raises(ModelFileError) as err:
         load_model(tmp_path / "m.json")
-    assert "latch_timing.rate_scale" in str(err.value)
+    assert "latch_rate_scale" in str(err.value)
     assert "has 1 values for 2 log_rates" in str(err.value)
 
 
@@ -244,10 +244,11 @@ def test_model_choice_folds_skip_the_std_only_fits():
     """Folds that score means (LOEO, the hybrid's form choice) fit without the extra
     decision fits; estimators without those parameters are left as they are."""
     from clutchlab.residual_ml import GPBaseline
-    from clutchlab.residual_ml.base import mean_only
+    from clutchlab.residual_ml.estimators import mean_only
 
     est = mean_only(SVCPartitionedGP())
     assert est.latch_uncertainty == "none" and est.rate_uncertainty == "none"
+    assert est.noise_model == "constant"
     assert mean_only(GPBaseline(max_points=7)).get_params() == GPBaseline(max_points=7).get_params()
 
 

@@ -75,18 +75,6 @@ def _numeric_lag(value) -> float:
     return lag
 
 
-def mean_only(est):
-    """``est`` with the std-only parts of its fit switched off (its mean is unchanged).
-
-    For fits whose predictions are only scored by their mean (folds of a model choice):
-    ``latch_uncertainty`` / ``rate_uncertainty`` of :class:`~.estimators.SVCPartitionedGP`
-    cost extra decision fits and do not move the mean.
-    """
-    params = est.get_params(deep=False)
-    off = {k: "none" for k in ("latch_uncertainty", "rate_uncertainty") if k in params}
-    return est.set_params(**off) if off else est
-
-
 @dataclass
 class Block:
     """Features, target, weights and labels of one experiment (or one array input).

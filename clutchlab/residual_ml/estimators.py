@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import os
 from concurrent.futures import ThreadPoolExecutor
+from types import MappingProxyType
 
 import numpy as np
 
@@ -47,9 +48,11 @@ from .rate_bridge import bridge_weight, group_log_rates
 __all__ = [
     "LATCH_RATE_SCALE",
     "PRESSURE_RATE_SCALE",
+    "STD_OPTIONS",
     "GPBaseline",
     "GPWithDerivative",
     "SVCPartitionedGP",
+    "mean_only",
 ]
 
 #: Default ``κ`` of :mod:`~clutchlab.residual_ml.latch_timing` (``latch_rate_scale``):
@@ -63,10 +66,31 @@ LATCH_RATE_SCALE = 1.5
 #: at 1.5 (``studies/latch_timing.py --scale pressure``: the smallest value of the same grid
 #: with ≥ 90 % regulated-region coverage on every circuit).
 PRESSURE_RATE_SCALE = 0.5
+#: The predictive-std options of :class:`SVCPartitionedGP` and their values (the default
+#: first, the GP's own std last): the model check and :func:`mean_only` read them too.
+STD_OPTIONS: MappingProxyType[str, tuple[str, str]] = MappingProxyType(
+    {
+        "latch_uncertainty": ("mixture", "none"),
+        "rate_uncertainty": ("bridge", "none"),
+        "noise_model": ("frequency", "constant"),
+    }
+)
 #: Below this |dI/dt| (mA/s) a sample holds: no rate to interpolate.
 _MOVING_MA_S = 10.0
 #: Median of a χ² variable with one degree of freedom: median(r²) / this estimates σ².
 _MEDIAN_CHI2_1 = 0.454936
+
+
+def mean_only(est):
+    """``est`` with the std-only parts of its fit switched off (its mean is unchanged).
+
+    For fits whose predictions are only scored by their mean (folds of a model choice): the
+    :data:`STD_OPTIONS` of :class:`SVCPartitionedGP` cost extra decision fits and residual
+    evaluations and do not move the mean. Other estimators are returned as they are.
+    """
+    params = est.get_params(deep=False)
+    off = {k: choices[-1] for k, choices in STD_OPTIONS.items() if k in params}
+    return est.set_params(**off) if off else est
 
 
 class _GPParams:
@@ -447,18 +471,11 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
             raise ModelError(
                 f"latch_model must be 'classifier' or 'event', got {self.latch_model!r}"
             )
-        if self.latch_uncertainty not in ("mixture", "none"):
-            raise ModelError(
-                f"latch_uncertainty must be 'mixture' or 'none', got {self.latch_uncertainty!r}"
-            )
-        if self.rate_uncertainty not in ("bridge", "none"):
-            raise ModelError(
-                f"rate_uncertainty must be 'bridge' or 'none', got {self.rate_uncertainty!r}"
-            )
-        if self.noise_model not in ("frequency", "constant"):
-            raise ModelError(
-                f"noise_model must be 'frequency' or 'constant', got {self.noise_model!r}"
-            )
+        for name, choices in STD_OPTIONS.items():
+            if getattr(self, name) not in choices:
+                raise ModelError(
+                    f"{name} must be {' or '.join(map(repr, choices))}, got {getattr(self, name)!r}"
+                )
         self.latch_timing_ = None
         if len(present) >= 2:
             Xc = b.X[:, self.classifier_columns_]
@@ -491,6 +508,10 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
     def _freq_column(self) -> int:
         names = self.feature_names_
         return names.index("dither_freq_Hz") if "dither_freq_Hz" in names else -1
+
+    def _didt_column(self) -> int:
+        """Column of the dI/dt feature among all features (−1 when absent)."""
+        return decision_current_columns(self.feature_names_)[1]
 
     def _observation_noise(self, g: int):
         """Per-row observation-noise variance (bar²) of regime ``g``, or None (the GP's)."""
@@ -543,7 +564,7 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
 
     def _trained_log_rates(self, blocks: list[Block]) -> list[float]:
         """Log ramp rate of each trained rate group (one median |dI/dt| per experiment)."""
-        didt = decision_current_columns(self.feature_names_)[1]
+        didt = self._didt_column()
         if didt < 0 or blocks[0].name == "arrays":
             return []
         per_exp = []
@@ -622,7 +643,6 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
             },
             log_rates={d: anchors[d][0] for d in (1, -1)},
             currents={d: anchors[d][1] for d in (1, -1)},
-            rate_scale=float(self.latch_rate_scale),
             n_errors={d: len(errors[d]) for d in (1, -1)},
             n_missed=missed,
         )
@@ -630,7 +650,7 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
     def _widen_for_rate(self, X, classes, knots, std, fns) -> np.ndarray:
         """``std`` with the pressure's rate-interpolation variance (``rate_uncertainty``)."""
         anchors = getattr(self, "train_log_rates_", [])
-        didt = decision_current_columns(self.feature_names_)[1]
+        didt = self._didt_column()
         if self.rate_uncertainty != "bridge" or len(anchors) < 2 or didt < 0:
             return std
         rate = np.abs(X[knots, didt])
@@ -660,7 +680,9 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         if timing is None or not (classes[1:] != classes[:-1]).any():
             return std
         cur, didt = self._timing_columns()
-        rows, p = timing.windows(classes, X[:, cur], X[:, didt] if didt >= 0 else None)
+        rows, p = timing.windows(
+            classes, X[:, cur], X[:, didt] if didt >= 0 else None, self.latch_rate_scale
+        )
         if rows.size == 0:
             return std
         other = 1 - classes[rows]

@@ -10,7 +10,7 @@ from sklearn.base import clone
 from tqdm.auto import tqdm
 
 from ..data import Trace, dither_period_mean, dither_period_samples, pressure_metrics
-from .base import mean_only
+from .estimators import mean_only
 
 __all__ = ["leave_one_experiment_out", "score_traces"]
 

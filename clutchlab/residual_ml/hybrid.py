@@ -21,8 +21,8 @@ from sklearn.utils.validation import validate_data
 
 from ..data import Trace, dither_period_mean, dither_period_samples
 from ..errors import DataError, ModelError
-from .base import TraceEstimator, mean_only
-from .estimators import SVCPartitionedGP
+from .base import TraceEstimator
+from .estimators import SVCPartitionedGP, mean_only
 from .features import DIDT_FEATURES, PHYSICS_FEATURES
 from .physics import DefaultPhysics, PhysicsPredictor
 

@@ -22,7 +22,7 @@ feature)::
   Brownian bridge of :mod:`~clutchlab.residual_ml.rate_bridge` in ``u = ln |dI/dt|``
   through the trained rates' mean switch currents (``v(u)`` there; ``ΔI`` the change of the
   mean switch current between the two bracketing rates). ``κ`` (``latch_rate_scale`` of the
-  estimator, ``rate_scale`` here; dimensionless) is calibrated on held-back
+  estimator, passed in as ``scale``; dimensionless) is calibrated on held-back
   *training-side* ramp rates (``studies/latch_timing.py``), never on the test ramp.
 
 **Predictive distribution near a switch** predicted at current ``I*``: the other latch
@@ -147,8 +147,6 @@ class LatchTiming:
     log_rates, currents : dict of int to list of float
         Per direction, the trained rate groups' ``ln(|dI/dt| / (mA/s))`` and mean switch
         current (mA).
-    rate_scale : float
-        ``κ`` (dimensionless).
     n_errors, n_missed : dict of int to int
         Held-out switches scored and missed, per direction.
     """
@@ -156,14 +154,14 @@ class LatchTiming:
     fit_rms_mA: dict[int, float]
     log_rates: dict[int, list[float]]
     currents: dict[int, list[float]]
-    rate_scale: float
     n_errors: dict[int, int] = field(default_factory=lambda: {1: 0, -1: 0})
     n_missed: dict[int, int] = field(default_factory=lambda: {1: 0, -1: 0})
 
-    def sigma_mA(self, direction: int, rate_mA_s: float) -> float:
-        """σ of the switch current (mA) for a switch of ``direction`` at ``|dI/dt|`` rate."""
+    def sigma_mA(self, direction: int, rate_mA_s: float, scale: float) -> float:
+        """σ of the switch current (mA) for a switch of ``direction`` at ``|dI/dt|`` rate
+        (mA/s), with ``κ = scale`` (dimensionless)."""
         u = np.log(max(abs(rate_mA_s), 1e-9))
-        var = self.fit_rms_mA[direction] ** 2 + self.rate_scale**2 * bridge_variance(
+        var = self.fit_rms_mA[direction] ** 2 + scale**2 * bridge_variance(
             u, self.log_rates[direction], self.currents[direction]
         )
         return float(max(np.sqrt(var), _SIGMA_FLOOR_MA))
@@ -178,7 +176,6 @@ class LatchTiming:
             "fit_rms_mA": by(self.fit_rms_mA),
             "log_rates": by(self.log_rates),
             "currents_mA": by(self.currents),
-            "rate_scale": self.rate_scale,
             "n_errors": by(self.n_errors),
             "n_missed": by(self.n_missed),
         }
@@ -196,13 +193,16 @@ class LatchTiming:
             fit_rms_mA=un(d["fit_rms_mA"]),
             log_rates=un(d["log_rates"], None),
             currents=un(d["currents_mA"], None),
-            rate_scale=float(d["rate_scale"]),
             n_errors=un(d["n_errors"], int),
             n_missed=un(d["n_missed"], int),
         )
 
     def windows(
-        self, classes: np.ndarray, current_mA: np.ndarray, didt_mA_s: np.ndarray | None
+        self,
+        classes: np.ndarray,
+        current_mA: np.ndarray,
+        didt_mA_s: np.ndarray | None,
+        scale: float,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Samples near a predicted switch and the probability that their state is the other.
 
@@ -214,6 +214,8 @@ class LatchTiming:
             The decision's current per sample, mA.
         didt_mA_s : numpy.ndarray or None
             dI/dt per sample, mA/s (None: no rate term).
+        scale : float
+            ``κ`` of the rate term (dimensionless).
 
         Returns
         -------
@@ -229,7 +231,7 @@ class LatchTiming:
         for k, d in switches(classes):
             rate = abs(float(didt_mA_s[k])) if didt_mA_s is not None else np.nan
             sigma = (
-                self.sigma_mA(d, rate)
+                self.sigma_mA(d, rate, scale)
                 if np.isfinite(rate)
                 else max(self.fit_rms_mA[d], _SIGMA_FLOOR_MA)
             )

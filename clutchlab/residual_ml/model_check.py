@@ -32,7 +32,7 @@ import numpy as np
 
 from ..errors import ClutchlabError, ModelFileError
 from .classifiers import CLASSIFIERS, KernelDecision, LinearDecision
-from .estimators import GPBaseline, GPWithDerivative, SVCPartitionedGP
+from .estimators import STD_OPTIONS, GPBaseline, GPWithDerivative, SVCPartitionedGP
 from .features import FEATURES
 from .hybrid import HybridModel
 from .kernels import KERNELS, kernel_spec
@@ -180,11 +180,9 @@ _PARAM_RULES: dict[str, Callable | None] = {
     "event_points": _one_of(("exclude", "assign")),
     "latch_model": _one_of(("classifier", "event")),
     "latched_reference": _one_of(("line", "none")),
-    "latch_uncertainty": _one_of(("mixture", "none")),
+    **{name: _one_of(choices) for name, choices in STD_OPTIONS.items()},
     "latch_rate_scale": _number(0.0),
-    "rate_uncertainty": _one_of(("bridge", "none")),
     "pressure_rate_scale": _number(0.0),
-    "noise_model": _one_of(("frequency", "constant")),
     "classifier": _one_of(CLASSIFIERS),
     "svc_C": _number(0.0, strict=True),
     "svc_gamma": _number(0.0, strict=True),
@@ -502,8 +500,7 @@ class _Checker:
             "n_errors": _integer(0),
             "n_missed": _integer(0),
         }
-        self.unknown(timing, (*per_direction, "rate_scale"), where)
-        self.key(timing, "rate_scale", where, _number(0.0))
+        self.unknown(timing, tuple(per_direction), where)
         for key, rule in per_direction.items():
             d = self.key(timing, key, where)
             if d is _MISSING or (d := self.mapping(d, f"{where}.{key}")) is None:
