@@ -32,3 +32,21 @@ def make_trace(
         "oil_temp_C": np.full(n, float(temp_C)),
     }
     return Trace(name, signals, meta={"ramp": ramp})
+
+
+def tiny_stand(seed: int):
+    """Six short stand experiments: fast / medium / slow (1 / 2 / 4 s ramps) × (30 Hz A,
+    70 Hz B), two substeps; the dataset of the ML tests (seed of noise and wander)."""
+    from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
+
+    config = StandConfig(
+        settings=(DitherSetting(30.0, "A"), DitherSetting(70.0, "B")),
+        ramps=(
+            RampProfile("fast", 1.0, 0.3),
+            RampProfile("medium", 2.0, 0.3),
+            RampProfile("slow", 4.0, 0.3),
+        ),
+        substeps=2,
+        seed=seed,
+    )
+    return run_stand(config, progress=False).dataset

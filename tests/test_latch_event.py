@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from synthetic import tiny_stand
 
 from clutchlab.errors import ModelError
 from clutchlab.physics.fmu import build_fmu, ml_program_from
 from clutchlab.physics.fmu.adapters import decision_spec
-from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
 from clutchlab.residual_ml import SVCPartitionedGP, load_model, step_predictor
 from clutchlab.residual_ml.features import causal_features
 from clutchlab.residual_ml.latch_event import EventDecision, fit_event_decision, latch_events
@@ -63,17 +63,7 @@ def test_fit_needs_its_features_and_events():
 
 @pytest.fixture(scope="module")
 def data():
-    config = StandConfig(
-        settings=(DitherSetting(30.0, "A"), DitherSetting(70.0, "B")),
-        ramps=(
-            RampProfile("fast", 1.0, 0.3),
-            RampProfile("medium", 2.0, 0.3),
-            RampProfile("slow", 4.0, 0.3),
-        ),
-        substeps=2,
-        seed=1,
-    )
-    return run_stand(config, progress=False).dataset
+    return tiny_stand(1)
 
 
 @pytest.fixture(scope="module")

@@ -12,11 +12,11 @@ import json
 
 import numpy as np
 import pytest
+from synthetic import tiny_stand
 
 from clutchlab.data import Trace, dither_period_mean, dither_period_samples
 from clutchlab.errors import DataError, ModelError
 from clutchlab.physics.fmu import ml_program_from
-from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
 from clutchlab.residual_ml import HybridModel, PhysicsPredictor, SVCPartitionedGP, load_model
 from clutchlab.residual_ml.hybrid import HYBRID_FEATURES
 from clutchlab.validation.metrics import compare_experiment, pool_comparisons
@@ -26,17 +26,7 @@ SMALL = {"n_hyper": 300, "max_points": 300}
 
 @pytest.fixture(scope="module")
 def data():
-    config = StandConfig(
-        settings=(DitherSetting(30.0, "A"), DitherSetting(70.0, "B")),
-        ramps=(
-            RampProfile("fast", 1.0, 0.3),
-            RampProfile("medium", 2.0, 0.3),
-            RampProfile("slow", 4.0, 0.3),
-        ),
-        substeps=2,
-        seed=3,
-    )
-    return run_stand(config, progress=False).dataset
+    return tiny_stand(3)
 
 
 @pytest.fixture(scope="module")

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from sklearn.base import clone
 from sklearn.exceptions import NotFittedError
+from synthetic import tiny_stand
 
 from clutchlab.data import Trace, dither_period_mean, dither_period_samples
 from clutchlab.errors import DataError, ModelError
-from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
 from clutchlab.residual_ml import (
     EVENT,
     LATCHED,
@@ -41,17 +41,7 @@ SMALL = {"n_hyper": 300, "max_points": 300}
 @pytest.fixture(scope="module")
 def tiny():
     """Six short stand experiments: fast / medium / slow × (30 Hz A, 70 Hz B)."""
-    config = StandConfig(
-        settings=(DitherSetting(30.0, "A"), DitherSetting(70.0, "B")),
-        ramps=(
-            RampProfile("fast", 1.0, 0.3),
-            RampProfile("medium", 2.0, 0.3),
-            RampProfile("slow", 4.0, 0.3),
-        ),
-        substeps=2,
-        seed=1,
-    )
-    return run_stand(config, progress=False).dataset
+    return tiny_stand(1)
 
 
 @pytest.fixture(scope="module")

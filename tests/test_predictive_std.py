@@ -9,9 +9,9 @@ import json
 import numpy as np
 import pytest
 from scipy.special import ndtr
+from synthetic import tiny_stand
 
 from clutchlab.errors import ModelFileError
-from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
 from clutchlab.residual_ml import HybridModel, SVCPartitionedGP, load_model
 from clutchlab.residual_ml.hybrid import HYBRID_FEATURES
 from clutchlab.residual_ml.latch_timing import (
@@ -78,17 +78,7 @@ def test_mixture_std_reaches_the_other_regime_only_when_it_is_likely():
 
 @pytest.fixture(scope="module")
 def data():
-    config = StandConfig(
-        settings=(DitherSetting(30.0, "A"), DitherSetting(70.0, "B")),
-        ramps=(
-            RampProfile("fast", 1.0, 0.3),
-            RampProfile("medium", 2.0, 0.3),
-            RampProfile("slow", 4.0, 0.3),
-        ),
-        substeps=2,
-        seed=5,
-    )
-    return run_stand(config, progress=False).dataset
+    return tiny_stand(5)
 
 
 @pytest.fixture(scope="module")
