@@ -34,6 +34,10 @@ from pathlib import Path
 
 import numpy as np
 
+# The held-back-rate datasets of the latch-event study (same plants, ramps and seeds): one
+# writer, so both studies read the same data. The script's folder is on sys.path.
+from latch_event import PLANTS, rates_dataset
+
 RULES = {
     "latch": """\
 Decision rule (fixed before the run; the 10 s medium ramp is not used):
@@ -57,30 +61,8 @@ Also printed (not decided on): the latched / window coverage and the mean band w
 #: The region whose coverage the rule of each scale reads.
 RULE_REGION = {"latch": "latch_window", "pressure": "regulated"}
 
-PLANTS = ("stand", "saturating_lugre", "quadratic_play", "stribeck_supply", "preisach_accumulator")
 REGIONS = ("regulated", "latched", "latch_window")
 SHORT = {"regulated": "reg", "latched": "lat", "latch_window": "win"}
-
-
-def rates_dataset(root: Path, plant: str, seed: int) -> Path:
-    """The plant's dataset with ramps fast / r5 / r20 / slow (written once, then reused)."""
-    from clutchlab.data import save_dataset
-    from clutchlab.physics.stand import StandConfig, run_stand
-    from clutchlab.physics.stand.plants import PlantConfig, run_plant
-    from clutchlab.physics.stand.scenarios import RampProfile
-
-    path = root / f"{plant}_rates_s{seed}"
-    if not (path / "manifest.json").exists():
-        ramps = tuple(
-            RampProfile(label, s)
-            for label, s in (("fast", 2.5), ("r5", 5.0), ("r20", 20.0), ("slow", 40.0))
-        )
-        if plant == "stand":
-            run = run_stand(StandConfig(ramps=ramps, seed=seed), progress=False)
-        else:
-            run = run_plant(PlantConfig(plant, ramps=ramps, seed=seed), progress=False)
-        save_dataset(run.dataset, path)
-    return path
 
 
 def coverage(path: Path, kappas: list[float], scale: str) -> dict:
