@@ -17,7 +17,9 @@ Usage:
 
 * ``python studies/latch_timing.py --data DIR --out F.json [--scale latch]`` calibrates
   ``κ`` (run first, the bridge off), ``--scale pressure`` then ``κ_p`` (``κ`` at its
-  default); ``[--seeds 0,1,2] [--plants ...] [--kappas 0,0.5,1,1.5,2,3]``;
+  default); ``[--seeds 0,1,2] [--plants ...] [--kappas 0,0.5,1,1.5,2,3]
+  [--over-seeds worst|mean]`` (how a circuit's seeds are pooled: the worst seed, as issue 20
+  asks, or their mean, the first calibration's rule);
 * ``python studies/latch_timing.py --compare-noise --data DIR --out F.json`` compares the
   per-frequency noise floor (``noise_model="frequency"``) with the GP's constant noise on
   the same held-back ramps, under a rule printed first;
@@ -43,7 +45,7 @@ RULES = {
 Decision rule (fixed before the run; the 10 s medium ramp is not used):
   latch_rate_scale (kappa) = the smallest value of the grid whose +-2 sigma coverage in the
   latch window (within 0.15 s of a measured snap or release), pooled over the held-back 5 s
-  and 20 s ramps and averaged over seeds, is >= 90 % on every circuit; if no value reaches
+  and 20 s ramps and {over}, is >= 90 % on every circuit; if no value reaches
   it, the value with the highest worst-circuit window coverage. (The pressure's rate bridge
   is off here, as it did not exist when this rule was run.)
 Also printed (not decided on): the regulated / latched coverage and the mean band width
@@ -51,12 +53,18 @@ Also printed (not decided on): the regulated / latched coverage and the mean ban
     "pressure": """\
 Decision rule (fixed before the run; the 10 s medium ramp is not used):
   pressure_rate_scale (kappa_p) = the smallest value of the grid whose +-2 sigma coverage in
-  the regulated region, pooled over the held-back 5 s and 20 s ramps and averaged over seeds,
+  the regulated region, pooled over the held-back 5 s and 20 s ramps and {over},
   is >= 90 % on every circuit; if no value reaches it, the value with the highest
   worst-circuit regulated coverage. latch_rate_scale stays at its default.
 Also printed (not decided on): the latched / window coverage and the mean band width
 (2 sigma, bar) in the regulated region.""",
 }
+
+#: How each rule pools the seeds of a circuit: issue 20 asks for the mean *and the worst*
+#: seed, so ``worst`` (the default since 2026-11-26) reads the seed with the lowest
+#: coverage; ``mean`` is the rule of the first calibration (kept to reproduce it).
+OVER_SEEDS = {"mean": "averaged over seeds", "worst": "in the worst seed"}
+POOL = {"mean": np.mean, "worst": np.min}
 
 #: The region whose coverage the rule of each scale reads.
 RULE_REGION = {"latch": "latch_window", "pressure": "regulated"}
@@ -284,6 +292,12 @@ def main(argv: list[str] | None = None) -> int:
         help="which scale to calibrate: latch_rate_scale or pressure_rate_scale",
     )
     ap.add_argument(
+        "--over-seeds",
+        choices=tuple(OVER_SEEDS),
+        default="worst",
+        help="pool a circuit's seeds by their mean or their worst coverage (default worst)",
+    )
+    ap.add_argument(
         "--medium",
         type=Path,
         help="score the default kappa on the standard datasets in this folder (medium ramp)",
@@ -300,7 +314,7 @@ def main(argv: list[str] | None = None) -> int:
         return compare_noise(args)
     kappas = [float(k) for k in args.kappas.split(",")]
     region = RULE_REGION[args.scale]
-    print(RULES[args.scale], flush=True)
+    print(RULES[args.scale].format(over=OVER_SEEDS[args.over_seeds]), flush=True)
     args.data.mkdir(parents=True, exist_ok=True)
     rows = []
     for plant in args.plants.split(","):
@@ -316,7 +330,11 @@ def main(argv: list[str] | None = None) -> int:
                 flush=True,
             )
             args.out.write_text(json.dumps(rows, indent=1))
-    print(f"\ncoverage per region and the band in the {region} region (bar), mean over seeds")
+    pool = POOL[args.over_seeds]
+    print(
+        f"\ncoverage per region and the band in the {region} region (bar), "
+        f"{OVER_SEEDS[args.over_seeds]} (the band: mean over seeds)"
+    )
     worst = {}
     meets = []
     for k in ("none", *(str(k) for k in kappas)):
@@ -324,7 +342,9 @@ def main(argv: list[str] | None = None) -> int:
         for plant in dict.fromkeys(r["plant"] for r in rows):
             mine = [r["by_kappa"][k] for r in rows if r["plant"] == plant]
             keys = (*REGIONS, "band_bar")
-            per[plant] = {m: float(np.mean([x[m] for x in mine])) for m in keys}
+            per[plant] = {
+                m: float((np.mean if m == "band_bar" else pool)([x[m] for x in mine])) for m in keys
+            }
         if k != "none":
             worst[k] = min(v[region] for v in per.values())
             if worst[k] >= 0.90:
