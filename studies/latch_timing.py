@@ -141,10 +141,12 @@ def standard_dataset(root: Path, plant: str, seed: int) -> Path:
     return path
 
 
-#: What ``--medium`` compares: the GP std alone, and the defaults (mixture and bridge).
+#: What ``--medium`` compares: the GP std alone, the defaults (mixture and bridge), and
+#: the defaults with the paper's latch classifier (the RBF SVC).
 MEDIUM_KINDS = {
     "gp": {"latch_uncertainty": "none", "rate_uncertainty": "none", "noise_model": "constant"},
     "default": {},
+    "classifier": {"latch_model": "classifier"},
 }
 
 
@@ -162,17 +164,29 @@ def medium_coverage(path: Path) -> dict:
         out[kind] = {
             **score.details["coverage_2sigma"],
             "rmse_bar": score.metrics["rmse_bar"],
+            "latch_on_err_mA": score.metrics["latch_on_err_mA"],
+            "latch_off_err_mA": score.metrics["latch_off_err_mA"],
+            "latched_plateau_rmse_bar": score.details["period_mean"]["latched_plateau_rmse_bar"],
             "fit_s": fit_s,
         }
     return out
 
 
+#: The latch metrics ``--medium`` summarizes, and their format.
+LATCH_METRICS = (("latch_on_err_mA", ".1f"), ("latch_off_err_mA", ".1f"), ("rmse_bar", ".3f"))
+
+
 def score_medium(args) -> int:
     """Score the default ``κ`` on the medium ramp (after the calibration; nothing chosen)."""
-    from clutchlab.residual_ml import LATCH_RATE_SCALE, PRESSURE_RATE_SCALE
+    from clutchlab.residual_ml import (
+        DEFAULT_LATCH_MODEL,
+        LATCH_RATE_SCALES,
+        PRESSURE_RATE_SCALE,
+    )
 
     print(
-        f"Scoring the defaults (latch_rate_scale = {LATCH_RATE_SCALE}, pressure_rate_scale = "
+        f"Scoring the defaults (latch_model = {DEFAULT_LATCH_MODEL!r}, latch_rate_scale = "
+        f"{dict(LATCH_RATE_SCALES)}, pressure_rate_scale = "
         f"{PRESSURE_RATE_SCALE}, noise_model = 'frequency') against the GP std alone on the "
         "medium ramp: train fast + slow, score the 9 medium experiments; nothing is chosen "
         "here.",
@@ -188,7 +202,8 @@ def score_medium(args) -> int:
                 f"{plant:22s} {seed}  "
                 + "   ".join(
                     f"{k}: reg {v['regulated']:.3f} lat {v['latched']:.3f} "
-                    f"win {v['latch_window']:.3f} rmse {v['rmse_bar']:.3f}"
+                    f"win {v['latch_window']:.3f} rmse {v['rmse_bar']:.3f} "
+                    f"on {v['latch_on_err_mA']:.1f} off {v['latch_off_err_mA']:.1f} mA"
                     for k, v in r.items()
                     if k in MEDIUM_KINDS
                 ),
@@ -203,6 +218,23 @@ def score_medium(args) -> int:
             mix = [r["default"][region] for r in mine]
             non = [r["gp"][region] for r in mine]
             cells.append(f"{region} {np.mean(mix):.3f} [{min(mix):.3f}] ({np.mean(non):.3f})")
+        print(f"  {plant:22s} " + "  ".join(cells))
+    print(
+        "\nper circuit, the paper's classifier -> the default latch model: mean over seeds [worst]"
+    )
+    for plant in dict.fromkeys(r["plant"] for r in rows):
+        mine = [r for r in rows if r["plant"] == plant]
+        cells = []
+        for what, fmt in (
+            ("latch_on_err_mA", ".1f"),
+            ("latch_off_err_mA", ".1f"),
+            ("rmse_bar", ".3f"),
+        ):
+            c = [r["classifier"][what] for r in mine]
+            d = [r["default"][what] for r in mine]
+            cells.append(
+                f"{what} {np.mean(c):{fmt}} [{max(c):{fmt}}] -> {np.mean(d):{fmt}} [{max(d):{fmt}}]"
+            )
         print(f"  {plant:22s} " + "  ".join(cells))
     return 0
 

@@ -5,8 +5,10 @@ contract that train on traces (:mod:`~clutchlab.residual_ml.base`):
 
 - :class:`GPBaseline` (``gp_base``): one GP on nominal current, dither amplitude, frequency;
 - :class:`GPWithDerivative` (``gp_didt``): + dI/dt (rate and direction of travel);
-- :class:`SVCPartitionedGP` (``paper_svc_gp``): RBF-SVC latch classifier, one rational-
-  quadratic GP per latch state — the paper's final model;
+- :class:`SVCPartitionedGP` (``paper_svc_gp``): a latch decision and one GP per latch
+  state — the paper's final model (RBF-SVC classifier, rational-quadratic GPs; the
+  ``paper_faithful`` variant); clutchlab's defaults decide the latch state with the local
+  latch-event law (:mod:`~clutchlab.residual_ml.latch_local`) and choose the kernel;
 - :class:`HybridModel` (``hybrid``): physics prediction + partitioned GP on its residual.
 
 The GPs (:class:`LocalGPRegressor`) scale to ~10⁶ samples by binning redundant 1 kHz ramp
@@ -27,7 +29,11 @@ from .classifiers import (
 )
 from .compare import ClassifierComparison, compare_classifiers
 from .estimators import (
+    DEFAULT_LATCH_MODEL,
+    LATCH_BANDWIDTH,
+    LATCH_MODELS,
     LATCH_RATE_SCALE,
+    LATCH_RATE_SCALES,
     PRESSURE_RATE_SCALE,
     GPBaseline,
     GPWithDerivative,
@@ -47,6 +53,7 @@ from .hybrid import HYBRID_FEATURES, HybridModel
 from .kernels import KERNELS, KernelSpec, kernel_spec
 from .labels import EVENT, LATCHED, UNLATCHED, LatchLabelRule, latch_labels
 from .lag import LAG_GRID_S, LagSelection, select_lag
+from .latch_local import LocalEventDecision, local_law
 from .latch_timing import LatchTiming
 from .local_gp import LocalGPRegressor, log_marginal_likelihood
 from .model_check import check_model, check_model_document
@@ -58,6 +65,7 @@ from .variants import VARIANTS, make_variant
 __all__ = [
     "BASE_FEATURES",
     "CLASSIFIERS",
+    "DEFAULT_LATCH_MODEL",
     "DIDT_FEATURES",
     "EVENT",
     "FEATURES",
@@ -65,7 +73,10 @@ __all__ = [
     "KERNELS",
     "LAG_GRID_S",
     "LATCHED",
+    "LATCH_BANDWIDTH",
+    "LATCH_MODELS",
     "LATCH_RATE_SCALE",
+    "LATCH_RATE_SCALES",
     "PHYSICS_FEATURES",
     "PRESSURE_RATE_SCALE",
     "RBF_FEATURE_WEIGHTS",
@@ -84,6 +95,7 @@ __all__ = [
     "LagSelection",
     "LatchLabelRule",
     "LatchTiming",
+    "LocalEventDecision",
     "LocalGPRegressor",
     "PhysicsPredictor",
     "SVCPartitionedGP",
@@ -99,6 +111,7 @@ __all__ = [
     "latch_labels",
     "leave_one_experiment_out",
     "load_model",
+    "local_law",
     "log_marginal_likelihood",
     "make_classifier",
     "make_variant",

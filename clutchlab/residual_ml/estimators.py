@@ -5,8 +5,9 @@ variant                estimator                                    paper
 =====================  ===========================================  ==========================
 ``gp_base``            :class:`GPBaseline` — one GP on I, A_d, f_d   stage 1
 ``gp_didt``            :class:`GPWithDerivative` — + dI/dt           stage 2
-``paper_svc_gp``       :class:`SVCPartitionedGP` — RBF-SVC latch      stage 3 (final model)
-                       classifier + one RQ GP per latch state
+``paper_svc_gp``       :class:`SVCPartitionedGP` — latch decision     stage 3 (final model)
+                       + one GP per latch state (the paper: RBF-SVC
+                       classifier and RQ GPs, ``paper_faithful``)
 =====================  ===========================================  ==========================
 
 All GPs are :class:`~clutchlab.residual_ml.local_gp.LocalGPRegressor` (binned, hyperparameters
@@ -34,6 +35,7 @@ from .latch_event import (
     fit_event_decision,
     latch_events,
 )
+from .latch_local import LocalEventDecision, fit_local_event_decision
 from .latch_timing import (
     LatchTiming,
     mixture_interval_std,
@@ -46,7 +48,11 @@ from .paths import knot_indices, piecewise_classes, predict_on_path
 from .rate_bridge import bridge_weight, group_log_rates
 
 __all__ = [
+    "DEFAULT_LATCH_MODEL",
+    "LATCH_BANDWIDTH",
+    "LATCH_MODELS",
     "LATCH_RATE_SCALE",
+    "LATCH_RATE_SCALES",
     "PRESSURE_RATE_SCALE",
     "STD_OPTIONS",
     "GPBaseline",
@@ -55,18 +61,30 @@ __all__ = [
     "mean_only",
 ]
 
-#: Default ``κ`` of :mod:`~clutchlab.residual_ml.latch_timing` (``latch_rate_scale``):
-#: calibrated by ``studies/latch_timing.py`` on held-back training-side ramps (5 s and 20 s,
-#: trained on 2.5 s + 40 s) of the stand and four zoo plants, seeds 0–2 — the smallest value
-#: of the grid 0, 0.5, 1, 1.5, 2, 3 with ≥ 90 % latch-window coverage on every circuit in
-#: its worst seed (1.5 when the rule read the mean over seeds; BENCHMARKS.md,
-#: "Latch-timing uncertainty").
-LATCH_RATE_SCALE = 2.0
+#: Values of ``SVCPartitionedGP(latch_model=...)``, and its default.
+LATCH_MODELS: tuple[str, ...] = ("classifier", "event", "local_event")
+DEFAULT_LATCH_MODEL = "local_event"
+#: Default ``κ`` of :mod:`~clutchlab.residual_ml.latch_timing` (``latch_rate_scale``) per
+#: latch model: calibrated by ``studies/latch_timing.py`` on held-back training-side ramps
+#: (5 s and 20 s, trained on 2.5 s + 40 s) of the stand and four zoo plants, seeds 0–2 —
+#: the smallest value of the grid 0, 0.5, 1, 1.5, 2, 3 with ≥ 90 % latch-window coverage on
+#: every circuit in its worst seed (BENCHMARKS.md, "Latch-timing uncertainty"): 1.5 for
+#: the local latch-event law, 2 for the classifier (1.5 when the rule read the mean over
+#: seeds); the one-plane event law was not calibrated and takes the classifier's.
+LATCH_RATE_SCALES: MappingProxyType[str, float] = MappingProxyType(
+    {"local_event": 1.5, "classifier": 2.0, "event": 2.0}
+)
+LATCH_RATE_SCALE = LATCH_RATE_SCALES[DEFAULT_LATCH_MODEL]
 #: Default ``κ_p`` of the pressure's rate bridge (``pressure_rate_scale``,
-#: :mod:`~clutchlab.residual_ml.rate_bridge`), calibrated likewise with ``LATCH_RATE_SCALE``
-#: at its default (``studies/latch_timing.py --scale pressure``: the smallest value of the
-#: same grid with ≥ 90 % regulated-region coverage on every circuit in its worst seed).
+#: :mod:`~clutchlab.residual_ml.rate_bridge`), calibrated likewise with the default latch
+#: model and its ``κ`` (``studies/latch_timing.py --scale pressure``: the smallest value of
+#: the same grid with ≥ 90 % regulated-region coverage on every circuit in its worst seed).
 PRESSURE_RATE_SCALE = 1.5
+#: Default bandwidth of the local latch-event law (``latch_bandwidth``): the value of the
+#: grid 0.2, 0.35, 0.5, 0.7, 1 with the lowest latch-timing error on held-back
+#: training-side ramps (5 s and 20 s, trained on 2.5 s + 40 s) of the stand and four zoo
+#: plants, seeds 0–2 (``studies/latch_event.py --local``; 0.2 and 0.35 tie within 0.2 %).
+LATCH_BANDWIDTH = 0.2
 #: The predictive-std options of :class:`SVCPartitionedGP` and their values (the default
 #: first, the GP's own std last): the model check and :func:`mean_only` read them too.
 STD_OPTIONS: MappingProxyType[str, tuple[str, str]] = MappingProxyType(
@@ -281,13 +299,21 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         RBF-SVC penalty and width (on weighted standardized features; defaults 100, 1).
     svc_max_points : int
         Most training bins of the RBF SVC (default 4000).
-    latch_model : {"classifier", "event"}
+    latch_model : {"classifier", "event", "local_event"}
         What decides the latch state: ``classifier`` (the paper: ``classifier`` on the
-        classifier features) or ``event``, the latch-event law of
+        classifier features), ``event``, the latch-event law of
         :mod:`~clutchlab.residual_ml.latch_event` (latch currents linear in the ramp rate,
-        thresholds linear in the dither; needs a current, a dI/dt and a direction feature
-        among the classifier features; without them, e.g. on feature arrays, the
-        classifier decides).
+        thresholds linear in the dither), or ``local_event``, the same law fitted locally
+        in the dither setting (:mod:`~clutchlab.residual_ml.latch_local`, bandwidth
+        ``latch_bandwidth``; the default: on held-back training-side ramps of the stand
+        and four zoo plants it had the lower latch-timing error and RMSE on every circuit,
+        ``studies/latch_event.py --local``). Both laws need a current, a dI/dt and a
+        direction feature among the classifier features; without them, e.g. on feature
+        arrays, or with fewer than two latch events of a direction for the local law, the
+        classifier decides (``latch_model_`` says which did).
+    latch_bandwidth : float
+        Bandwidth ``h`` of ``latch_model="local_event"`` in standard deviations of the
+        latch events' dither amplitude and frequency (default :data:`LATCH_BANDWIDTH`).
     latched_reference : {"line", "none"}
         ``line`` (default): the latched GP learns the clutch pressure *below line
         pressure* (the latched plateau is line pressure less a small offset that
@@ -301,10 +327,11 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         the prediction there becomes a mixture of both regimes
         (:mod:`~clutchlab.residual_ml.latch_timing`; the mean is unchanged). ``none``: the
         std is the GP's alone.
-    latch_rate_scale : float
+    latch_rate_scale : float or None
         ``κ`` of :mod:`~clutchlab.residual_ml.latch_timing` (dimensionless): how much of the
         switch-current change between two trained ramp rates is taken as the uncertainty
-        of interpolating it at a rate between them.
+        of interpolating it at a rate between them. None (default): the value calibrated
+        for the latch model (:data:`LATCH_RATE_SCALES`).
     rate_uncertainty : {"bridge", "none"}
         ``bridge`` (default): the predictive std of a sample on a ramp also holds the
         uncertainty of interpolating the pressure between the trained ramp rates — the
@@ -363,10 +390,11 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         svc_C: float = 100.0,
         svc_gamma: float = 1.0,
         svc_max_points: int = 4000,
-        latch_model: str = "classifier",
+        latch_model: str = DEFAULT_LATCH_MODEL,
+        latch_bandwidth: float = LATCH_BANDWIDTH,
         latched_reference: str = "line",
         latch_uncertainty: str = "mixture",
-        latch_rate_scale: float = LATCH_RATE_SCALE,
+        latch_rate_scale: float | None = None,
         rate_uncertainty: str = "bridge",
         pressure_rate_scale: float = PRESSURE_RATE_SCALE,
         noise_model: str = "frequency",
@@ -393,6 +421,7 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         self.svc_gamma = svc_gamma
         self.svc_max_points = svc_max_points
         self.latch_model = latch_model
+        self.latch_bandwidth = latch_bandwidth
         self.latched_reference = latched_reference
         self.latch_uncertainty = latch_uncertainty
         self.latch_rate_scale = latch_rate_scale
@@ -468,10 +497,8 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         clean = b.labels >= 0
         present = sorted(set(np.unique(b.labels[clean]).tolist()))
         self.classifier_columns_ = self._clf_cols()
-        if self.latch_model not in ("classifier", "event"):
-            raise ModelError(
-                f"latch_model must be 'classifier' or 'event', got {self.latch_model!r}"
-            )
+        if self.latch_model not in LATCH_MODELS:
+            raise ModelError(f"latch_model must be one of {LATCH_MODELS}, got {self.latch_model!r}")
         for name, choices in STD_OPTIONS.items():
             if getattr(self, name) not in choices:
                 raise ModelError(
@@ -581,9 +608,14 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         b = self._stack(blocks) if b is None else b
         cols = self.classifier_columns_
         names = [self.feature_names_[j] for j in cols]
-        if self.latch_model == "event" and event_features(names):
+        if self.latch_model in ("event", "local_event") and event_features(names):
             events = [e for blk in blocks for e in latch_events(blk.X[:, cols], blk.state)]
-            return None, fit_event_decision(events, names)
+            if self.latch_model == "event":
+                return None, fit_event_decision(events, names)
+            # The default law needs two events of each direction; with fewer (one
+            # training experiment, a latch that never releases) the classifier decides.
+            if min(sum(s == d for _, s in events) for d in (1, -1)) >= 2:
+                return None, fit_local_event_decision(events, names, self.latch_bandwidth)
         clean = b.labels >= 0
         clf = self._make_classifier().fit(b.X[clean][:, cols], b.labels[clean])
         return clf, lean_decision(clf)
@@ -682,7 +714,7 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
             return std
         cur, didt = self._timing_columns()
         rows, p = timing.windows(
-            classes, X[:, cur], X[:, didt] if didt >= 0 else None, self.latch_rate_scale
+            classes, X[:, cur], X[:, didt] if didt >= 0 else None, self._latch_rate_scale()
         )
         if rows.size == 0:
             return std
@@ -699,13 +731,22 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         out[rows] = mixture_interval_std(mean[rows], std[rows], o_mean, o_std, p)
         return out
 
+    def _latch_rate_scale(self) -> float:
+        """``κ``: the parameter, or the value calibrated for the fitted latch model."""
+        if self.latch_rate_scale is not None:
+            return float(self.latch_rate_scale)
+        return LATCH_RATE_SCALES.get(self.latch_model_, LATCH_RATE_SCALES["classifier"])
+
     @property
     def latch_model_(self) -> str:
-        """What decides the latch state as fitted: ``event``, ``classifier`` or ``none``."""
+        """What decides the latch state as fitted: ``event``, ``local_event``,
+        ``classifier`` or ``none``."""
         dec = self.decision_
         if dec is None:
             return "none"
-        return "event" if isinstance(dec, EventDecision) else "classifier"
+        if isinstance(dec, EventDecision | LocalEventDecision):
+            return dec.kind
+        return "classifier"
 
     def _classes(self, X: np.ndarray, knots: np.ndarray | None) -> np.ndarray:
         if self.decision_ is None:

@@ -22,7 +22,7 @@ from sklearn.utils.validation import validate_data
 from ..data import Trace, dither_period_mean, dither_period_samples
 from ..errors import DataError, ModelError
 from .base import TraceEstimator
-from .estimators import SVCPartitionedGP, mean_only
+from .estimators import DEFAULT_LATCH_MODEL, SVCPartitionedGP, mean_only
 from .features import DIDT_FEATURES, PHYSICS_FEATURES
 from .physics import DefaultPhysics, PhysicsPredictor
 
@@ -41,11 +41,17 @@ HYBRID_CLASSIFIER_FEATURES: tuple[str, ...] | None = None
 
 
 def default_residual() -> SVCPartitionedGP:
-    """The default residual model: SVC-partitioned GP on :data:`HYBRID_FEATURES`."""
+    """The default residual model: SVC-partitioned GP on :data:`HYBRID_FEATURES`.
+
+    Its latch decision stays the RBF-SVC classifier, on features that hold the physics
+    prediction: the residual's regimes then follow the physics' own latch state, which the
+    local latch-event law (on current, rate and dither only) would not see.
+    """
     return SVCPartitionedGP(
         features=HYBRID_FEATURES,
         classifier_features=HYBRID_CLASSIFIER_FEATURES,
         latched_reference="none",  # the physics already follows line pressure
+        latch_model="classifier",
     )
 
 
@@ -123,7 +129,12 @@ class HybridModel(TraceEstimator):
         """
         res = self._residual()
         if self.residual is None:
-            return res.set_params(features=None, classifier_features=None, latched_reference="line")
+            return res.set_params(
+                features=None,
+                classifier_features=None,
+                latched_reference="line",
+                latch_model=DEFAULT_LATCH_MODEL,
+            )
         params = res.get_params(deep=False)
         update = {
             key: tuple(f for f in params[key] if f not in PHYSICS_FEATURES)

@@ -32,12 +32,19 @@ import numpy as np
 
 from ..errors import ClutchlabError, ModelFileError
 from .classifiers import CLASSIFIERS, KernelDecision, LinearDecision
-from .estimators import STD_OPTIONS, GPBaseline, GPWithDerivative, SVCPartitionedGP
+from .estimators import (
+    LATCH_MODELS,
+    STD_OPTIONS,
+    GPBaseline,
+    GPWithDerivative,
+    SVCPartitionedGP,
+)
 from .features import FEATURES
 from .hybrid import HybridModel
 from .kernels import KERNELS, kernel_spec
 from .labels import LatchLabelRule
 from .latch_event import EventDecision
+from .latch_local import LocalEventDecision
 from .local_gp import LocalGPRegressor
 from .physics import PhysicsPredictor
 
@@ -61,10 +68,12 @@ MAX_STANDARDIZED = 1e6
 _SCALE_FLOOR = 1e-12
 
 _MISSING = object()
-_DECISIONS = {
+#: Saved latch decisions by their ``kind`` (the model file's ``decision``).
+DECISIONS = {
     KernelDecision.kind: KernelDecision,
     LinearDecision.kind: LinearDecision,
     EventDecision.kind: EventDecision,
+    LocalEventDecision.kind: LocalEventDecision,
 }
 
 
@@ -178,10 +187,11 @@ _PARAM_RULES: dict[str, Callable | None] = {
     "max_knot_gap": _integer(1),
     "random_state": _optional(_integer(0, 2**32 - 1)),
     "event_points": _one_of(("exclude", "assign")),
-    "latch_model": _one_of(("classifier", "event")),
+    "latch_model": _one_of(LATCH_MODELS),
+    "latch_bandwidth": _number(0.0, strict=True),
     "latched_reference": _one_of(("line", "none")),
     **{name: _one_of(choices) for name, choices in STD_OPTIONS.items()},
-    "latch_rate_scale": _number(0.0),
+    "latch_rate_scale": _optional(_number(0.0)),
     "pressure_rate_scale": _number(0.0),
     "classifier": _one_of(CLASSIFIERS),
     "svc_C": _number(0.0, strict=True),
@@ -529,7 +539,7 @@ class _Checker:
         timing = self.key(state, "latch_timing", where, required=False)
         if timing is not _MISSING and timing is not None:
             self.latch_timing(timing, f"{where}.latch_timing")
-        kind = self.key(state, "decision", where, _optional(_one_of(_DECISIONS)))
+        kind = self.key(state, "decision", where, _optional(_one_of(DECISIONS)))
         if kind is None and single is None:
             self.add(f"{where}.single_state", "must be 0 or 1 when there is no decision")
         if kind is _MISSING or cols is _MISSING or kind is None:
@@ -558,6 +568,18 @@ class _Checker:
                 self.add(prefix + "columns", f"must be column indices below {c} or -1")
             a(prefix + "on", (5,))
             a(prefix + "off", (5,))
+            return
+        if kind == LocalEventDecision.kind:
+            cols = a(prefix + "columns", (5,))
+            if cols is not None and not all(-1 <= v < c and v == int(v) for v in cols):
+                self.add(prefix + "columns", f"must be column indices below {c} or -1")
+            for side in ("on", "off"):
+                ev = a(prefix + side, (None, 4))
+                if ev is not None and ev.shape[0] < 2:
+                    self.add(prefix + side, "needs at least two latch events")
+            a(prefix + "scale", (2,), positive=True)
+            a(prefix + "bandwidth", (1,), positive=True)
+            a(prefix + "slope", (2,), positive=True)
             return
         a(prefix + "mean", (c,))
         a(prefix + "scale", (c,), positive=True, inf_ok=True)  # inf: a feature weighted 0

@@ -24,14 +24,13 @@ from sklearn.base import BaseEstimator
 
 from ..data.output import write_file_atomic
 from ..errors import ClutchlabError, ModelError, ModelFileError
-from .classifiers import KernelDecision, LinearDecision
 from .estimators import SVCPartitionedGP
 from .hybrid import HybridModel
 from .labels import LatchLabelRule
-from .latch_event import EventDecision
 from .latch_timing import LatchTiming
 from .local_gp import LocalGPRegressor
 from .model_check import (
+    DECISIONS,
     FORMAT,
     FORMAT_VERSIONS,
     MODEL_CLASSES,
@@ -156,7 +155,7 @@ def _state(est, arrays: dict, prefix: str) -> dict:
         if dec is None:
             state["decision"] = None
         else:
-            if not isinstance(dec, KernelDecision | LinearDecision | EventDecision):
+            if not isinstance(dec, tuple(DECISIONS.values())):
                 dec.arrays()  # raises ModelError naming the classifier
             state["decision"] = dec.kind
             _put(arrays, prefix + "clf", dec.arrays())
@@ -207,11 +206,7 @@ def _restore(est, state: dict, arrays, prefix: str) -> None:
         if kind is None:
             est.decision_ = None
         else:
-            cls = {
-                KernelDecision.kind: KernelDecision,
-                LinearDecision.kind: LinearDecision,
-                EventDecision.kind: EventDecision,
-            }[kind]
+            cls = DECISIONS[kind]
             est.decision_ = cls.from_arrays(_get(arrays, prefix + "clf"))
         est.gps_ = {}
         for g, meta in state["gps"].items():

@@ -17,6 +17,7 @@ from ..errors import ModelError
 from .classifiers import KernelDecision, LinearDecision
 from .estimators import GPBaseline, SVCPartitionedGP
 from .hybrid import HybridModel
+from .latch_local import LocalEventDecision, within_setting
 from .local_gp import LocalGPRegressor
 
 __all__ = ["StepPredictor", "step_predictor"]
@@ -76,6 +77,44 @@ class _LinearStep:
 
     def __call__(self, x: np.ndarray) -> float:
         return float(x[self.cols] @ self.w) + self.b
+
+
+class _LocalEventStep:
+    """:class:`LocalEventDecision` for one feature vector, the direction's events only."""
+
+    def __init__(self, dec: LocalEventDecision, cols: list[int]) -> None:
+        c = np.asarray(cols)[np.maximum(dec.columns, 0)]
+        self.cols = [int(k) if j >= 0 else -1 for k, j in zip(c, dec.columns, strict=True)]
+        self.dec = dec
+        self.s = 1.0 / np.asarray(dec.scale, dtype=float)
+        self.branch = {
+            side: (ev, *within_setting(ev, dec.scale, dec.bandwidth))
+            for side, ev in ((1, dec.on), (-1, dec.off))
+        }
+
+    def _moments(self, d2, h, i_k, r_k):
+        w = d2 / (h * h)
+        w -= w.min()
+        w *= -0.5
+        np.exp(w, out=w)
+        sw = w.sum()
+        mr, mi, mrr = (w @ r_k) / sw, (w @ i_k) / sw, (w @ (r_k * r_k)) / sw
+        return mr, mi, mrr - mr * mr, (w @ (r_k * i_k)) / sw - mr * mi, mrr
+
+    def __call__(self, x: np.ndarray) -> float:
+        i, di, direction, a, f = (x[k] if k >= 0 else 0.0 for k in self.cols)
+        ev, di_k, dr_k = self.branch[1 if direction >= 0 else -1]
+        i_k, r_k = ev[:, 0], ev[:, 1]
+        d2 = ((a - ev[:, 2]) * self.s[0]) ** 2 + ((f - ev[:, 3]) * self.s[1]) ** 2
+        dec = self.dec
+        w = d2 / (dec.slope_bandwidth * dec.slope_bandwidth)
+        w = np.exp(-0.5 * (w - w.min()))
+        num, den = w @ (di_k * dr_k), w @ (dr_k * dr_k)
+        tau0 = num / den if den > 1e-6 * (w @ (r_k * r_k)) and den > 0 else 0.0
+        mr, mi, var_r, cov, mrr = self._moments(d2, dec.bandwidth, i_k, r_k)
+        lam = dec.slope_prior * mrr
+        tau = (cov + lam * tau0) / (var_r + lam) if var_r + lam > 0 else 0.0
+        return float(i - (mi - tau * mr) - tau * di)
 
 
 class StepPredictor:
@@ -174,6 +213,8 @@ def step_predictor(model) -> StepPredictor:
             decide = _RBFStep(dec, cols)
         elif isinstance(dec, LinearDecision):
             decide = _LinearStep(dec, cols)
+        elif isinstance(dec, LocalEventDecision):
+            decide = _LocalEventStep(dec, cols)
         else:
             est = dec
 

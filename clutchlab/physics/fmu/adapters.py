@@ -112,6 +112,21 @@ def decision_spec(decision, columns=None) -> DecisionSpec:
             event_on=np.asarray(decision.on, dtype=float),
             event_off=np.asarray(decision.off, dtype=float),
         )
+    if kind == "local_event":
+        n = len(cols) if cols is not None else int(max(decision.columns)) + 1
+        return DecisionSpec(
+            "local_event",
+            np.zeros(n),
+            np.ones(n),
+            0.0,
+            gamma=float(decision.bandwidth),
+            columns=cols,
+            event_columns=tuple(int(c) for c in decision.columns),
+            event_on=decision.events_with_deviations(decision.on),
+            event_off=decision.events_with_deviations(decision.off),
+            event_scale=np.asarray(decision.scale, dtype=float),
+            event_slope=np.array([decision.slope_bandwidth, decision.slope_prior], dtype=float),
+        )
     raise FmuError(
         f"cannot export the latch classifier {type(decision).__name__}: only RBF-SVC, "
         "linear and latch-event decision functions are exported"

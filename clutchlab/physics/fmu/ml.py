@@ -258,7 +258,13 @@ class DecisionSpec:
     :class:`~clutchlab.residual_ml.latch_event.EventDecision` on ``x[columns]``, with its
     ``event_columns`` (current, dI/dt, direction, dither amplitude, dither frequency; −1:
     absent) and coefficients ``event_on`` / ``event_off`` (``mean``, ``scale`` and
-    ``intercept`` unused).
+    ``intercept`` unused). ``kind="local_event"``: the local law of
+    :class:`~clutchlab.residual_ml.latch_local.LocalEventDecision` with the same
+    ``event_columns``, its ``(n, 6)`` events in ``event_on`` / ``event_off`` (current,
+    dI/dt, dither amplitude and frequency, and the within-setting deviations of current
+    and dI/dt, :func:`~clutchlab.residual_ml.latch_local.within_setting`), the amplitude
+    and frequency scales in ``event_scale``, the bandwidth in ``gamma`` and the slope
+    prior's bandwidth and weight in ``event_slope``.
     """
 
     kind: str
@@ -273,6 +279,8 @@ class DecisionSpec:
     event_columns: tuple[int, ...] | None = None
     event_on: np.ndarray | None = None
     event_off: np.ndarray | None = None
+    event_scale: np.ndarray | None = None
+    event_slope: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         ok = (
@@ -285,16 +293,26 @@ class DecisionSpec:
                 and self.event_on is not None
                 and self.event_off is not None
             )
+            or (
+                self.kind == "local_event"
+                and self.event_columns is not None
+                and len(self.event_columns) == 5
+                and self.event_on is not None
+                and self.event_off is not None
+                and self.event_scale is not None
+                and self.event_slope is not None
+            )
         )
         if not ok:
             raise ModelError(
                 "invalid DecisionSpec: kind 'rbf' needs support and coef, 'linear' needs "
-                "weights, 'event' needs event_columns (5), event_on and event_off"
+                "weights, 'event' needs event_columns (5), event_on and event_off, "
+                "'local_event' also event_scale and event_slope"
             )
         problems = _number_problems(
             self,
             finite=("mean", "intercept", "support", "coef", "weights", "event_on", "event_off"),
-            positive=("gamma",),
+            positive=("gamma", "event_scale", "event_slope"),
             positive_or_inf=("scale",),  # inf: a feature the classifier weights 0
         )
         if problems:
@@ -306,6 +324,8 @@ class DecisionSpec:
             x = ca.horzcat(*(x[:, c] for c in self.columns))
         if self.kind == "event":
             return self._event(x)
+        if self.kind == "local_event":
+            return self._local_event(x)
         z = (x - const(self.mean).T) / const(self.scale).T
         if self.kind == "linear":
             return ca.dot(z.T, const(self.weights)) + self.intercept
@@ -316,18 +336,47 @@ class DecisionSpec:
         k = kern.map(n, "serial")(z.T, const(np.ascontiguousarray(self.support.T)))
         return ca.mtimes(k, const(self.coef)) + self.intercept
 
+    def _event_inputs(self, x: ca.MX) -> list[ca.MX]:
+        """Current, dI/dt, direction, dither amplitude and frequency (0 where absent)."""
+        return [x[:, c] if c >= 0 else ca.MX(0) for c in self.event_columns]
+
     def _event(self, x: ca.MX) -> ca.MX:
         """The latch-event law (mA): its rising / held branch where direction ≥ 0."""
-
-        def col(k):
-            c = self.event_columns[k]
-            return x[:, c] if c >= 0 else ca.MX(0)
-
-        i, di, direction, a, f = (col(k) for k in range(5))
+        i, di, direction, a, f = self._event_inputs(x)
 
         def branch(c):
             c = [float(v) for v in c]
             return i - c[4] * di - (c[0] + c[1] * a + c[2] * f + c[3] * a * f)
+
+        return ca.if_else(direction >= 0, branch(self.event_on), branch(self.event_off))
+
+    def _local_event(self, x: ca.MX) -> ca.MX:
+        """The local latch-event law (mA), as in :func:`~clutchlab.residual_ml.local_law`."""
+        i, di, direction, a, f = self._event_inputs(x)
+        s_a, s_f = (float(v) for v in self.event_scale)
+        h_slope, rho = (float(v) for v in self.event_slope)
+
+        def moments(d2, h, i_k, r_k):
+            q = d2 / h**2
+            w = ca.exp(-0.5 * (q - ca.mmin(q)))
+            sw = ca.sum1(w)
+            mr, mi = ca.dot(w, r_k) / sw, ca.dot(w, i_k) / sw
+            mrr = ca.dot(w, r_k * r_k) / sw
+            return mr, mi, mrr - mr**2, ca.dot(w, r_k * i_k) / sw - mr * mi, mrr
+
+        def branch(events):
+            ev = np.asarray(events, dtype=float)
+            i_k, r_k, a_k, f_k, dev_i, dev_r = (ca.DM(ev[:, j]) for j in range(6))
+            d2 = (a - a_k) ** 2 / s_a**2 + (f - f_k) ** 2 / s_f**2
+            q = d2 / h_slope**2
+            w0 = ca.exp(-0.5 * (q - ca.mmin(q)))
+            num, den = ca.dot(w0, dev_i * dev_r), ca.dot(w0, dev_r * dev_r)
+            tau0 = ca.if_else(den > 1e-6 * ca.dot(w0, r_k * r_k), num / ca.fmax(den, 1e-300), 0)
+            mr, mi, var_r, cov, mrr = moments(d2, float(self.gamma), i_k, r_k)
+            lam = rho * mrr
+            den = var_r + lam
+            tau = ca.if_else(den > 0, (cov + lam * tau0) / ca.fmax(den, 1e-300), 0)
+            return i - (mi - tau * mr) - tau * di
 
         return ca.if_else(direction >= 0, branch(self.event_on), branch(self.event_off))
 

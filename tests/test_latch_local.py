@@ -1,0 +1,177 @@
+"""The local latch-event law: a latch-event law per dither setting, by kernel weights."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from synthetic import tiny_stand
+
+from clutchlab.errors import ModelError, ModelFileError
+from clutchlab.physics.fmu import build_fmu, ml_program_from
+from clutchlab.physics.fmu.adapters import decision_spec
+from clutchlab.residual_ml import (
+    LocalEventDecision,
+    SVCPartitionedGP,
+    load_model,
+    local_law,
+    step_predictor,
+)
+from clutchlab.residual_ml.features import causal_features
+from clutchlab.residual_ml.latch_event import fit_event_decision
+from clutchlab.residual_ml.latch_local import fit_local_event_decision
+
+SMALL = {"n_hyper": 300, "max_points": 300}
+NAMES = ["current_lag_mA", "dither_amp_mA", "dither_freq_Hz", "didt_mA_s", "direction"]
+#: Dither settings (mA, Hz) and each one's latch-on / latch-off law: θ (mA), τ (s). The
+#: thresholds are not bilinear in (A, f) and τ differs per setting.
+SETTINGS = {
+    (40.0, 30.0): ((905.0, 0.10), (790.0, 0.20)),
+    (100.0, 30.0): ((930.0, 0.16), (770.0, 0.31)),
+    (40.0, 70.0): ((880.0, 0.22), (805.0, 0.12)),
+    (100.0, 70.0): ((960.0, 0.12), (745.0, 0.26)),
+}
+RATES = (27.5, 440.0)
+
+
+def _events():
+    rows = []
+    for (a, f), ((t_on, k_on), (t_off, k_off)) in SETTINGS.items():
+        for r in RATES:
+            rows.append((np.array([t_on + k_on * r, a, f, r, 1.0]), 1))
+            rows.append((np.array([t_off - k_off * r, a, f, -r, -1.0]), -1))
+    return rows
+
+
+def test_a_narrow_bandwidth_is_each_settings_own_line_between_the_trained_rates():
+    dec = fit_local_event_decision(_events(), NAMES, bandwidth=0.2)
+    plane = fit_event_decision(_events(), NAMES)
+    worst_local = worst_plane = 0.0
+    for (a, f), ((t_on, k_on), (t_off, k_off)) in SETTINGS.items():
+        for r in (55.0, 110.0, 220.0):  # rates between the trained ones
+            want_on, want_off = t_on + k_on * r, t_off - k_off * r
+            x = np.array([[want_on, a, f, r, 1.0], [want_off, a, f, -r, -1.0]])
+            got = dec(x)  # 0 at the switch current
+            worst_local = max(worst_local, float(np.abs(got).max()))
+            worst_plane = max(worst_plane, float(np.abs(plane(x)).max()))
+    # Within the slope prior's pull (about 2 % of the slope's difference to the neighbours').
+    assert worst_local < 0.5
+    assert worst_plane > 5.0  # the one-plane law cannot hold these settings
+    on, off = dec.thresholds(100.0, 70.0)
+    assert on == pytest.approx(960.0, abs=1.0) and off == pytest.approx(745.0, abs=1.0)
+    # Latched above the switch current on a rise, below it on a fall.
+    x = np.array([[930 + 0.16 * 110 + 1, 100, 30, 110, 1], [930 + 0.16 * 110 - 1, 100, 30, 110, 1]])
+    assert list(dec(x) > 0) == [True, False]
+
+
+def test_a_setting_trained_at_one_rate_borrows_its_neighbours_slope():
+    """Left out at the fast rate (as in leave-one-experiment-out), (100 mA, 70 Hz) keeps its
+    own slow event and takes the slope of the others instead of none."""
+    events = [
+        (row, s)
+        for row, s in _events()
+        if not (row[1] == 100.0 and row[2] == 70.0 and abs(row[3]) == 440.0)
+    ]
+    dec = fit_local_event_decision(events, NAMES, bandwidth=0.2)
+    theta, tau = local_law(dec.on, dec.scale, 0.2, np.array([100.0]), np.array([70.0]))
+    assert 0.12 < tau[0] < 0.22  # the neighbours' on-slopes are 0.10-0.22 s, not 0
+    assert theta[0] + tau[0] * 27.5 == pytest.approx(960.0 + 0.12 * 27.5, abs=0.5)
+
+
+def test_a_wide_bandwidth_is_one_line_for_every_setting():
+    events = _events()
+    dec = fit_local_event_decision(events, NAMES, bandwidth=1e4)
+    on = np.array([row for row, s in events if s == 1])
+    slope, icpt = np.polyfit(on[:, 3], on[:, 0], 1)
+    theta, tau = local_law(dec.on, dec.scale, dec.bandwidth, np.array([70.0]), np.array([50.0]))
+    assert tau[0] == pytest.approx(slope, rel=1e-6) and theta[0] == pytest.approx(icpt, rel=1e-6)
+
+
+def test_one_ramp_rate_gives_no_slope_and_bad_input_is_named():
+    one_rate = [(row, s) for row, s in _events() if abs(row[3]) == RATES[0]]
+    dec = fit_local_event_decision(one_rate, NAMES, bandwidth=0.5)
+    theta, tau = local_law(dec.on, dec.scale, 0.5, np.array([40.0]), np.array([30.0]))
+    assert abs(tau[0]) < 1e-9 and theta[0] == pytest.approx(905.0 + 0.10 * 27.5, abs=0.5)
+    with pytest.raises(ModelError, match="a dI/dt, a direction"):
+        fit_local_event_decision(_events(), ["current_mA", "dither_amp_mA"], bandwidth=0.5)
+    with pytest.raises(ModelError, match="two latch-off events"):
+        fit_local_event_decision([e for e in _events() if e[1] == 1], NAMES, bandwidth=0.5)
+    with pytest.raises(ModelError, match="positive number"):
+        fit_local_event_decision(_events(), NAMES, bandwidth=0.0)
+    back = LocalEventDecision.from_arrays(dec.arrays())
+    x = np.array([[900.0, 40, 30, 100, 1], [760.0, 100, 70, -100, -1]])
+    np.testing.assert_array_equal(back(x), dec(x))
+
+
+@pytest.fixture(scope="module")
+def data():
+    return tiny_stand(1)
+
+
+@pytest.fixture(scope="module")
+def local_model(data):
+    train = data.select(ramps=["fast", "slow"])
+    return SVCPartitionedGP(latch_model="local_event", **SMALL).fit(train)
+
+
+def test_partitioned_gp_with_the_local_law(local_model, data, tmp_path):
+    assert local_model.latch_model_ == "local_event" and local_model.classifier_ is None
+    assert local_model.classifier_train_accuracy_ > 0.99
+    tr = data["medium_30Hz_A"]
+    latch = local_model.predict_latch(tr)
+    assert 0 < latch.mean() < 1  # it latches and releases on the unseen ramp
+    local_model.save(tmp_path / "m.json")
+    back = load_model(tmp_path / "m.json")
+    assert back.latch_model_ == "local_event"
+    np.testing.assert_array_equal(back.predict(tr), local_model.predict(tr))
+    step = step_predictor(local_model)
+    F = local_model._trace_matrix(tr)[::53]
+    line = tr.get("line_pressure_bar")[::53]
+    exact = local_model._predict_matrix(F, path=False, return_std=False, ref=line)
+    got = np.array([step(x, line_bar=v) for x, v in zip(F, line, strict=True)])
+    np.testing.assert_allclose(got, exact, atol=1e-9)
+
+
+def test_a_saved_local_law_is_checked_on_load(local_model, tmp_path):
+    local_model.save(tmp_path / "m.json")
+    npz = tmp_path / "m.npz"
+    arrays = dict(np.load(npz))
+    key = next(k for k in arrays if k.endswith("clf.bandwidth"))
+    arrays[key] = np.array([-1.0])
+    np.savez(npz, **arrays)
+    with pytest.raises(ModelFileError, match="bandwidth"):
+        load_model(tmp_path / "m.json")
+    doc = json.loads((tmp_path / "m.json").read_text())
+    doc["params"]["latch_bandwidth"] = 0
+    (tmp_path / "m.json").write_text(json.dumps(doc))
+    with pytest.raises(ModelFileError, match="latch_bandwidth"):
+        load_model(tmp_path / "m.json")
+
+
+def test_local_law_exports_to_an_exact_fmu(data, tmp_path):
+    from clutchlab.physics.fmu import FmuPhysics
+
+    train = data.select(ramps=["fast", "slow"])
+    features = causal_features(SVCPartitionedGP()._builder().names)
+    model = SVCPartitionedGP(features=features, latch_model="local_event", **SMALL).fit(train)
+    spec = decision_spec(model.decision_, model.classifier_columns_)
+    assert spec.kind == "local_event"
+    fmu = build_fmu(ml_program_from(model, with_std=False), tmp_path / "local.fmu")
+    model.set_params(knot_tol=0.0)
+    tr = data["medium_70Hz_B"]
+    sim = FmuPhysics(fmu).simulate(tr)
+    np.testing.assert_array_equal(sim.outputs["latch_state"], model.predict_latch(tr))
+    assert np.abs(sim.pressure_bar - model.predict(tr)).max() < 0.01
+
+
+def test_the_default_falls_back_to_the_classifier_and_reads_its_own_kappa(local_model, data):
+    from clutchlab.residual_ml import LATCH_RATE_SCALES
+
+    assert SVCPartitionedGP().latch_model == "local_event"
+    assert local_model._latch_rate_scale() == LATCH_RATE_SCALES["local_event"]
+    # One training experiment: one latch event per direction, too few for the law.
+    one = SVCPartitionedGP(**SMALL).fit([data["slow_30Hz_A"]])
+    assert one.latch_model_ == "classifier"
+    assert one._latch_rate_scale() == LATCH_RATE_SCALES["classifier"]
+    assert one.set_params(latch_rate_scale=0.25)._latch_rate_scale() == 0.25
