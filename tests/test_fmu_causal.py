@@ -74,7 +74,9 @@ def _model(variant: str):
         return SVCPartitionedGP(features=features, svc_max_points=1000, **SMALL).fit(train)
     own = _causal(f for f in HYBRID_FEATURES if not f.startswith("physics_"))
     residual = SVCPartitionedGP(features=own, svc_max_points=1000, **SMALL)
-    return HybridModel(physics=PhysicsPredictor(params=FITTED), residual=residual).fit(train)
+    # The residual form is what is exported here (the form choice has its own tests).
+    physics = PhysicsPredictor(params=FITTED)
+    return HybridModel(physics=physics, residual=residual, form="residual").fit(train)
 
 
 def test_causal_didt_looks_at_past_samples_only_and_follows_a_ramp():
