@@ -80,40 +80,40 @@ class _LinearStep:
 
 
 class _LocalEventStep:
-    """:class:`LocalEventDecision` for one feature vector, the direction's events only."""
+    """:class:`LocalEventDecision` for one feature vector, the direction's events only
+    (:func:`~clutchlab.residual_ml.latch_local.local_law` with its per-event products
+    computed once)."""
 
     def __init__(self, dec: LocalEventDecision, cols: list[int]) -> None:
         c = np.asarray(cols)[np.maximum(dec.columns, 0)]
         self.cols = [int(k) if j >= 0 else -1 for k, j in zip(c, dec.columns, strict=True)]
-        self.dec = dec
         self.s = 1.0 / np.asarray(dec.scale, dtype=float)
-        self.branch = {
-            side: (ev, *within_setting(ev, dec.scale, dec.bandwidth))
-            for side, ev in ((1, dec.on), (-1, dec.off))
-        }
-
-    def _moments(self, d2, h, i_k, r_k):
-        w = d2 / (h * h)
-        w -= w.min()
-        w *= -0.5
-        np.exp(w, out=w)
-        sw = w.sum()
-        mr, mi, mrr = (w @ r_k) / sw, (w @ i_k) / sw, (w @ (r_k * r_k)) / sw
-        return mr, mi, mrr - mr * mr, (w @ (r_k * i_k)) / sw - mr * mi, mrr
+        self.h2 = -0.5 / dec.bandwidth**2
+        self.h2_slope = -0.5 / dec.slope_bandwidth**2
+        self.rho = dec.slope_prior
+        self.branch = {}
+        for side, ev in ((1, dec.on), (-1, dec.off)):
+            di, dr = within_setting(ev, dec.scale, dec.bandwidth)
+            i_k, r_k = ev[:, 0], ev[:, 1]
+            # rows: I, İ, İ², İ·I, ΔI·Δİ, Δİ²
+            table = np.ascontiguousarray(
+                np.stack([i_k, r_k, r_k * r_k, r_k * i_k, di * dr, dr * dr])
+            )
+            self.branch[side] = (ev[:, 2] * self.s[0], ev[:, 3] * self.s[1], table)
 
     def __call__(self, x: np.ndarray) -> float:
         i, di, direction, a, f = (x[k] if k >= 0 else 0.0 for k in self.cols)
-        ev, di_k, dr_k = self.branch[1 if direction >= 0 else -1]
-        i_k, r_k = ev[:, 0], ev[:, 1]
-        d2 = ((a - ev[:, 2]) * self.s[0]) ** 2 + ((f - ev[:, 3]) * self.s[1]) ** 2
-        dec = self.dec
-        w = d2 / (dec.slope_bandwidth * dec.slope_bandwidth)
-        w = np.exp(-0.5 * (w - w.min()))
-        num, den = w @ (di_k * dr_k), w @ (dr_k * dr_k)
-        tau0 = num / den if den > 1e-6 * (w @ (r_k * r_k)) and den > 0 else 0.0
-        mr, mi, var_r, cov, mrr = self._moments(d2, dec.bandwidth, i_k, r_k)
-        lam = dec.slope_prior * mrr
-        tau = (cov + lam * tau0) / (var_r + lam) if var_r + lam > 0 else 0.0
+        a_k, f_k, table = self.branch[1 if direction >= 0 else -1]
+        d2 = (a * self.s[0] - a_k) ** 2 + (f * self.s[1] - f_k) ** 2
+        d2 -= d2.min()
+        w0 = np.exp(self.h2_slope * d2)
+        _, _, mrr0, _, num, den = (table @ w0) / w0.sum()
+        tau0 = num / den if den > 1e-6 * mrr0 and den > 0 else 0.0
+        w = np.exp(self.h2 * d2)
+        mi, mr, mrr, mri, _, _ = (table @ w) / w.sum()
+        var_r = mrr - mr * mr
+        lam = self.rho * mrr
+        tau = ((mri - mr * mi) + lam * tau0) / (var_r + lam) if var_r + lam > 0 else 0.0
         return float(i - (mi - tau * mr) - tau * di)
 
 
