@@ -129,6 +129,9 @@ def _cmd_train(args: argparse.Namespace) -> int:
         f"{o['max_abs_bar']:12.4f} {o['fit_pct']:7.2f}"
     )
     print(f"fit {fit_s:.1f} s; model written to {out / 'model.json'} (+ model.npz)")
+    latch = _latch_decision(model)
+    if latch:
+        print(f"latch decision: {latch}")
     for part, h in model.gp_hyperparameters().items():
         ell = ", ".join(f"{v:.3g}" for v in h["length_scales"])
         print(
@@ -156,6 +159,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
             "model": str(out / "model.json"),
             "gp_hyperparameters": model.gp_hyperparameters(),
             "hyperparameters_at_bounds": bound,
+            "latch_decision": latch,
         }
         from .cli import write_json_output
 
@@ -208,3 +212,27 @@ def register(sub) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", help="also write the training metrics here")
     p.set_defaults(func=_cmd_train)
+
+
+#: How ``clutchlab train`` names each latch decision.
+_LATCH_NAMES = {
+    "local_event": "local latch-event law (a line in dI/dt per dither setting)",
+    "event": "latch-event law (one plane over the dither settings)",
+    "classifier": "classifier",
+    "none": "none (one latch state in the training data)",
+}
+
+
+def _latch_decision(model) -> str | None:
+    """What decides the latch state of ``model`` (or of a hybrid's residual model)."""
+    est = getattr(model, "residual_", None) or model
+    kind = getattr(est, "latch_model_", None)
+    if kind is None:
+        return None
+    text = _LATCH_NAMES.get(kind, kind)
+    if kind == "local_event":
+        text += f", bandwidth {est.decision_.bandwidth:g}"
+    elif kind == "classifier" and getattr(est, "classifier", None):
+        text += f" {est.classifier}"
+    acc = getattr(est, "classifier_train_accuracy_", None)
+    return text + (f"; training latch-state accuracy {100 * acc:.2f} %" if acc is not None else "")

@@ -80,6 +80,10 @@ def test_classifiers_and_train_cli(tmp_path):
     model = load_model(model_dir / "model.json")
     assert model.feature_names_ == ["current_mA", "dither_amp_mA", "dither_freq_Hz"]
     assert np.isfinite(doc["fit_s"])
+    assert doc["latch_decision"] is None and "latch decision" not in res.stdout
+
+    res = _run("train", str(data), "--variant", "paper_svc_gp", "--out", str(tmp_path / "p"))
+    assert "latch decision: local latch-event law" in res.stdout  # the default says so
 
     bad = _run(
         "train",
