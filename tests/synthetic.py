@@ -50,3 +50,46 @@ def tiny_stand(seed: int):
         seed=seed,
     )
     return run_stand(config, progress=False).dataset
+
+
+def check_latch_law_model(model, data, tmp_path, kind: str) -> None:
+    """A partitioned GP whose latch law is ``kind``: it latches and releases on an unseen
+    ramp, survives save / load, and its step predictor equals the batch path."""
+    from clutchlab.residual_ml import load_model, step_predictor
+
+    assert model.latch_model_ == kind and model.classifier_ is None
+    assert model.classifier_train_accuracy_ > 0.99
+    tr = data["medium_30Hz_A"]
+    latch = model.predict_latch(tr)
+    assert 0 < latch.mean() < 1  # it latches and releases on the unseen ramp
+    model.save(tmp_path / "m.json")
+    back = load_model(tmp_path / "m.json")
+    assert back.latch_model_ == kind
+    np.testing.assert_array_equal(back.predict(tr), model.predict(tr))
+    step = step_predictor(model)
+    F = model._trace_matrix(tr)[::53]
+    line = tr.get("line_pressure_bar")[::53]
+    exact = model._predict_matrix(F, path=False, return_std=False, ref=line)
+    got = np.array([step(x, line_bar=v) for x, v in zip(F, line, strict=True)])
+    np.testing.assert_allclose(got, exact, atol=1e-9)
+
+
+def check_latch_law_fmu(data, tmp_path, kind: str, **small) -> None:
+    """A causal partitioned GP with latch law ``kind`` exports to an FMU whose latch state
+    equals the model's and whose pressure is within 0.01 bar of it."""
+    from clutchlab.physics.fmu import FmuPhysics, build_fmu, ml_program_from
+    from clutchlab.physics.fmu.adapters import decision_spec
+    from clutchlab.residual_ml import SVCPartitionedGP
+    from clutchlab.residual_ml.features import causal_features
+
+    train = data.select(ramps=["fast", "slow"])
+    features = causal_features(SVCPartitionedGP()._builder().names)
+    model = SVCPartitionedGP(features=features, latch_model=kind, **small).fit(train)
+    spec = decision_spec(model.decision_, model.classifier_columns_)
+    assert spec.kind == kind
+    fmu = build_fmu(ml_program_from(model, with_std=False), tmp_path / f"{kind}.fmu")
+    model.set_params(knot_tol=0.0)
+    tr = data["medium_70Hz_B"]
+    sim = FmuPhysics(fmu).simulate(tr)
+    np.testing.assert_array_equal(sim.outputs["latch_state"], model.predict_latch(tr))
+    assert np.abs(sim.pressure_bar - model.predict(tr)).max() < 0.01

@@ -4,13 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from synthetic import tiny_stand
+from synthetic import check_latch_law_fmu, check_latch_law_model, tiny_stand
 
 from clutchlab.errors import ModelError
-from clutchlab.physics.fmu import build_fmu, ml_program_from
-from clutchlab.physics.fmu.adapters import decision_spec
-from clutchlab.residual_ml import SVCPartitionedGP, load_model, step_predictor
-from clutchlab.residual_ml.features import causal_features
+from clutchlab.residual_ml import SVCPartitionedGP
 from clutchlab.residual_ml.latch_event import EventDecision, fit_event_decision, latch_events
 
 SMALL = {"n_hyper": 300, "max_points": 300}
@@ -73,21 +70,7 @@ def event_model(data):
 
 
 def test_partitioned_gp_with_the_event_law(event_model, data, tmp_path):
-    assert event_model.latch_model_ == "event" and event_model.classifier_ is None
-    assert event_model.classifier_train_accuracy_ > 0.99
-    tr = data["medium_30Hz_A"]
-    latch = event_model.predict_latch(tr)
-    assert 0 < latch.mean() < 1  # it latches and releases on the unseen ramp
-    event_model.save(tmp_path / "m.json")
-    back = load_model(tmp_path / "m.json")
-    assert back.latch_model_ == "event"
-    np.testing.assert_array_equal(back.predict(tr), event_model.predict(tr))
-    step = step_predictor(event_model)
-    F = event_model._trace_matrix(tr)[::53]
-    line = tr.get("line_pressure_bar")[::53]
-    exact = event_model._predict_matrix(F, path=False, return_std=False, ref=line)
-    got = np.array([step(x, line_bar=v) for x, v in zip(F, line, strict=True)])
-    np.testing.assert_allclose(got, exact, atol=1e-9)
+    check_latch_law_model(event_model, data, tmp_path, "event")
 
 
 def test_event_law_falls_back_to_the_classifier_on_arrays(event_model, data):
@@ -100,16 +83,4 @@ def test_event_law_falls_back_to_the_classifier_on_arrays(event_model, data):
 
 
 def test_event_law_exports_to_an_exact_fmu(data, tmp_path):
-    from clutchlab.physics.fmu import FmuPhysics
-
-    train = data.select(ramps=["fast", "slow"])
-    features = causal_features(SVCPartitionedGP()._builder().names)
-    model = SVCPartitionedGP(features=features, latch_model="event", **SMALL).fit(train)
-    spec = decision_spec(model.decision_, model.classifier_columns_)
-    assert spec.kind == "event"
-    fmu = build_fmu(ml_program_from(model, with_std=False), tmp_path / "event.fmu")
-    model.set_params(knot_tol=0.0)
-    tr = data["medium_70Hz_B"]
-    sim = FmuPhysics(fmu).simulate(tr)
-    np.testing.assert_array_equal(sim.outputs["latch_state"], model.predict_latch(tr))
-    assert np.abs(sim.pressure_bar - model.predict(tr)).max() < 0.01
+    check_latch_law_fmu(data, tmp_path, "event", **SMALL)

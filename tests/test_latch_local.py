@@ -6,19 +6,15 @@ import json
 
 import numpy as np
 import pytest
-from synthetic import tiny_stand
+from synthetic import check_latch_law_fmu, check_latch_law_model, tiny_stand
 
 from clutchlab.errors import ModelError, ModelFileError
-from clutchlab.physics.fmu import build_fmu, ml_program_from
-from clutchlab.physics.fmu.adapters import decision_spec
 from clutchlab.residual_ml import (
     LocalEventDecision,
     SVCPartitionedGP,
     load_model,
     local_law,
-    step_predictor,
 )
-from clutchlab.residual_ml.features import causal_features
 from clutchlab.residual_ml.latch_event import fit_event_decision
 from clutchlab.residual_ml.latch_local import fit_local_event_decision
 
@@ -116,21 +112,7 @@ def local_model(data):
 
 
 def test_partitioned_gp_with_the_local_law(local_model, data, tmp_path):
-    assert local_model.latch_model_ == "local_event" and local_model.classifier_ is None
-    assert local_model.classifier_train_accuracy_ > 0.99
-    tr = data["medium_30Hz_A"]
-    latch = local_model.predict_latch(tr)
-    assert 0 < latch.mean() < 1  # it latches and releases on the unseen ramp
-    local_model.save(tmp_path / "m.json")
-    back = load_model(tmp_path / "m.json")
-    assert back.latch_model_ == "local_event"
-    np.testing.assert_array_equal(back.predict(tr), local_model.predict(tr))
-    step = step_predictor(local_model)
-    F = local_model._trace_matrix(tr)[::53]
-    line = tr.get("line_pressure_bar")[::53]
-    exact = local_model._predict_matrix(F, path=False, return_std=False, ref=line)
-    got = np.array([step(x, line_bar=v) for x, v in zip(F, line, strict=True)])
-    np.testing.assert_allclose(got, exact, atol=1e-9)
+    check_latch_law_model(local_model, data, tmp_path, "local_event")
 
 
 def test_a_saved_local_law_is_checked_on_load(local_model, tmp_path):
@@ -150,19 +132,7 @@ def test_a_saved_local_law_is_checked_on_load(local_model, tmp_path):
 
 
 def test_local_law_exports_to_an_exact_fmu(data, tmp_path):
-    from clutchlab.physics.fmu import FmuPhysics
-
-    train = data.select(ramps=["fast", "slow"])
-    features = causal_features(SVCPartitionedGP()._builder().names)
-    model = SVCPartitionedGP(features=features, latch_model="local_event", **SMALL).fit(train)
-    spec = decision_spec(model.decision_, model.classifier_columns_)
-    assert spec.kind == "local_event"
-    fmu = build_fmu(ml_program_from(model, with_std=False), tmp_path / "local.fmu")
-    model.set_params(knot_tol=0.0)
-    tr = data["medium_70Hz_B"]
-    sim = FmuPhysics(fmu).simulate(tr)
-    np.testing.assert_array_equal(sim.outputs["latch_state"], model.predict_latch(tr))
-    assert np.abs(sim.pressure_bar - model.predict(tr)).max() < 0.01
+    check_latch_law_fmu(data, tmp_path, "local_event", **SMALL)
 
 
 def test_the_default_falls_back_to_the_classifier_and_reads_its_own_kappa(local_model, data):

@@ -114,6 +114,31 @@ def decision_current_columns(names: list[str]) -> tuple[int, int]:
     return _first(list(names), _CURRENT), _first(list(names), _DIDT)
 
 
+def law_columns(names: list[str], law: str) -> np.ndarray:
+    """Indices in ``names`` of current, dI/dt, direction, dither amplitude and frequency
+    (−1: absent) for a latch-event ``law``; ModelError naming what it lacks."""
+    cols = np.array(
+        [
+            _first(names, _CURRENT),
+            _first(names, _DIDT),
+            _first(names, _DIRECTION),
+            _first(names, ("dither_amp_mA",)),
+            _first(names, ("dither_freq_Hz",)),
+        ]
+    )
+    missing = [
+        what
+        for what, c in zip(("a current", "a dI/dt", "a direction"), cols[:3], strict=True)
+        if c < 0
+    ]
+    if missing:
+        raise ModelError(
+            f"the {law} needs {', '.join(missing)} feature among the classifier features; "
+            f"they are {names}"
+        )
+    return cols
+
+
 def _first(names: list[str], wanted: tuple[str, ...]) -> int:
     return next((names.index(n) for n in wanted if n in names), -1)
 
@@ -163,25 +188,7 @@ def fit_event_decision(
         If a needed feature is missing or there are fewer than two events of each kind.
     """
     names = list(feature_names)
-    cols = np.array(
-        [
-            _first(names, _CURRENT),
-            _first(names, _DIDT),
-            _first(names, _DIRECTION),
-            _first(names, ("dither_amp_mA",)),
-            _first(names, ("dither_freq_Hz",)),
-        ]
-    )
-    missing = [
-        what
-        for what, c in zip(("a current", "a dI/dt", "a direction"), cols[:3], strict=True)
-        if c < 0
-    ]
-    if missing:
-        raise ModelError(
-            f"the latch-event law needs {', '.join(missing)} feature among the classifier "
-            f"features; they are {names}"
-        )
+    cols = law_columns(names, "latch-event law")
     coefs = []
     for sign, what in ((1, "latch-on"), (-1, "latch-off")):
         x = np.array([row for row, s in events if s == sign], dtype=float)

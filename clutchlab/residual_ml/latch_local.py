@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ModelError
-from .latch_event import _CURRENT, _DIDT, _DIRECTION, _first
+from .latch_event import law_columns
 
 __all__ = [
     "SLOPE_BANDWIDTH",
@@ -262,25 +262,7 @@ def fit_local_event_decision(
         the bandwidth is not a positive number.
     """
     names = list(feature_names)
-    cols = np.array(
-        [
-            _first(names, _CURRENT),
-            _first(names, _DIDT),
-            _first(names, _DIRECTION),
-            _first(names, ("dither_amp_mA",)),
-            _first(names, ("dither_freq_Hz",)),
-        ]
-    )
-    missing = [
-        what
-        for what, c in zip(("a current", "a dI/dt", "a direction"), cols[:3], strict=True)
-        if c < 0
-    ]
-    if missing:
-        raise ModelError(
-            f"the local latch-event law needs {', '.join(missing)} feature among the "
-            f"classifier features; they are {names}"
-        )
+    cols = law_columns(names, "local latch-event law")
     if not (np.isfinite(bandwidth) and bandwidth > 0):
         raise ModelError(f"the latch bandwidth must be a positive number, got {bandwidth!r}")
 

@@ -100,32 +100,31 @@ def decision_spec(decision, columns=None) -> DecisionSpec:
             weights=decision.weights,
             columns=cols,
         )
-    if kind == "event":
+    if kind in ("event", "local_event"):
+        # The laws read their own columns: no standardization (mean 0, scale 1, unused).
         n = len(cols) if cols is not None else int(max(decision.columns)) + 1
-        return DecisionSpec(
-            "event",
-            np.zeros(n),
-            np.ones(n),
-            0.0,
-            columns=cols,
-            event_columns=tuple(int(c) for c in decision.columns),
-            event_on=np.asarray(decision.on, dtype=float),
-            event_off=np.asarray(decision.off, dtype=float),
-        )
-    if kind == "local_event":
-        n = len(cols) if cols is not None else int(max(decision.columns)) + 1
+        common = {"columns": cols, "event_columns": tuple(int(c) for c in decision.columns)}
+        if kind == "event":
+            return DecisionSpec(
+                "event",
+                np.zeros(n),
+                np.ones(n),
+                0.0,
+                event_on=np.asarray(decision.on, dtype=float),
+                event_off=np.asarray(decision.off, dtype=float),
+                **common,
+            )
         return DecisionSpec(
             "local_event",
             np.zeros(n),
             np.ones(n),
             0.0,
             gamma=float(decision.bandwidth),
-            columns=cols,
-            event_columns=tuple(int(c) for c in decision.columns),
             event_on=decision.events_with_deviations(decision.on),
             event_off=decision.events_with_deviations(decision.off),
             event_scale=np.asarray(decision.scale, dtype=float),
             event_slope=np.array([decision.slope_bandwidth, decision.slope_prior], dtype=float),
+            **common,
         )
     raise FmuError(
         f"cannot export the latch classifier {type(decision).__name__}: only RBF-SVC, "
