@@ -35,6 +35,7 @@ def _cmd_discover(args: argparse.Namespace) -> int:
         candidates=_csv(args.candidates) or None,
         max_effects=args.max_effects,
         alpha=args.alpha,
+        alternatives=not args.no_alternatives,
         progress=not args.quiet,
     )
     baseline = None
@@ -91,6 +92,12 @@ def register(sub) -> None:
         help="a fit from `clutchlab fit-physics` on this dataset's training ramps: the "
         "discovery starts from it instead of fitting the base model again; refused if it was "
         "fitted on other experiments or lacks --effects",
+    )
+    p.add_argument(
+        "--no-alternatives",
+        action="store_true",
+        help="claim an effect without asking that it predict the left-out experiments "
+        "better than each flexible component law of at most its size (default: asked)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress display")
     p.set_defaults(func=_cmd_discover, report_out=True)

@@ -184,6 +184,8 @@ class Evaluation:
         result = self.discovery_result()
         if result is None:
             return None
+        from .discover import alternative_note
+
         model = self.models["augmented_hybrid"]
         iterations = []
         for it in result.iterations:
@@ -201,6 +203,7 @@ class Evaluation:
                         "status": c.status,
                         "delta_bic_screening": screen.get("delta_bic"),
                         "delta_bic": None if refit is screen else refit.get("delta_bic"),
+                        "flexible_alternatives": alternative_note(refit),
                     }
                 )
             iterations.append(

@@ -6,9 +6,12 @@ sparse regression with pysindy), scores every library effect the model lacks by 
 much of the residual its output sensitivity explains (a score test at zero strength),
 confirms the best by refitting, adds the winner while an information criterion
 improves, and reports the error before and after on the training and the unseen test
-ramp. It says "unexplained residual" rather than naming a wrong effect.
+ramp. It says "unexplained residual" rather than naming a wrong effect, and claims an
+effect only when it predicts the left-out training experiments better than each
+flexible component law of at most its size (``alternatives``).
 """
 
+from .alternatives import Alternative, alternative_note, alternatives_for, fit_alternative
 from .diagnostics import Diagnostics, diagnose
 from .loop import discover, period_mean_metrics
 from .report import plot_diagnostics, plot_evidence, plot_residuals, write_report
@@ -19,6 +22,7 @@ from .settings import DiscoverySettings
 from .sparse import SparseFit, sparse_regression
 
 __all__ = [
+    "Alternative",
     "CandidateScore",
     "Diagnostics",
     "DiscoveryResult",
@@ -27,8 +31,11 @@ __all__ = [
     "ModelState",
     "ResidualSet",
     "SparseFit",
+    "alternative_note",
+    "alternatives_for",
     "diagnose",
     "discover",
+    "fit_alternative",
     "period_mean_metrics",
     "plot_diagnostics",
     "plot_evidence",

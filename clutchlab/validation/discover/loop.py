@@ -5,8 +5,11 @@ refitted; a refit qualifies when both its information criterion and its lineariz
 leave-one-experiment-out prediction error (DESIGN §5: selection by
 leave-one-experiment-out inside the training set) are lower than the current model's;
 the qualifying candidate with the lowest such error is added (with fewer than two training
-experiments there is no such error, and the lowest criterion decides). The loop stops when
-none is significant, none qualifies, or at the effect limit. The test ramp is only scored.
+experiments there is no such error, and the lowest criterion decides) — provided it also
+predicts better than every flexible component law of at most its size, refitted the same
+way (:mod:`.alternatives`; otherwise no effect is claimed for the residual). The loop stops
+when none is significant, none qualifies, or at the effect limit. The test ramp is only
+scored.
 
 Information criterion: ``BIC = n_eff · ln(RSS) + p · ln(n_eff)`` on the kept training
 residuals, ``n_eff`` the effective number of independent residuals of the augmented
@@ -31,12 +34,13 @@ from ...physics import CircuitModel, simulate
 from ...physics.effects import EFFECTS
 from ...physics.fit import FitResult, resolve_free
 from ...physics.parameters import ParameterSet
+from .alternatives import alternatives_for, beats, fit_alternative
 from .diagnostics import diagnose
 from .refit import candidate_free, judge, refit_start, residual_at, run_fit
 from .residuals import ResidualSet, loeo_evidence
 from .result import DiscoveryResult, IterationRecord, ModelState
 from .scoring import CandidateScore, score_candidates
-from .screen import Screening, confirm_settings, screen_refit, screening
+from .screen import Screening, confirm_settings, screen_refit, screen_settings, screening
 from .settings import DiscoverySettings
 from .sparse import sparse_regression
 
@@ -198,6 +202,15 @@ def _qualifies(refit: dict, cv_ref: float | None) -> bool:
     return cv_ref is None or (refit["loeo_rss_bar2"] or math.inf) < cv_ref
 
 
+def _matched_decision(matched: dict[str, str], scope: str) -> str:
+    """The decision when every qualifying candidate was matched by a flexible law."""
+    pairs = ", ".join(f"{e} by {law}" for e, law in matched.items())
+    return (
+        "a flexible law of at most the same size predicted the left-out experiments as "
+        f"well ({pairs}; {scope}): no effect claimed"
+    )
+
+
 def _say(settings: DiscoverySettings, text: str) -> None:
     if settings.progress:
         tqdm.write(f"discover: {text}")
@@ -261,6 +274,9 @@ def _iteration(
 
     refits: dict[str, dict] = {}
     ref: list = []
+    # flexible-law alternatives refitted in this iteration: (scope, law) -> verdict
+    alt_verdicts: dict[tuple[str, str], dict] = {}
+    matched: dict[str, str] = {}  # candidate -> the flexible law that predicted as well
 
     def score(expansion: str = "zero", previous=None) -> list[CandidateScore]:
         # candidates refitted already keep their score: they would not be refitted again
@@ -301,9 +317,32 @@ def _iteration(
             if state is not None:
                 states[s.effect] = state
 
+    def alternatives_beaten(s: CandidateScore, scope: str, traces, reference_res, fit) -> bool:
+        """Whether the candidate's refit predicts better than every flexible law of at most
+        its size refitted on ``traces`` (each law refitted once per scope); recorded
+        under ``s.refit["alternatives"]``."""
+        if not settings.alternatives:
+            return True
+        rows = []
+        for alt in alternatives_for(current.model, tuple(current.fit.free), s.refit["k"]):
+            key = (scope, alt.law)
+            if key not in alt_verdicts:
+                _say(settings, f"refitting the flexible alternative {alt.law} ({scope})")
+                alt_verdicts[key] = fit_alternative(
+                    alt, current, traces, settings, reference_res, fit
+                )
+            rows.append(alt_verdicts[key])
+            if not beats(s.refit, rows[-1]):
+                matched[s.effect] = alt.law
+                break
+        s.refit["alternatives"] = rows
+        s.refit["beats_alternatives"] = s.effect not in matched
+        return s.effect not in matched
+
     def screen_then_confirm(confirm: list[CandidateScore]) -> None:
         """Refit each on the subset; confirm on every training experiment the ones that
-        qualify there, best held-out error first, until one qualifies on all of them."""
+        qualify there and predict better than the flexible alternatives there, best
+        held-out error first, until one qualifies on all of them."""
         screen.reference_for(current, settings)
         cv_sub = screen.info["loeo_rss_bar2"]
         passed = []
@@ -314,7 +353,10 @@ def _iteration(
             if fit is not None and _qualifies(s.refit, cv_sub):
                 passed.append((s, fit))
         passed.sort(key=lambda p: p[0].refit["loeo_rss_bar2"] or 0.0)
+        sub_fit = screen_settings(settings)
         for s, fit in passed:
+            if not alternatives_beaten(s, "screening", screen.traces, screen.reference, sub_fit):
+                continue
             rss_ref, cv_ref = full_reference()
             _say(settings, f"confirming {s.effect} on all {len(train)} training experiments")
             state = _confirm(s, current, rss_ref, train, test, settings, screened=fit)
@@ -342,6 +384,8 @@ def _iteration(
             screen_then_confirm(confirm)
         confirmed = [s for s in significant if s.effect in states]
         if screen is not None and not confirmed:
+            if matched:
+                return None, _matched_decision(matched, "screening subset")
             screened = [s.refit for s in significant if "delta_bic" in s.refit]
             if any(r["delta_bic"] < 0 for r in screened):
                 return None, "no leave-one-experiment-out improvement (screening subset)"
@@ -351,11 +395,18 @@ def _iteration(
             return None, "information criterion did not improve"
         _, cv_ref = full_reference()
         if cv_ref is None:
-            return min(ok, key=lambda s: s.refit["delta_bic"]), "added"
-        ok = [s for s in ok if _qualifies(s.refit, cv_ref)]
-        if not ok:
-            return None, "no leave-one-experiment-out improvement"
-        return min(ok, key=lambda s: s.refit["loeo_rss_bar2"]), "added"
+            ok.sort(key=lambda s: s.refit["delta_bic"])
+        else:
+            ok = [s for s in ok if _qualifies(s.refit, cv_ref)]
+            if not ok:
+                return None, "no leave-one-experiment-out improvement"
+            ok.sort(key=lambda s: s.refit["loeo_rss_bar2"])
+        if screen is not None:  # the alternatives were refitted on the subset already
+            return ok[0], "added"
+        for s in ok:
+            if alternatives_beaten(s, "all training experiments", train, ref[0], None):
+                return s, "added"
+        return None, _matched_decision(matched, "all training experiments")
 
     chosen, decision = attempt(scores)
     if chosen is None and not diag.whiteness.get("white", True):

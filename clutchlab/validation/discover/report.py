@@ -13,6 +13,7 @@ from matplotlib.figure import Figure
 
 from ..._plotly import MARKER_SCRIPT, figure_div, plotlyjs_script
 from ...data.output import write_folder_atomic
+from .alternatives import alternative_note
 from .interactive import iplot_diagnostics, iplot_evidence, iplot_residuals
 from .result import DiscoveryResult, IterationRecord, ModelState
 
@@ -139,6 +140,7 @@ def _candidate_rows(it: IterationRecord) -> list[list[str]]:
                 f"{c.probe} ({c.n_tests})",
                 "yes" if c.significant else "no",
                 _fmt(refit.get("delta_bic"), ".1f") if refit else "",
+                alternative_note(refit),
                 c.status,
             ]
         )
@@ -156,6 +158,7 @@ _CAND_HEAD = [
     "linearized at (tests)",
     "significant",
     "ΔBIC",
+    "flexible alternatives",
     "status",
 ]
 

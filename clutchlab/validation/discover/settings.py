@@ -75,6 +75,12 @@ class DiscoverySettings:
     screen_max_iter : int
         Solver iterations of each screening refit on the subset (and of the current fit's
         continuation there, which it is compared with: the same budget for both).
+    alternatives : bool
+        Claim an effect only when its refit predicts the left-out training experiments
+        better than each flexible component law of at most its size, refitted the same
+        way (:mod:`.alternatives`): on the screening subset when there is one, else on
+        every training experiment. False: the library effects compete only with each
+        other and the current model (discovery before issue 17).
     progress : bool
         Show a progress bar per stage.
     """
@@ -93,6 +99,7 @@ class DiscoverySettings:
     sparse_threshold: float = 0.1
     screen_samples: int | None = None
     screen_max_iter: int = 10
+    alternatives: bool = True
     progress: bool = True
 
     def __post_init__(self) -> None:

@@ -1,0 +1,219 @@
+"""Flexible-structure alternatives: an effect is claimed only when it predicts better than one.
+
+Issue 17, "false attribution is the cardinal sin". A library effect that lowers the
+information criterion and the leave-one-experiment-out error may still be the wrong
+name: on a circuit whose component laws differ from clutchlab's, any added parameter
+that bends the model towards the data helps, whatever physics it stands for. So before
+an effect is added, each flexible component law (:data:`~clutchlab.physics.effects.
+FLEXIBLE_LAWS`: a monotone VFS force correction, a play-operator hysteresis, free latch
+thresholds, a regulator pilot lag) that adds **at most as many free parameters** as the
+effect and is not in the model yet is refitted the same way, on the same experiments,
+from the same current fit; the effect is claimed only when its linearized
+leave-one-experiment-out error is lower than every such alternative's (with a single
+training experiment there is no such error, and the kept residual sum of squares
+decides). Otherwise no effect is claimed for that residual and the report names the
+alternative that predicted as well.
+
+Sizes are counted against the current fit's free parameters: ``latch_free_thresholds``
+replaces the datasheet latch's preload and rate by its two thresholds (net 0 when those
+are free), ``reg_pilot_lag`` frees one time constant (its weight held at 1), the play
+operator three heights, the monotone force correction four steps.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+from ...data import Trace
+from ...errors import ClutchlabError
+from ...physics import CircuitModel
+from ...physics.components.latch import latch_thresholds
+from ...physics.effects import FLEXIBLE_LAWS
+from ...physics.fit import FitSettings
+from ...physics.parameters import ParameterSet
+from .refit import judge, residual_at, run_fit
+from .residuals import ResidualSet
+from .result import ModelState
+from .settings import DiscoverySettings
+
+__all__ = [
+    "PILOT_LAG_STARTS_MS",
+    "Alternative",
+    "alternative_note",
+    "alternatives_for",
+    "beats",
+    "fit_alternative",
+]
+
+#: Time constants (ms) tried as the start of a ``reg_pilot_lag`` alternative (the best by
+#: the kept residual sum of squares, one simulation each): its time constant is the only
+#: parameter it frees, and the objective is far from quadratic in it.
+PILOT_LAG_STARTS_MS: tuple[float, ...] = (5.0, 20.0, 80.0, 300.0)
+
+#: What a failing alternative refit may raise (recorded in its evidence, never raised).
+_FAILURES = (ClutchlabError, ArithmeticError, ValueError)
+
+
+@dataclass(frozen=True)
+class Alternative:
+    """A flexible law as an alternative to a candidate effect.
+
+    Attributes
+    ----------
+    law : str
+        Name of the flexible law (a key of ``FLEXIBLE_LAWS``).
+    model : CircuitModel
+        The current model with the law switched on.
+    free : tuple of str
+        Its free parameters: the current ones, minus those the law retires, plus the
+        law's fit parameters.
+    k : int
+        Free parameters added to the current fit's (may be 0 or negative).
+    """
+
+    law: str
+    model: CircuitModel
+    free: tuple[str, ...]
+    k: int
+
+
+def alternatives_for(current: CircuitModel, free: tuple[str, ...], k: int) -> list[Alternative]:
+    """The flexible laws not in ``current`` that add at most ``k`` free parameters.
+
+    Parameters
+    ----------
+    current : CircuitModel
+        The current model structure.
+    free : tuple of str
+        The current fit's free parameters.
+    k : int
+        Free parameters the candidate effect adds.
+
+    Returns
+    -------
+    list of Alternative
+        Smallest first.
+    """
+    out = []
+    for name, cls in FLEXIBLE_LAWS.items():
+        if name in current.effect_names:
+            continue
+        retired = getattr(cls, "REPLACES", ())
+        kept = tuple(n for n in free if n not in retired)
+        new_free = kept + tuple(n for n in cls.fit_parameters() if n not in kept)
+        size = len(new_free) - len(free)
+        if size <= k:
+            out.append(Alternative(name, current.with_effects(name), new_free, size))
+    return sorted(out, key=lambda a: (a.k, a.law))
+
+
+def _start(
+    alt: Alternative,
+    values: dict[str, float],
+    traces: list[Trace],
+    settings: DiscoverySettings,
+) -> ParameterSet:
+    """The alternative's start: the current fit, with the law at the point where it equals
+    the current model (free latch thresholds at the fitted latch's thresholds) or, for the
+    pilot lag (weight 1), at the best of :data:`PILOT_LAG_STARTS_MS`."""
+    names = {p.name for p in alt.model.parameters}
+    base = {n: v for n, v in values.items() if n in names}
+    if alt.law == "latch_free_thresholds":
+        p_on, p_off = latch_thresholds(values)
+        return alt.model.params(**base, lthr_p_on=p_on, lthr_p_off=p_off)
+    if alt.law != "reg_pilot_lag":
+        return alt.model.params(**base)
+    best, best_rss = PILOT_LAG_STARTS_MS[0], math.inf
+    for tau in PILOT_LAG_STARTS_MS:
+        params = alt.model.params(**base, rlag_w=1.0, rlag_tau=tau)
+        try:
+            rss = residual_at(alt.model, params, alt.free, traces, settings, jacobian=False)
+        except _FAILURES:
+            continue
+        if math.isfinite(rss.kept_rss) and rss.kept_rss < best_rss:
+            best, best_rss = tau, rss.kept_rss
+    return alt.model.params(**base, rlag_w=1.0, rlag_tau=best)
+
+
+def fit_alternative(
+    alt: Alternative,
+    current: ModelState,
+    traces: list[Trace],
+    settings: DiscoverySettings,
+    reference: ResidualSet,
+    fit: FitSettings | None = None,
+) -> dict:
+    """Refit the alternative on ``traces`` from the current fit; its verdict.
+
+    Parameters
+    ----------
+    alt : Alternative
+        The flexible law and its free parameters.
+    current : ModelState
+        The current fit (the start).
+    traces : list of Trace
+        The experiments of the comparison (the screening subset or every training one).
+    settings : DiscoverySettings
+        Residual operator, fit settings.
+    reference : ResidualSet
+        The residual the candidate was judged against on the same experiments.
+    fit : FitSettings, optional
+        The refit's settings (a screening refit's); ``settings.fit`` by default.
+
+    Returns
+    -------
+    dict
+        ``law``, ``k``, ``status``, ``wall_s`` and, when the refit worked, the verdict of
+        :func:`~.refit.judge` (``loeo_rss_bar2``, ``rss_bar2``, ``delta_bic`` …).
+    """
+    t0 = time.perf_counter()
+    head = {"law": alt.law, "k": alt.k}
+    try:
+        start = _start(alt, current.fit.values, traces, settings)
+        res_fit = run_fit(alt.model, traces, settings, alt.free, start, fit=fit)
+        res = residual_at(res_fit.model(), res_fit.params(), res_fit.free, traces, settings)
+    except _FAILURES as exc:
+        return head | {"status": f"failed: {exc}", "wall_s": time.perf_counter() - t0}
+    verdict = judge(res, reference.kept_rss, alt.k)
+    if verdict is None:
+        return head | {"status": "failed: non-finite residual", "wall_s": time.perf_counter() - t0}
+    return head | {
+        **{k: v for k, v in verdict.items() if k != "k"},
+        "status": res_fit.status,
+        "iterations": res_fit.iterations,
+        "wall_s": time.perf_counter() - t0,
+    }
+
+
+def beats(candidate: dict, alternative: dict) -> bool:
+    """Whether a candidate's refit verdict predicts better than an alternative's.
+
+    Lower linearized leave-one-experiment-out error (bar²), or, where neither has one,
+    lower kept residual sum of squares. An alternative whose refit failed is beaten.
+    """
+    if "rss_bar2" not in alternative:
+        return True
+    mine, theirs = candidate.get("loeo_rss_bar2"), alternative.get("loeo_rss_bar2")
+    if mine is None or theirs is None:
+        mine, theirs = candidate["rss_bar2"], alternative["rss_bar2"]
+    return bool(mine < theirs)
+
+
+def alternative_note(refit: dict | None) -> str:
+    """One cell for an evidence table: the flexible laws a candidate's refit was compared
+    with (on the screening subset or every training experiment) and the outcome —
+    ``"beat reg_pilot_lag, latch_free_thresholds"``, ``"matched by reg_pilot_lag"`` or
+    ``""`` when it was not compared."""
+    refit = refit or {}
+    rows = refit.get("alternatives")
+    if rows is None:
+        rows = (refit.get("screen") or {}).get("alternatives")
+    if not rows:
+        return "" if rows is None else "none to compare"
+    laws = ", ".join(r["law"] for r in rows)
+    won = refit.get("beats_alternatives")
+    if won is None:
+        won = (refit.get("screen") or {}).get("beats_alternatives")
+    return f"beat {laws}" if won else f"matched by {rows[-1]['law']}"
