@@ -60,13 +60,28 @@ def test_alternatives_add_at_most_the_candidates_parameters():
     assert alt.free[-2:] == ("lthr_p_on", "lthr_p_off")
 
 
-def test_a_candidate_must_predict_strictly_better_than_the_alternative():
-    cand = {"loeo_rss_bar2": 2.0, "rss_bar2": 1.0}
-    assert beats(cand, {"loeo_rss_bar2": 2.5, "rss_bar2": 0.5})
-    assert not beats(cand, {"loeo_rss_bar2": 2.0, "rss_bar2": 2.0})
-    assert not beats(cand, {"loeo_rss_bar2": 1.5, "rss_bar2": 2.0})
-    # one training experiment: no held-out error, the sums of squares decide
+def _verdict(by_experiment):
+    return {
+        "loeo_bar2_by_experiment": by_experiment,
+        "loeo_rss_bar2": sum(by_experiment.values()),
+        "rss_bar2": 1.0,
+    }
+
+
+def test_a_candidate_must_predict_better_in_most_left_out_experiments():
+    cand = _verdict({"a": 1.0, "b": 1.0, "c": 1.0, "d": 1.0})
+    assert beats(cand, _verdict({"a": 2.0, "b": 2.0, "c": 2.0, "d": 0.5}))  # 3 of 4
+    assert not beats(cand, _verdict({"a": 2.0, "b": 2.0, "c": 0.5, "d": 0.5}))  # 2 of 4
+    assert not beats(cand, _verdict({"a": 1.0, "b": 1.0, "c": 1.0, "d": 1.0}))  # ties lose
+    # one exploding held-out term (the only slow ramp left out) does not decide: the
+    # alternative's sum is far larger, but it predicts three of the four better
+    # (saturating_lugre seed 0, the null study's false attribution)
+    exploding = _verdict({"a": 0.8, "b": 1.1e6, "c": 0.6, "d": 0.7})
+    assert exploding["loeo_rss_bar2"] > cand["loeo_rss_bar2"]
+    assert not beats(cand, exploding)
+    # without per-experiment errors the sums decide, and with one experiment the fit
     one = {"loeo_rss_bar2": None, "rss_bar2": 1.0}
+    assert beats({"loeo_rss_bar2": 2.0, "rss_bar2": 1.0}, {"loeo_rss_bar2": 2.5, "rss_bar2": 0.5})
     assert beats(one, {"loeo_rss_bar2": None, "rss_bar2": 1.2})
     assert not beats(one, {"loeo_rss_bar2": None, "rss_bar2": 0.9})
     # an alternative whose refit failed explains nothing

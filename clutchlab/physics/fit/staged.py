@@ -54,6 +54,7 @@ __all__ = [
     "free_latch_structure",
     "lag_signature",
     "measured_latch_indices",
+    "measured_thresholds",
     "quasi_static_traces",
     "ramp_rate",
     "regulated_band",
@@ -296,6 +297,53 @@ def _clip(start: ParameterSet, name: str, value: float, bounds) -> float:
     return float(min(max(value, lo), hi))
 
 
+def measured_thresholds(
+    model: CircuitModel,
+    params: ParameterSet,
+    traces: list[Trace],
+    latch: dict[str, tuple[int, int]] | None = None,
+    substeps: int = 8,
+) -> tuple[float, float] | str:
+    """Latch-on / latch-off pilot pressures (bar) at the data's latch snaps.
+
+    The model's pilot pressure (period mean), simulated at ``params``, at the samples where
+    the measured pressure snaps to line and leaves it (:func:`measured_latch_indices`),
+    median over ``traces``: the thresholds a latch would need to switch where the data do,
+    given the model's pilot.
+
+    Parameters
+    ----------
+    model, params : CircuitModel, ParameterSet
+        The model and its parameters.
+    traces : list of Trace
+        Experiments to read the snaps from (the quasi-static ones are best).
+    latch : dict, optional
+        Experiment name -> (latch-on, latch-off) sample indices; measured when omitted.
+    substeps : int
+        Integrator substeps of the simulations.
+
+    Returns
+    -------
+    (float, float) or str
+        The thresholds, or why there are none.
+    """
+    on, off = [], []
+    sim = SimulationSettings(substeps=substeps)
+    for tr in traces:
+        k = latch.get(tr.name) if latch is not None else measured_latch_indices(tr)
+        if k is None:
+            continue
+        pilot = simulate(model, params, tr, sim).outputs.get("pilot_pressure_bar")
+        if pilot is None:
+            return "the model has no pilot-pressure output"
+        pm = _period_mean(tr, pilot)
+        on.append(pm[k[0]])
+        off.append(pm[k[1]])
+    if not on:
+        return "no latch snap in the data"
+    return float(np.median(on)), float(np.median(off))
+
+
 def _threshold_stage(model, start, traces, latch, settings, free, info):
     """Latch thresholds from the model's pilot pressure at the measured latch currents."""
     names = {p.name for p in model.parameters}
@@ -304,23 +352,11 @@ def _threshold_stage(model, start, traces, latch, settings, free, info):
     if not (free_thr or free_spring):
         info.notes.append("latch parameters not free: thresholds left at the start")
         return start
-    on, off = [], []
-    sim = SimulationSettings(substeps=settings.substeps)
-    for tr in traces:
-        k = latch.get(tr.name)
-        if k is None:
-            continue
-        pilot = simulate(model, start, tr, sim).outputs.get("pilot_pressure_bar")
-        if pilot is None:
-            info.notes.append("the model has no pilot-pressure output: thresholds left")
-            return start
-        pm = _period_mean(tr, pilot)
-        on.append(pm[k[0]])
-        off.append(pm[k[1]])
-    if not on:
-        info.notes.append("no latch snap in the quasi-static data: thresholds left")
+    found = measured_thresholds(model, start, traces, latch, settings.substeps)
+    if isinstance(found, str):
+        info.notes.append(f"{found}: thresholds left at the start")
         return start
-    p_on, p_off = float(np.median(on)), float(np.median(off))
+    p_on, p_off = found
     info.thresholds_bar = (p_on, p_off)
     if free_thr:
         values = {
