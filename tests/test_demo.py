@@ -70,7 +70,9 @@ def test_demo_end_to_end_from_the_console_script(tmp_path):
     disc = doc["discovery"]
     assert disc["baseline_reused"] and disc["iterations"][0]["candidates"]
     assert {"discovery_evidence", "discovery_residuals"} <= set(doc["figures"]["drawn"])
-    assert "Closing the loop" in (out / "report.html").read_text(encoding="utf-8")
+    html = (out / "report.html").read_text(encoding="utf-8")
+    assert "Closing the loop" in html and "flexible alternatives" in html
+    assert all("flexible_alternatives" in c for c in disc["iterations"][0]["candidates"])
     assert wall <= BUDGET_S, f"demo took {wall:.0f} s (budget {BUDGET_S:.0f} s)"
     again = subprocess.run(
         [*_cli(), "demo", "--out", str(out), "--quiet", "--variants", "physics_default"],

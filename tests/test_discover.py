@@ -114,6 +114,7 @@ def test_cli_writes_the_issue_json_and_a_report(cli_run):
     assert json.loads((report / "discovery.json").read_text()) == doc
     html = (report / "report.html").read_text()
     assert "Iteration 0" in html and "supply_droop" in html
+    assert "flexible alternatives" in html  # the evidence table's column (issue 17)
     for kind in ("residuals", "evidence", "diagnostics"):
         png = report / f"iteration0_{kind}.png"
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

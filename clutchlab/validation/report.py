@@ -178,6 +178,7 @@ _DISCOVERY_HEAD = [
     "significant",
     "ΔBIC screening",
     "ΔBIC all training",
+    "flexible alternatives",
     "status",
 ]
 
@@ -192,6 +193,7 @@ def _discovery_rows(it: dict[str, Any]) -> list[list[str]]:
             fmt(c["significant"]),
             fmt(c["delta_bic_screening"]) if c["delta_bic_screening"] is not None else "",
             fmt(c["delta_bic"]) if c["delta_bic"] is not None else "",
+            c.get("flexible_alternatives", ""),  # absent in reports before issue 17's rule
             c["status"],
         ]
         for c in it["candidates"]
