@@ -60,28 +60,32 @@ def test_alternatives_add_at_most_the_candidates_parameters():
     assert alt.free[-2:] == ("lthr_p_on", "lthr_p_off")
 
 
-def _verdict(by_experiment):
+def _verdict(by_experiment, rss=1.0):
     return {
         "loeo_bar2_by_experiment": by_experiment,
         "loeo_rss_bar2": sum(by_experiment.values()),
-        "rss_bar2": 1.0,
+        "rss_bar2": rss,
     }
 
 
-def test_a_candidate_must_predict_better_in_most_left_out_experiments():
+def test_an_alternative_matches_when_as_good_in_sample_and_in_most_left_out_experiments():
     cand = _verdict({"a": 1.0, "b": 1.0, "c": 1.0, "d": 1.0})
-    assert beats(cand, _verdict({"a": 2.0, "b": 2.0, "c": 2.0, "d": 0.5}))  # 3 of 4
-    assert not beats(cand, _verdict({"a": 2.0, "b": 2.0, "c": 0.5, "d": 0.5}))  # 2 of 4
-    assert not beats(cand, _verdict({"a": 1.0, "b": 1.0, "c": 1.0, "d": 1.0}))  # ties lose
+    assert beats(cand, _verdict({"a": 2.0, "b": 2.0, "c": 2.0, "d": 0.5}))  # 1 of 4
+    assert beats(cand, _verdict({"a": 2.0, "b": 2.0, "c": 0.5, "d": 0.5}))  # 2 of 4: no majority
+    assert not beats(cand, _verdict({"a": 0.5, "b": 0.5, "c": 0.5, "d": 2.0}))  # 3 of 4
     # one exploding held-out term (the only slow ramp left out) does not decide: the
-    # alternative's sum is far larger, but it predicts three of the four better
-    # (saturating_lugre seed 0, the null study's false attribution)
-    exploding = _verdict({"a": 0.8, "b": 1.1e6, "c": 0.6, "d": 0.7})
+    # alternative's sum is far larger, but it fits better and predicts three of the four
+    # better (saturating_lugre seed 0 of the null study, a false attribution before)
+    exploding = _verdict({"a": 0.8, "b": 1.1e6, "c": 0.6, "d": 0.7}, rss=0.3)
     assert exploding["loeo_rss_bar2"] > cand["loeo_rss_bar2"]
     assert not beats(cand, exploding)
+    # an alternative that fits worse does not match, whatever the count
+    # (a lag helping the three fast experiments of a subset against a true supply droop)
+    worse = _verdict({"a": 0.5, "b": 0.5, "c": 0.5, "d": 2.0}, rss=1.2)
+    assert beats(cand, worse)
     # without per-experiment errors the sums decide, and with one experiment the fit
-    one = {"loeo_rss_bar2": None, "rss_bar2": 1.0}
     assert beats({"loeo_rss_bar2": 2.0, "rss_bar2": 1.0}, {"loeo_rss_bar2": 2.5, "rss_bar2": 0.5})
+    one = {"loeo_rss_bar2": None, "rss_bar2": 1.0}
     assert beats(one, {"loeo_rss_bar2": None, "rss_bar2": 1.2})
     assert not beats(one, {"loeo_rss_bar2": None, "rss_bar2": 0.9})
     # an alternative whose refit failed explains nothing

@@ -8,11 +8,10 @@ an effect is added, each flexible component law (:data:`~clutchlab.physics.effec
 FLEXIBLE_LAWS`: a monotone VFS force correction, a play-operator hysteresis, free latch
 thresholds, a regulator pilot lag) that adds **at most as many free parameters** as the
 effect and is not in the model yet is refitted the same way, on the same experiments,
-from the same current fit; the effect is claimed only when its linearized
-leave-one-experiment-out error is lower than every such alternative's in a strict majority
-of the training experiments (:func:`beats`; with a single training experiment there is no
-such error, and the kept residual sum of squares decides). Otherwise no effect is claimed
-for that residual and the report names the alternative that predicted as well.
+from the same current fit; the effect is not claimed when such an alternative is at least
+as good in-sample (with no more parameters) and predicts a strict majority of the left-out
+training experiments better (:func:`beats`). Then the report names the alternative that
+explained the residual as well, and no effect is claimed for it.
 
 Sizes are counted against the current fit's free parameters: ``latch_free_thresholds``
 replaces the datasheet latch's preload and rate by its two thresholds (net 0 when those
@@ -224,27 +223,35 @@ def fit_alternative(
 
 
 def beats(candidate: dict, alternative: dict) -> bool:
-    """Whether a candidate's refit verdict predicts better than an alternative's.
+    """Whether a candidate's refit verdict is not matched by an alternative's.
 
-    With the held-out error of each training experiment on both sides
-    (``loeo_bar2_by_experiment``): lower in a strict majority of the experiments. A count,
-    not the sum: the linearized held-out error of an experiment whose leaving-out makes a
-    parameter unidentifiable (the only slow ramp of a subset) can be off by orders of
-    magnitude, and one such term would decide a sum. Without them, the lower sum
-    (``loeo_rss_bar2``), and without that (one training experiment) the lower kept
-    residual sum of squares. An alternative whose refit failed is beaten.
+    The alternative matches the candidate when it fits the same experiments at least as well
+    (kept residual sum of squares ``rss_bar2``; with no more parameters it is then at least
+    as good under any penalty, whereas the ``delta_bic`` of two refits use their own
+    effective sample sizes) **and** predicts better out of sample: with the held-out error
+    of each training experiment on both sides (``loeo_bar2_by_experiment``), lower in a
+    strict majority of the experiments; without them the lower sum (``loeo_rss_bar2``), and
+    without that (one training experiment) nothing more. A count, not the sum: the
+    linearized held-out error of an experiment whose leaving-out makes a parameter
+    unidentifiable (the only slow ramp of a subset) can be off by orders of magnitude, and
+    one such term would decide a sum. Both conditions, because the count alone follows the
+    subset's mix of ramps (a lag that helps the three fast experiments of a five-experiment
+    subset while the true effect fits better overall would win it). An alternative whose
+    refit failed is beaten.
     """
     if "rss_bar2" not in alternative:
+        return True
+    if alternative["rss_bar2"] > candidate["rss_bar2"]:
         return True
     mine = candidate.get("loeo_bar2_by_experiment")
     theirs = alternative.get("loeo_bar2_by_experiment")
     if mine and theirs and set(mine) == set(theirs):
-        wins = sum(mine[e] < theirs[e] for e in mine)
-        return 2 * wins > len(mine)
+        wins = sum(theirs[e] < mine[e] for e in mine)
+        return not 2 * wins > len(mine)
     mine, theirs = candidate.get("loeo_rss_bar2"), alternative.get("loeo_rss_bar2")
     if mine is None or theirs is None:
-        mine, theirs = candidate["rss_bar2"], alternative["rss_bar2"]
-    return bool(mine < theirs)
+        return False
+    return bool(mine <= theirs)
 
 
 def alternative_note(refit: dict | None) -> str:
