@@ -15,7 +15,7 @@ committed before either had been run on any discovery; nothing here is chosen on
 
 Usage::
 
-    python studies/discover_effect_size.py [--effects a,b] [--json OUT]
+    python studies/discover_effect_size.py [--effects a,b] [--json OUT] [--keep DIR]
 """
 
 from __future__ import annotations
@@ -24,15 +24,20 @@ import argparse
 import json
 import os
 import platform
+from pathlib import Path
 
 from clutchlab.physics.effects import EFFECTS
 from clutchlab.validation.discover import DiscoverySettings
 from clutchlab.validation.discover.scenarios import run_sized_case
 
 
-def run_effect(effect: str) -> dict:
-    """Calibrate ``effect``'s size, run the discovery case, return its measured row."""
-    _, row = run_sized_case(effect, settings=DiscoverySettings(progress=False))
+def run_effect(effect: str, keep: Path | None = None) -> dict:
+    """Calibrate ``effect``'s size, run the discovery case, return its measured row
+    (and write the discovery's full evidence to ``keep / EFFECT.discover.json``)."""
+    res, row = run_sized_case(effect, settings=DiscoverySettings(progress=False))
+    if keep is not None:
+        keep.mkdir(parents=True, exist_ok=True)
+        res.to_json(keep / f"{effect}.discover.json")
     return row
 
 
@@ -40,6 +45,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--effects", default="", help="comma-separated subset (default: all)")
     ap.add_argument("--json", help="write the rows here (rewritten after each effect)")
+    ap.add_argument("--keep", type=Path, help="write each discovery's JSON evidence here")
     args = ap.parse_args()
     wanted = [e for e in args.effects.split(",") if e] or sorted(EFFECTS)
     print(
@@ -53,7 +59,7 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     rows = []
     for effect in wanted:
-        row = run_effect(effect)
+        row = run_effect(effect, args.keep)
         rows.append(row)
         if args.json:
             with open(args.json, "w", encoding="utf-8") as f:

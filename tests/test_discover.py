@@ -280,6 +280,30 @@ def test_loeo_rss_equals_the_exact_held_out_error_of_a_linear_model():
     assert loeo_evidence(one)["loeo_bar2_by_experiment"] is None
 
 
+def test_loeo_does_not_extrapolate_when_the_left_out_experiment_dominates_every_column():
+    """Every parameter's sensitivity peaks in one experiment (a snap the model misplaces):
+    without it the others determine nothing on the full data's scale, so the held-out
+    step stays put and the held-out error is that experiment's own residual. A cut-off
+    relative to the remaining experiments' largest singular value extrapolated instead."""
+    rng = np.random.default_rng(6)
+    x = 1e-9 * rng.standard_normal((300, 3))
+    x[250:260] = 1e3 * rng.standard_normal((10, 3))  # the spike, in experiment "c"
+    r = 0.1 * rng.standard_normal(300)
+    r -= x @ np.linalg.lstsq(x, r, rcond=None)[0]  # at the fit's optimum
+    slices = [(0, 100), (100, 220), (220, 300)]
+    res = _linear_residual_set(x, r, slices, ["a", "b", "c"])
+    errors = loeo_errors(res)
+    own_c = float(r[220:300] @ r[220:300])
+    assert errors[2] == pytest.approx(own_c, rel=1e-6)
+    assert np.all(errors < 10 * float(r @ r))
+    # the old operator: rcond relative to the remaining rows' own scale
+    norms = np.linalg.norm(x, axis=0)
+    others = np.r_[0:220]
+    step, *_ = np.linalg.lstsq(x[others] / norms, -r[others], rcond=3e-2)
+    e_old = r[220:300] + (x[220:300] / norms) @ step
+    assert float(e_old @ e_old) > 1e6 * own_c
+
+
 def test_leave_one_ramp_out_is_the_exact_held_out_error_of_a_linear_model_per_ramp():
     """Block deletion over a ramp's experiments together: for a residual linear in the
     parameters it is the exact refit on the other ramps; one experiment per ramp is

@@ -232,9 +232,9 @@ def beats(candidate: dict, alternative: dict) -> bool:
     of each training experiment on both sides (``loeo_bar2_by_experiment``), lower in a
     strict majority of the experiments; without them the lower sum (``loeo_rss_bar2``), and
     without that (one training experiment) nothing more. A count, not the sum: the
-    linearized held-out error of an experiment whose leaving-out makes a parameter
-    unidentifiable (the only slow ramp of a subset) can be off by orders of magnitude, and
-    one such term would decide a sum. Both conditions, because the count alone follows the
+    linearized held-out error of an experiment whose leaving-out leaves a parameter poorly
+    determined (the only slow ramp of a subset) is the least accurate of all, and one such
+    term would decide a sum. Both conditions, because the count alone follows the
     subset's mix of ramps (a lag that helps the three fast experiments of a five-experiment
     subset while the true effect fits better overall would win it). An alternative whose
     refit failed is beaten.
