@@ -438,13 +438,13 @@ def _held_out_errors(res: ResidualSet, blocks: list[list[int]], rcond: float) ->
         held = np.zeros(len(r), dtype=bool)
         for k in block:
             held[slices[k][0] : slices[k][1]] = True
-        step = truncated_step(jn[~held], -r[~held], cutoff)
+        step = _truncated_step(jn[~held], -r[~held], cutoff)
         e = r[held] + jn[held] @ step
         out.append(float(e @ e))
     return np.array(out)
 
 
-def truncated_step(a: np.ndarray, b: np.ndarray, cutoff: float) -> np.ndarray:
+def _truncated_step(a: np.ndarray, b: np.ndarray, cutoff: float) -> np.ndarray:
     """The least-squares solution of ``a x ≈ b`` restricted to the right singular
     directions of ``a`` whose singular value is at least ``cutoff`` (an absolute
     threshold; zero where none is)."""
