@@ -371,14 +371,18 @@ def loeo_rss(res: ResidualSet, rcond: float = 3e-2) -> float | None:
     held-out error 70-fold; at 1e-2 a direction at 0.0146 still slipped through in a
     10-parameter fold and turned a true effect's held-out error from 0.26 to 2.4 bar²).
     The keep / reject decisions of the stored training-data cases (true and false
-    candidates) are the same for every cut-off from 0.02 to 0.05 and change at 0.01 and
-    0.1; 0.03 lies in the middle.
+    candidates) were the same for every cut-off from 0.02 to 0.05 and changed at 0.01 and
+    0.1; 0.03 lies in the middle (measured with the cut-off relative to the remaining
+    experiments, before the change below).
 
     The cut-off is on the scale of all experiments, not of the remaining ones: when the
     left-out experiment dominates every column (each parameter's sensitivity peaks
     there, as at a snap the model places away from the data's), the remaining
     experiments' own largest singular value is tiny, and a cut-off relative to it let
-    through steps that predicted held-out errors of up to 10²³ bar².
+    through steps that predicted held-out errors of up to 10²³ bar². With two training
+    experiments every fold predicts one ramp rate from the other, and there the change
+    moves the held-out errors enough to reorder candidates (the outcome-blind sensor_lag
+    case now ranks transport_delay first; BENCHMARKS.md, issue 17 session 13).
 
     Returns
     -------
