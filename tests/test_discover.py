@@ -29,6 +29,7 @@ from clutchlab.validation.discover import (
     residual_problem,
     residual_set,
 )
+from clutchlab.validation.discover.refit import by_criterion
 from clutchlab.validation.discover.residuals import (
     effective_size,
     integrated_time,
@@ -521,3 +522,18 @@ def test_a_candidate_already_refitted_keeps_its_score_in_the_second_look(monkeyp
     assert by["b"].statistic == 25.0 and by["b"].n_tests == 2
     # the family is still both candidates: level α/2 = 0.005, each divided by its tests
     assert by["a"].significant and by["b"].significant
+
+
+def test_refits_are_ranked_by_one_information_criterion():
+    # the outcome-blind sensor-lag stand: the true lag fits 8x better with fewer
+    # parameters, whatever its two-fold held-out sum says
+    td = {"rss_bar2": 2.393, "k": 2, "n_eff": 400.0, "loeo_rss_bar2": 5.7}
+    sl = {"rss_bar2": 0.298, "k": 1, "n_eff": 300.0, "loeo_rss_bar2": 11.1}
+    assert by_criterion([td, sl]) == [1, 0]
+    # one sample size for all (the smallest): 1 % better fit for one more parameter
+    # loses at n = 300 (300·ln 0.99 + ln 300 > 0), wins at n = 3000
+    a = {"rss_bar2": 1.0, "k": 1, "n_eff": 300.0}
+    b = {"rss_bar2": 0.99, "k": 2, "n_eff": 3000.0}
+    assert by_criterion([b, a]) == [1, 0]
+    assert by_criterion([b, {**a, "n_eff": 3000.0}]) == [0, 1]
+    assert by_criterion([]) == []

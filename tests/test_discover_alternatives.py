@@ -20,7 +20,7 @@ from clutchlab.validation.discover import (
     alternatives_for,
     discover,
 )
-from clutchlab.validation.discover.alternatives import beats
+from clutchlab.validation.discover.alternatives import beats, held_out_log_ratio
 
 TINY_RAMPS = (
     RampProfile("fast", 1.5, 0.3),
@@ -68,28 +68,55 @@ def _verdict(by_experiment, rss=1.0):
     }
 
 
-def test_an_alternative_matches_when_as_good_in_sample_and_in_most_left_out_experiments():
+def test_a_candidate_must_fit_better_and_predict_better_on_the_geometric_mean():
     cand = _verdict({"a": 1.0, "b": 1.0, "c": 1.0, "d": 1.0})
-    assert beats(cand, _verdict({"a": 2.0, "b": 2.0, "c": 2.0, "d": 0.5}))  # 1 of 4
-    assert beats(cand, _verdict({"a": 2.0, "b": 2.0, "c": 0.5, "d": 0.5}))  # 2 of 4: no majority
-    assert not beats(cand, _verdict({"a": 0.5, "b": 0.5, "c": 0.5, "d": 2.0}))  # 3 of 4
-    # one exploding held-out term (the only slow ramp left out) does not decide: the
-    # alternative's sum is far larger, but it fits better and predicts three of the four
-    # better (saturating_lugre seed 0 of the null study, a false attribution before)
+    # fits worse and predicts worse on the geometric mean: beaten, whatever the count
+    assert beats(cand, _verdict({"a": 2.0, "b": 2.0, "c": 2.0, "d": 0.5}, rss=1.2))
+    assert beats(cand, _verdict({"a": 0.9, "b": 0.9, "c": 0.9, "d": 2.0}, rss=1.2))  # 3 of 4
+    # fits worse but predicts better on the geometric mean: matched
+    assert not beats(cand, _verdict({"a": 0.5, "b": 0.5, "c": 2.0, "d": 1.5}, rss=1.2))
+    # fits at least as well with no more parameters: matched, whatever it predicts; one
+    # exploding held-out term (the only slow ramp of a subset left out) decides nothing
     exploding = _verdict({"a": 0.8, "b": 1.1e6, "c": 0.6, "d": 0.7}, rss=0.3)
-    assert exploding["loeo_rss_bar2"] > cand["loeo_rss_bar2"]
+    assert held_out_log_ratio(cand, exploding) < 0
     assert not beats(cand, exploding)
-    # an alternative that fits worse does not match, whatever the count
-    # (a lag helping the three fast experiments of a subset against a true supply droop)
-    worse = _verdict({"a": 0.5, "b": 0.5, "c": 0.5, "d": 2.0}, rss=1.2)
-    assert beats(cand, worse)
-    # without per-experiment errors the sums decide, and with one experiment the fit
-    assert beats({"loeo_rss_bar2": 2.0, "rss_bar2": 1.0}, {"loeo_rss_bar2": 2.5, "rss_bar2": 0.5})
+    assert not beats(cand, _verdict({"a": 2.0, "b": 2.0, "c": 2.0, "d": 2.0}, rss=1.0))
+
+
+def test_the_comparison_on_the_stored_verdicts_it_was_settled_on():
+    """Subset verdicts (bar²) of discoveries run before the rule; training data only."""
+    # null study, saturating_lugre seed 2: latch_threshold_drift fits better than the
+    # pilot lag, which predicts the three fast experiments 2-4x better and the slow one
+    # 1.3x worse: matched (the count with a fit condition claimed it)
+    ltd = _verdict({"f30": 140.3, "s30": 2420.6, "f50": 155.6, "f70": 230.8}, rss=2126.0)
+    lag = _verdict({"f30": 73.2, "s30": 3157.6, "f50": 60.5, "f70": 59.2}, rss=3251.9)
+    assert held_out_log_ratio(ltd, lag) == pytest.approx(0.67, abs=0.01)
+    assert not beats(ltd, lag)
+    # a tiny stand's true supply droop: the pilot lag predicts the three fast experiments
+    # of the subset 2x better and the two slow ones 2.7x worse: beaten (a strict-majority
+    # count refused the true effect)
+    droop = _verdict({"f50": 37.8, "s50": 25.0, "f70": 36.6, "s70": 23.2, "f30": 30.2}, 158.3)
+    lag = _verdict({"f50": 19.6, "s50": 65.1, "f70": 19.9, "s70": 65.6, "f30": 19.2}, 189.2)
+    assert held_out_log_ratio(droop, lag) == pytest.approx(-0.056, abs=0.005)
+    assert beats(droop, lag)
+    # the outcome-blind sensor lag against the pilot lag (two training experiments)
+    lag1 = _verdict({"fast": 0.185, "slow": 10.94}, rss=0.298)
+    assert beats(lag1, _verdict({"fast": 2.458, "slow": 10.70}, rss=5.56))
+
+
+def test_without_per_experiment_errors_the_sums_decide_and_with_one_experiment_the_fit():
+    assert beats({"loeo_rss_bar2": 2.0, "rss_bar2": 1.0}, {"loeo_rss_bar2": 2.5, "rss_bar2": 1.5})
+    assert not beats(
+        {"loeo_rss_bar2": 2.0, "rss_bar2": 1.0}, {"loeo_rss_bar2": 1.5, "rss_bar2": 1.5}
+    )
     one = {"loeo_rss_bar2": None, "rss_bar2": 1.0}
     assert beats(one, {"loeo_rss_bar2": None, "rss_bar2": 1.2})
     assert not beats(one, {"loeo_rss_bar2": None, "rss_bar2": 0.9})
     # an alternative whose refit failed explains nothing
+    cand = _verdict({"a": 1.0, "b": 1.0})
     assert beats(cand, {"law": "reg_pilot_lag", "status": "failed: diverged"})
+    # different experiments: no per-experiment comparison
+    assert held_out_log_ratio(cand, _verdict({"a": 1.0, "c": 1.0})) is None
 
 
 def test_the_evidence_cell_says_what_was_compared_and_how_it_ended():

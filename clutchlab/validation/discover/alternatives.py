@@ -8,10 +8,10 @@ an effect is added, each flexible component law (:data:`~clutchlab.physics.effec
 FLEXIBLE_LAWS`: a monotone VFS force correction, a play-operator hysteresis, free latch
 thresholds, a regulator pilot lag) that adds **at most as many free parameters** as the
 effect and is not in the model yet is refitted the same way, on the same experiments,
-from the same current fit; the effect is not claimed when such an alternative is at least
-as good in-sample (with no more parameters) and predicts a strict majority of the left-out
-training experiments better (:func:`beats`). Then the report names the alternative that
-explained the residual as well, and no effect is claimed for it.
+from the same current fit; the effect is claimed only when it fits better than each such
+alternative **and** predicts the left-out training experiments better on the geometric
+mean of their held-out errors (:func:`beats`). Otherwise the report names the alternative
+that explained the residual as well, and no effect is claimed for it.
 
 Sizes are counted against the current fit's free parameters: ``latch_free_thresholds``
 replaces the datasheet latch's preload and rate by its two thresholds (net 0 when those
@@ -45,6 +45,7 @@ __all__ = [
     "alternatives_for",
     "beats",
     "fit_alternative",
+    "held_out_log_ratio",
 ]
 
 #: Time constants (ms) tried as the start of a ``reg_pilot_lag`` alternative (the best by
@@ -222,36 +223,57 @@ def fit_alternative(
     }
 
 
+def held_out_log_ratio(candidate: dict, alternative: dict) -> float | None:
+    """Mean over the left-out training experiments of ``ln(e_candidate / e_alternative)``.
+
+    ``e`` is each verdict's linearized held-out error of an experiment (bar², under
+    ``loeo_bar2_by_experiment``); a negative value means the candidate predicts better on
+    the geometric mean. None when either verdict lacks the per-experiment errors or they
+    cover different experiments.
+    """
+    mine = candidate.get("loeo_bar2_by_experiment")
+    theirs = alternative.get("loeo_bar2_by_experiment")
+    if not mine or not theirs or set(mine) != set(theirs):
+        return None
+    tiny = 1e-300
+    return sum(math.log(max(mine[e], tiny) / max(theirs[e], tiny)) for e in mine) / len(mine)
+
+
 def beats(candidate: dict, alternative: dict) -> bool:
     """Whether a candidate's refit verdict is not matched by an alternative's.
 
-    The alternative matches the candidate when it fits the same experiments at least as well
-    (kept residual sum of squares ``rss_bar2``; with no more parameters it is then at least
-    as good under any penalty, whereas the ``delta_bic`` of two refits use their own
-    effective sample sizes) **and** predicts better out of sample: with the held-out error
-    of each training experiment on both sides (``loeo_bar2_by_experiment``), lower in a
-    strict majority of the experiments; without them the lower sum (``loeo_rss_bar2``), and
-    without that (one training experiment) nothing more. A count, not the sum: the
-    linearized held-out error of an experiment whose leaving-out leaves a parameter poorly
-    determined (the only slow ramp of a subset) is the least accurate of all, and one such
-    term would decide a sum. Both conditions, because the count alone follows the
-    subset's mix of ramps (a lag that helps the three fast experiments of a five-experiment
-    subset while the true effect fits better overall would win it). An alternative whose
-    refit failed is beaten.
+    The candidate beats the alternative only when it is better **both** in-sample and out
+    of sample:
+
+    * it fits the same experiments strictly better (kept residual sum of squares
+      ``rss_bar2``): an alternative with no more parameters that fits at least as well
+      is at least as good under any penalty (the ``delta_bic`` of two refits use their
+      own effective sample sizes);
+    * it predicts the left-out training experiments better on the geometric mean of
+      their held-out errors (:func:`held_out_log_ratio` < 0); without per-experiment
+      errors on a sum (``loeo_rss_bar2``), and with one training experiment the fit
+      alone decides.
+
+    Why the geometric mean: it weighs each experiment's margin on the same relative
+    scale, so neither one poorly determined term (the held-out error of the only slow
+    ramp of a subset) nor a count that a subset's mix of ramps tilts (a lag that helps
+    the three fast experiments of a five-experiment subset a little while the true
+    effect predicts the two slow ones much better) decides alone. Why both: a flexible
+    law that fits better is as good an explanation of the training data whatever a
+    linearized held-out error says, and one that predicts better is whatever it fits.
+    An alternative whose refit failed is beaten.
     """
     if "rss_bar2" not in alternative:
         return True
-    if alternative["rss_bar2"] > candidate["rss_bar2"]:
-        return True
-    mine = candidate.get("loeo_bar2_by_experiment")
-    theirs = alternative.get("loeo_bar2_by_experiment")
-    if mine and theirs and set(mine) == set(theirs):
-        wins = sum(theirs[e] < mine[e] for e in mine)
-        return not 2 * wins > len(mine)
+    if alternative["rss_bar2"] <= candidate["rss_bar2"]:
+        return False
+    ratio = held_out_log_ratio(candidate, alternative)
+    if ratio is not None:
+        return bool(ratio < 0.0)
     mine, theirs = candidate.get("loeo_rss_bar2"), alternative.get("loeo_rss_bar2")
     if mine is None or theirs is None:
-        return False
-    return bool(mine <= theirs)
+        return True
+    return bool(mine < theirs)
 
 
 def alternative_note(refit: dict | None) -> str:

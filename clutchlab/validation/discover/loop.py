@@ -3,13 +3,15 @@
 DESIGN §6. Among the candidates the score test finds significant, the best few are
 refitted; a refit qualifies when both its information criterion and its linearized
 leave-one-experiment-out prediction error (DESIGN §5: selection by
-leave-one-experiment-out inside the training set) are lower than the current model's;
-the qualifying candidate with the lowest such error is added (with fewer than two training
-experiments there is no such error, and the lowest criterion decides) — provided it also
-predicts better than every flexible component law of at most its size, refitted the same
-way (:mod:`.alternatives`; otherwise no effect is claimed for the residual). The loop stops
-when none is significant, none qualifies, or at the effect limit. The test ramp is only
-scored.
+leave-one-experiment-out inside the training set) are lower than the current model's
+(with fewer than two training experiments there is no such error, and the criterion
+decides). The qualifying candidates are tried best criterion first (:func:`~.refit.
+by_criterion`: the held-out error is the go / no-go, not the ranking, because with few
+training ramps each fold predicts one ramp rate from the others and the true effect's
+fold can be the worst); the first that also fits and predicts better than every flexible
+component law of at most its size, refitted the same way (:mod:`.alternatives`), is
+added; when none does, no effect is claimed for the residual. The loop stops when none is
+significant, none qualifies, or at the effect limit. The test ramp is only scored.
 
 Information criterion: ``BIC = n_eff · ln(RSS) + p · ln(n_eff)`` on the kept training
 residuals, ``n_eff`` the effective number of independent residuals of the augmented
@@ -36,7 +38,7 @@ from ...physics.fit import FitResult, resolve_free
 from ...physics.parameters import ParameterSet
 from .alternatives import alternatives_for, beats, fit_alternative
 from .diagnostics import diagnose
-from .refit import candidate_free, judge, refit_start, residual_at, run_fit
+from .refit import by_criterion, candidate_free, judge, refit_start, residual_at, run_fit
 from .residuals import ResidualSet, loeo_evidence
 from .result import DiscoveryResult, IterationRecord, ModelState
 from .scoring import CandidateScore, score_candidates
@@ -341,8 +343,8 @@ def _iteration(
 
     def screen_then_confirm(confirm: list[CandidateScore]) -> None:
         """Refit each on the subset; confirm on every training experiment the ones that
-        qualify there and predict better than the flexible alternatives there, best
-        held-out error first, until one qualifies on all of them."""
+        qualify there and beat the flexible alternatives there, best criterion first,
+        until one qualifies on all of them."""
         screen.reference_for(current, settings)
         cv_sub = screen.info["loeo_rss_bar2"]
         passed = []
@@ -352,7 +354,7 @@ def _iteration(
             refits[s.effect] = s.refit
             if fit is not None and _qualifies(s.refit, cv_sub):
                 passed.append((s, fit))
-        passed.sort(key=lambda p: p[0].refit["loeo_rss_bar2"] or 0.0)
+        passed = [passed[i] for i in by_criterion([p[0].refit for p in passed])]
         sub_fit = screen_settings(settings)
         for s, fit in passed:
             if not alternatives_beaten(s, "screening", screen.traces, screen.reference, sub_fit):
@@ -394,13 +396,10 @@ def _iteration(
         if not ok:
             return None, "information criterion did not improve"
         _, cv_ref = full_reference()
-        if cv_ref is None:
-            ok.sort(key=lambda s: s.refit["delta_bic"])
-        else:
-            ok = [s for s in ok if _qualifies(s.refit, cv_ref)]
-            if not ok:
-                return None, "no leave-one-experiment-out improvement"
-            ok.sort(key=lambda s: s.refit["loeo_rss_bar2"])
+        ok = [s for s in ok if _qualifies(s.refit, cv_ref)]
+        if not ok:
+            return None, "no leave-one-experiment-out improvement"
+        ok = [ok[i] for i in by_criterion([s.refit for s in ok])]
         if screen is not None:  # the alternatives were refitted on the subset already
             return ok[0], "added"
         for s in ok:

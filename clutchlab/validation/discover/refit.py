@@ -29,7 +29,15 @@ from .scoring import CandidateScore
 from .settings import DiscoverySettings
 from .warm import warm_sensitivities
 
-__all__ = ["START_FRACTIONS", "candidate_free", "judge", "refit_start", "residual_at", "run_fit"]
+__all__ = [
+    "START_FRACTIONS",
+    "by_criterion",
+    "candidate_free",
+    "judge",
+    "refit_start",
+    "residual_at",
+    "run_fit",
+]
 
 #: Fractions of the one-step strength estimate tried as refit starts (besides the default):
 #: the estimate is a linear extrapolation, far off when the strength enters nonlinearly
@@ -103,6 +111,30 @@ def judge(res: ResidualSet, rss_ref: float, k: int) -> dict | None:
         "k": k,
         "delta_bic": n_eff * math.log(rss1 / rss_ref) + k * math.log(max(n_eff, 1.0)),
     }
+
+
+def by_criterion(verdicts: list[dict]) -> list[int]:
+    """Order refits of the same experiments by information criterion, best first.
+
+    ``BIC = n · ln(RSS) + k · ln(n)`` with one effective sample size ``n`` for all — the
+    smallest of theirs (``n_eff``), so that a better fit is not outweighed by a refit's
+    own estimate of its sample size — and ``k`` each one's added free parameters.
+
+    Parameters
+    ----------
+    verdicts : list of dict
+        Verdicts of :func:`judge` (``rss_bar2`` in bar², ``k``, ``n_eff``).
+
+    Returns
+    -------
+    list of int
+        Indices into ``verdicts``, lowest criterion first (ties keep their order).
+    """
+    if not verdicts:
+        return []
+    n = max(min(v["n_eff"] for v in verdicts), 1.0)
+    key = [n * math.log(v["rss_bar2"]) + v["k"] * math.log(n) for v in verdicts]
+    return sorted(range(len(verdicts)), key=key.__getitem__)
 
 
 def refit_start(
