@@ -10,6 +10,7 @@ communication step.
 
 from __future__ import annotations
 
+import atexit
 import hashlib
 import os
 import shutil
@@ -30,6 +31,7 @@ __all__ = [
     "cache_dir",
     "chunk_function",
     "compile_function",
+    "compile_in_background",
     "lu_factor",
     "lu_solve",
     "sample_step_function",
@@ -143,11 +145,12 @@ def compile_function(fn: ca.Function, tag: str, opt: str = "-O2") -> ca.Function
     return _compile(fn, tag, opt)
 
 
-def _compile(fn: ca.Function, tag: str, opt: str = "-O2") -> ca.Function | None:
-    """Generate C for ``fn``, compile it (cached by code hash) and load it; None if impossible."""
-    cc = shutil.which(os.environ.get("CC", "gcc")) or shutil.which("cc")
-    if cc is None:
-        return None
+def _compiler() -> str | None:
+    return shutil.which(os.environ.get("CC", "gcc")) or shutil.which("cc")
+
+
+def _generate(fn: ca.Function, tag: str, opt: str) -> tuple[bytes, Path]:
+    """The C source of ``fn`` and the cached library it compiles to (by code hash)."""
     with tempfile.TemporaryDirectory() as tmp:
         cwd = os.getcwd()
         os.chdir(tmp)
@@ -156,9 +159,69 @@ def _compile(fn: ca.Function, tag: str, opt: str = "-O2") -> ca.Function | None:
         finally:
             os.chdir(cwd)
         code = src.read_bytes()
-        digest = hashlib.sha1(code + ca.__version__.encode() + opt.encode()).hexdigest()[:16]
-        lib = cache_dir() / f"{tag}_{digest}.so"
-        if not lib.exists():
+    digest = hashlib.sha1(code + ca.__version__.encode() + opt.encode()).hexdigest()[:16]
+    return code, cache_dir() / f"{tag}_{digest}.so"
+
+
+#: Libraries this process is compiling in the background: path -> the compiler process.
+_BUILDS: dict[Path, subprocess.Popen] = {}
+
+
+def compile_in_background(fn: ca.Function, tag: str, opt: str = "-O2") -> None:
+    """Start compiling ``fn`` into the cache and return at once.
+
+    A later :func:`compile_function` of the same code in this process waits for it
+    instead of compiling again; a failed build leaves nothing behind, and that call then
+    compiles as usual (with its error message). Does nothing when the library is cached
+    already, is being built here, or there is no compiler or POSIX shell.
+    """
+    cc, sh = _compiler(), shutil.which("sh")
+    if cc is None or sh is None:
+        return
+    for done in [lib for lib, build in _BUILDS.items() if build.poll() is not None]:
+        del _BUILDS[done]  # finished builds nobody asked for (yet): reaped
+    code, lib = _generate(fn, tag, opt)
+    if lib.exists() or lib in _BUILDS:
+        return
+    stem = lib.with_suffix(f".{os.getpid()}.bg")
+    src, part = stem.with_suffix(".bg.c"), stem.with_suffix(".bg.tmp")
+    src.write_bytes(code)
+    # the rename is atomic and done by the shell: the library appears whole or not at all
+    script = f'"$1" {opt} -shared -fPIC -o "$3" "$2" -lm && mv -f "$3" "$4"; rm -f "$2" "$3"'
+    _BUILDS[lib] = subprocess.Popen(
+        [sh, "-c", script, "sh", cc, str(src), str(part), str(lib)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+
+
+def _await_build(lib: Path) -> None:
+    build = _BUILDS.pop(lib, None)
+    if build is not None:
+        build.wait()
+
+
+@atexit.register
+def _reap_builds() -> None:  # pragma: no cover - interpreter exit
+    for build in _BUILDS.values():
+        try:
+            build.wait(timeout=120)
+        except subprocess.TimeoutExpired:
+            build.kill()
+
+
+def _compile(fn: ca.Function, tag: str, opt: str = "-O2") -> ca.Function | None:
+    """Generate C for ``fn``, compile it (cached by code hash) and load it; None if impossible."""
+    cc = _compiler()
+    if cc is None:
+        return None
+    code, lib = _generate(fn, tag, opt)
+    if not lib.exists():
+        _await_build(lib)
+    if not lib.exists():
+        with tempfile.TemporaryDirectory() as tmp:
+            src = Path(tmp) / f"{fn.name()}.c"
+            src.write_bytes(code)
             part = lib.with_suffix(f".{os.getpid()}.tmp")
             cmd = [cc, opt, "-shared", "-fPIC", "-o", str(part), str(src), "-lm"]
             res = subprocess.run(cmd, capture_output=True, text=True)

@@ -3,7 +3,12 @@
 from .fitter import PhysicsFitter, resolve_free
 from .problem import FitProblem
 from .result import FitResult, identifiability
-from .sensitivity import SensitivityRun, sensitivity_chunk, simulate_sensitivities
+from .sensitivity import (
+    SensitivityRun,
+    compile_sensitivities_in_background,
+    sensitivity_chunk,
+    simulate_sensitivities,
+)
 from .settings import DEFAULT_FREE, FitSettings
 from .stages import prefit_settings, prefit_subset, refine_settings
 from .structure import (
@@ -25,6 +30,7 @@ __all__ = [
     "SensitivityRun",
     "StructureSelection",
     "StructureSelector",
+    "compile_sensitivities_in_background",
     "identifiability",
     "prefit_settings",
     "prefit_subset",

@@ -17,22 +17,19 @@ import numpy as np
 
 from ...errors import SimulationError
 from ..inputs import interval_inputs
-from ..integrator import compile_function, sample_step_function
+from ..integrator import compile_function, compile_in_background, sample_step_function
 from ..model import CircuitModel
 
-__all__ = ["SensitivityRun", "sensitivity_chunk", "simulate_sensitivities"]
+__all__ = [
+    "SensitivityRun",
+    "compile_sensitivities_in_background",
+    "sensitivity_chunk",
+    "simulate_sensitivities",
+]
 
 
-@lru_cache(maxsize=32)
-def sensitivity_chunk(
-    model: CircuitModel, drive: str, substeps: int, nd: int, chunk: int, compile_mode: str = "auto"
-) -> ca.Function:
-    """``sens(x0, S0, U0, U1, DT, p, E) -> (X, S, Y, DY)`` over ``chunk`` samples.
-
-    ``X`` (nx × chunk) states, ``S`` (nx × nd·chunk) their sensitivities, ``Y``
-    (1 × chunk) the sensor pressure (bar), ``DY`` (nd × chunk) its sensitivities,
-    all at the interval ends.
-    """
+def _mapped(model: CircuitModel, drive: str, substeps: int, nd: int, chunk: int):
+    """The uncompiled sensitivity loop over ``chunk`` samples, and its cache tag."""
     fns = model.functions(drive)
     step = sample_step_function(fns, substeps)
     nx, nu, npar = fns.nx, fns.u_sym.shape[0], fns.p_sym.shape[0]
@@ -51,12 +48,40 @@ def sensitivity_chunk(
         ["x1", "S1", "y1", "dy1"],
     )
     mapped = fn.mapaccum(f"sens_chunk_{chunk}", chunk, ["x0", "S0"], ["x1", "S1"])
+    return mapped, f"clutchlab_sens_{model.key}_{drive}_{substeps}_{nd}"
+
+
+#: -O1: the derivative code is large; -O3 compiles ~10x longer for no speed-up here.
+_OPT = "-O1"
+
+
+@lru_cache(maxsize=32)
+def sensitivity_chunk(
+    model: CircuitModel, drive: str, substeps: int, nd: int, chunk: int, compile_mode: str = "auto"
+) -> ca.Function:
+    """``sens(x0, S0, U0, U1, DT, p, E) -> (X, S, Y, DY)`` over ``chunk`` samples.
+
+    ``X`` (nx × chunk) states, ``S`` (nx × nd·chunk) their sensitivities, ``Y``
+    (1 × chunk) the sensor pressure (bar), ``DY`` (nd × chunk) its sensitivities,
+    all at the interval ends.
+    """
+    mapped, tag = _mapped(model, drive, substeps, nd, chunk)
     if compile_mode == "never":
         return mapped
-    tag = f"clutchlab_sens_{model.key}_{drive}_{substeps}_{nd}"
-    # -O1: the derivative code is large; -O3 compiles ~10x longer for no speed-up here.
-    compiled = compile_function(mapped, tag, "-O1")
+    compiled = compile_function(mapped, tag, _OPT)
     return compiled if compiled is not None else mapped
+
+
+def compile_sensitivities_in_background(
+    model: CircuitModel, drive: str, substeps: int, nd: int, chunk: int
+) -> None:
+    """Start compiling :func:`sensitivity_chunk`'s code into the cache and return at once.
+
+    For a model that will be needed later (the next candidate's refit): its C code
+    compiles on the other core while this process works on, and the later
+    :func:`sensitivity_chunk` waits for that build instead of starting its own.
+    """
+    compile_in_background(*_mapped(model, drive, substeps, nd, chunk), _OPT)
 
 
 @dataclass(frozen=True)

@@ -45,6 +45,7 @@ from .scoring import CandidateScore, score_candidates
 from .screen import Screening, confirm_settings, screen_refit, screen_settings, screening
 from .settings import DiscoverySettings
 from .sparse import sparse_regression
+from .warm import warm_sensitivities
 
 __all__ = ["discover", "period_mean_metrics"]
 
@@ -309,9 +310,25 @@ def _iteration(
             ref.append(ref_res)
         return ref[0].kept_rss, reference["loeo_rss_bar2"]
 
+    def compile_ahead(confirm: list[CandidateScore], traces: list[Trace]) -> None:
+        """Start compiling the code of the refits after the first (the other candidates,
+        the flexible laws they may meet) while the first one runs."""
+        free = tuple(current.fit.free)
+        k_max = 0
+        for s in confirm:
+            cand_free = candidate_free(free, s.effect)
+            k_max = max(k_max, len(cand_free) - len(free))
+            if s is not confirm[0]:
+                cand = current.model.with_effects(s.effect)
+                warm_sensitivities(cand, traces, settings.fit, len(cand_free), background=True)
+        if settings.alternatives:
+            for alt in alternatives_for(current.model, free, k_max):
+                warm_sensitivities(alt.model, traces, settings.fit, len(alt.free), background=True)
+
     def confirm_all(confirm: list[CandidateScore]) -> None:
         """Refit each on every training experiment (no screening stage)."""
         rss_ref, _ = full_reference()
+        compile_ahead(confirm, train)
         for s in confirm:
             _say(settings, f"refitting with {s.effect} (score {s.statistic:.1f})")
             state = _confirm(s, current, rss_ref, train, test, settings)
@@ -345,6 +362,7 @@ def _iteration(
         """Refit each on the subset; confirm on every training experiment the ones that
         qualify there and beat the flexible alternatives there, best criterion first,
         until one qualifies on all of them."""
+        compile_ahead(confirm, screen.traces)
         screen.reference_for(current, settings)
         cv_sub = screen.info["loeo_rss_bar2"]
         passed = []

@@ -453,6 +453,16 @@ def _profile_best(
     return best, best_rss
 
 
+def _compile_ahead(model: CircuitModel, name: str, traces: list[Trace], fit: FitSettings) -> None:
+    """Start compiling the sensitivity code the score of ``name`` will need (see
+    :func:`~.warm.warm_sensitivities`); a model that cannot be built is left to its score."""
+    try:
+        cand = model.with_effects(name)
+    except (ClutchlabError, ValueError):
+        return
+    warm_sensitivities(cand, traces, fit, len(EFFECTS[name].STRENGTH), background=True)
+
+
 def score_candidates(
     candidates: list[str],
     model: CircuitModel,
@@ -513,11 +523,14 @@ def score_candidates(
     desc = {"zero": "score effects", "profile": "profile effect strengths"}.get(
         expansion, f"score effects at {expansion} strength"
     )
+    fresh = [n for n in candidates if not (n in before and n in keep)]
     for name in tqdm(candidates, desc=desc, unit="effect", disable=not progress):
         old = before.get(name)
         if old is not None and name in keep:
             scores.append(old)
             continue
+        if expansion == "zero" and name in fresh[:-1]:  # the next one compiles meanwhile
+            _compile_ahead(model, fresh[fresh.index(name) + 1], traces, fit)
         hint = old.nuisance if old is not None and expansion == "profile" else None
         new = score_effect(
             name, model, values, traces, base, projector, fit, probe_fraction, expansion, hint

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from ...data import Trace
 from ...physics import CircuitModel
-from ...physics.fit import FitSettings, sensitivity_chunk
+from ...physics.fit import FitSettings, compile_sensitivities_in_background, sensitivity_chunk
 from ...physics.inputs import choose_drive
 from ...physics.settings import SimulationSettings
 
@@ -20,7 +20,13 @@ __all__ = ["warm_sensitivities"]
 CHUNK = 500
 
 
-def warm_sensitivities(model: CircuitModel, traces: list[Trace], fit: FitSettings, nd: int) -> None:
+def warm_sensitivities(
+    model: CircuitModel,
+    traces: list[Trace],
+    fit: FitSettings,
+    nd: int,
+    background: bool = False,
+) -> None:
     """Compile (or load from the cache) ``model``'s sensitivity code for ``nd`` directions.
 
     Parameters
@@ -33,7 +39,13 @@ def warm_sensitivities(model: CircuitModel, traces: list[Trace], fit: FitSetting
         Substeps and drive of the fit.
     nd : int
         Number of sensitivity directions (free parameters, single shooting).
+    background : bool
+        Only start compiling what is not cached (on another core, while this process
+        works on) and return at once; the later foreground call waits for it.
     """
     sim = SimulationSettings(substeps=fit.substeps, drive=fit.drive)
     for drive in sorted({choose_drive(t, sim) for t in traces}):
-        sensitivity_chunk(model, drive, fit.substeps, nd, CHUNK)
+        if background:
+            compile_sensitivities_in_background(model, drive, fit.substeps, nd, CHUNK)
+        else:
+            sensitivity_chunk(model, drive, fit.substeps, nd, CHUNK)
