@@ -149,6 +149,11 @@ def _compiler() -> str | None:
     return shutil.which(os.environ.get("CC", "gcc")) or shutil.which("cc")
 
 
+def _cc_command(cc: str, opt: str, src: Path, out: Path) -> list[str]:
+    """The one compiler call of the cache: ``src`` (C) to the shared library ``out``."""
+    return [cc, opt, "-shared", "-fPIC", "-o", str(out), str(src), "-lm"]
+
+
 def _generate(fn: ca.Function, tag: str, opt: str) -> tuple[bytes, Path]:
     """The C source of ``fn`` and the cached library it compiles to (by code hash)."""
     with tempfile.TemporaryDirectory() as tmp:
@@ -187,9 +192,9 @@ def compile_in_background(fn: ca.Function, tag: str, opt: str = "-O2") -> None:
     src, part = stem.with_suffix(".bg.c"), stem.with_suffix(".bg.tmp")
     src.write_bytes(code)
     # the rename is atomic and done by the shell: the library appears whole or not at all
-    script = f'"$1" {opt} -shared -fPIC -o "$3" "$2" -lm && mv -f "$3" "$4"; rm -f "$2" "$3"'
+    script = 's=$1 p=$2 l=$3; shift 3; "$@" && mv -f "$p" "$l"; rm -f "$s" "$p"'
     _BUILDS[lib] = subprocess.Popen(
-        [sh, "-c", script, "sh", cc, str(src), str(part), str(lib)],
+        [sh, "-c", script, "sh", str(src), str(part), str(lib), *_cc_command(cc, opt, src, part)],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
@@ -223,8 +228,7 @@ def _compile(fn: ca.Function, tag: str, opt: str = "-O2") -> ca.Function | None:
             src = Path(tmp) / f"{fn.name()}.c"
             src.write_bytes(code)
             part = lib.with_suffix(f".{os.getpid()}.tmp")
-            cmd = [cc, opt, "-shared", "-fPIC", "-o", str(part), str(src), "-lm"]
-            res = subprocess.run(cmd, capture_output=True, text=True)
+            res = subprocess.run(_cc_command(cc, opt, src, part), capture_output=True, text=True)
             if res.returncode != 0:
                 warnings.warn(
                     f"C compilation failed, interpreting instead:\n{res.stderr[-2000:]}",
