@@ -93,6 +93,16 @@ def test_screening_refits_on_the_subset_and_decides_on_every_training_experiment
     assert it.after.test["rmse_bar"] < it.before.test["rmse_bar"]
 
 
+def test_the_training_jacobian_is_computed_only_where_it_is_used(stand, screened):
+    # no candidate to score: nothing needs the sensitivities on every training experiment
+    res = discover(stand, settings=_settings(screen_samples=_budget(stand), candidates=()))
+    assert res.iterations[0].decision == "no candidates left"
+    assert res.baseline.residual.jacobian is None
+    # a confirmation on every training experiment is judged against them
+    before = screened.iterations[0].before.residual
+    assert before.jacobian is not None and before.jacobian.shape[0] == before.n
+
+
 def test_no_screening_when_the_data_fit_in_the_budget(stand):
     res = discover(stand, settings=_settings(screen_samples=0))
     it = res.iterations[0]

@@ -230,7 +230,9 @@ def _iteration(
 ) -> IterationRecord:
     """One turn: diagnose the residual, score the candidates, confirm, decide."""
     t_it = time.perf_counter()
-    current = _with_jacobian(current, train, settings)
+    # the training residual's Jacobian (one sensitivity run on every training experiment)
+    # is computed only where it is used: scoring without a screening stage, and the
+    # reference of a confirmation on all data (the residual itself is the same either way)
     res = current.residual
     diag = diagnose(res, settings.max_lag_s)
     sparse = sparse_regression(res, settings.sparse_threshold)
@@ -271,7 +273,10 @@ def _iteration(
     # Long training data: the evidence is gathered on the pre-fit subset and only the
     # candidate chosen there is refitted on every training experiment (see .screen).
     screen = screening(current, train, settings)
-    evidence_traces, evidence = (train, res) if screen is None else (screen.traces, screen.residual)
+    if screen is None:
+        evidence_traces, evidence = train, _with_jacobian(current, train, settings).residual
+    else:
+        evidence_traces, evidence = screen.traces, screen.residual
     if screen is not None:
         _say(settings, f"screening on {screen.describe()}")
 
@@ -304,6 +309,7 @@ def _iteration(
 
     def full_reference() -> tuple[float, float | None]:
         if not ref:
+            _with_jacobian(current, train, settings)
             ref_res, ref_info = _reference(current, train, settings)
             reference.update(ref_info)
             reference.update(loeo_evidence(ref_res))
@@ -504,7 +510,7 @@ def discover(
     else:
         _check_baseline(baseline, model, train)
         _say(settings, f"starting from the given fit ({baseline.status})")
-    current = _state(baseline, train, test, settings, True)
+    current = _state(baseline, train, test, settings, jacobian=False)
     baseline = current
     iterations: list[IterationRecord] = []
     for index in range(settings.max_effects + 1):
