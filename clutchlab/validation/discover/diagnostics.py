@@ -3,6 +3,16 @@
 All on the kept (snap-free) training residuals of :class:`~.residuals.ResidualSet`
 unless stated otherwise. The *signature* of a residual is the list of signals whose
 binned conditional mean explains a sizeable part of it (correlation ratio η²).
+
+A poor base fit leaves a large residual that follows the current and its direction of
+travel (a misplaced characteristic or hysteresis), and a missing effect that follows
+another signal (line pressure, oil temperature, the dither) is a small part of it. So
+for every signal that is not the current, its direction or the pressure they set, η² is
+also measured on what a flexible map of the current and its direction leaves: the
+residual minus its mean per (current quantile bin × direction of travel), pooled over
+the experiments (:func:`current_map_residual`). A signal that moves independently of the
+ramp (line-pressure wander) keeps its share there; one the ramp fixes (an oil warming
+through every run) does not, and no statistic on these data can separate it.
 """
 
 from __future__ import annotations
@@ -13,9 +23,9 @@ import numpy as np
 from scipy.signal import welch
 from scipy.stats import chi2
 
-from .residuals import SIGNALS, ResidualSet, integrated_time
+from .residuals import SIGNALS, ResidualSet, effective_size, integrated_time
 
-__all__ = ["Diagnostics", "diagnose", "signal_association"]
+__all__ = ["Diagnostics", "current_map_residual", "diagnose", "signal_association"]
 
 #: Quantile bins of a continuous signal for the correlation ratio.
 N_BINS = 12
@@ -23,6 +33,11 @@ N_BINS = 12
 SIGNATURE_ETA2 = 0.1
 #: Signals whose lagged cross-correlation with the residual is reported.
 LAGGED = ("didt_mA_s", "dpdt_bar_s")
+#: Signals the flexible map of the current and its direction stands for (their η² is
+#: measured on the residual itself only).
+MAP_SIGNALS = ("current_mA", "didt_mA_s", "didt_sign", "pressure_bar", "dpdt_bar_s")
+#: Quantile bins of the current in that map (times the direction of travel: −1, 0, +1).
+MAP_CURRENT_BINS = 24
 
 
 def _eta2(r: np.ndarray, x: np.ndarray, n_eff: float) -> tuple[float, list[dict]]:
@@ -54,8 +69,46 @@ def _eta2(r: np.ndarray, x: np.ndarray, n_eff: float) -> tuple[float, list[dict]
     return float(max(adj, 0.0)), bins
 
 
+def _constant(x: np.ndarray) -> bool:
+    return x.size < 3 or np.ptp(x) <= 1e-9 * (1.0 + abs(float(np.mean(x))))
+
+
+def current_map_residual(res: ResidualSet) -> np.ndarray:
+    """The kept residual minus what a flexible map of the current and its direction explains.
+
+    The map is the residual's mean per cell of (:data:`MAP_CURRENT_BINS` quantile bins of
+    the nominal current × the direction of travel, −1 / 0 / +1), pooled over the
+    experiments, so that what repeats with the ramp is removed and what moves
+    independently of it (from one experiment to the next, or within one) is kept.
+
+    Parameters
+    ----------
+    res : ResidualSet
+        Residuals (bar) and signals.
+
+    Returns
+    -------
+    numpy.ndarray
+        Bar, one value per kept residual.
+    """
+    r = res.r[res.keep]
+    cur = res.signals["current_mA"][res.keep]
+    if r.size == 0 or _constant(cur):
+        return r - (r.mean() if r.size else 0.0)
+    edges = np.unique(np.quantile(cur, np.linspace(0, 1, MAP_CURRENT_BINS + 1)))
+    k = np.clip(np.searchsorted(edges, cur, side="right") - 1, 0, max(len(edges) - 2, 0))
+    cell = k * 3 + (np.sign(res.signals["didt_sign"][res.keep]).astype(int) + 1)
+    sums = np.bincount(cell, weights=r)
+    counts = np.bincount(cell)
+    return r - (sums / np.maximum(counts, 1))[cell]
+
+
 def signal_association(res: ResidualSet, n_eff: float | None = None) -> list[dict]:
     """Residual against each signal: Pearson correlation and bias-corrected η².
+
+    For a signal outside :data:`MAP_SIGNALS` also ``eta2_beyond_current``: its η² on
+    :func:`current_map_residual` (bias-corrected with that residual's own effective size),
+    the share of what the current and its direction leave that the signal explains.
 
     Parameters
     ----------
@@ -67,19 +120,26 @@ def signal_association(res: ResidualSet, n_eff: float | None = None) -> list[dic
     Returns
     -------
     list of dict
-        ``signal``, ``unit``, ``description``, ``corr``, ``eta2``, ``bins``; largest η² first.
+        ``signal``, ``unit``, ``description``, ``corr``, ``eta2``, ``bins``,
+        ``eta2_beyond_current`` (None for the map's own signals); largest η² of the two
+        first.
     """
     r = res.r[res.keep]
     if n_eff is None:
         n_eff = res.effective()[0]
+    rest = current_map_residual(res)
+    n_rest = effective_size(rest, res.kept_slices)[0]
     out = []
     for name, (unit, desc) in SIGNALS.items():
         x = res.signals[name][res.keep]
-        if x.size < 3 or np.ptp(x) <= 1e-9 * (1.0 + abs(float(np.mean(x)))):
+        beyond = None if name in MAP_SIGNALS else 0.0
+        if _constant(x):
             corr, eta2, bins = 0.0, 0.0, []
         else:
             corr = float(np.corrcoef(r, x)[0, 1]) if np.std(r) > 0 else 0.0
             eta2, bins = _eta2(r, x, n_eff)
+            if beyond is not None:
+                beyond, _ = _eta2(rest, x, n_rest)
         out.append(
             {
                 "signal": name,
@@ -88,10 +148,16 @@ def signal_association(res: ResidualSet, n_eff: float | None = None) -> list[dic
                 "corr": corr,
                 "eta2": eta2,
                 "bins": bins,
+                "eta2_beyond_current": beyond,
             }
         )
-    out.sort(key=lambda d: -d["eta2"])
+    out.sort(key=lambda d: -_strength(d))
     return out
+
+
+def _strength(assoc: dict) -> float:
+    """The larger of a signal's η² on the residual and beyond the current map."""
+    return max(assoc["eta2"], assoc.get("eta2_beyond_current") or 0.0)
 
 
 def _lagged(res: ResidualSet, name: str, max_lag: int) -> tuple[np.ndarray, np.ndarray]:
@@ -160,8 +226,9 @@ class Diagnostics:
     whiteness : dict
         Ljung–Box ``statistic``, ``dof``, ``p_value``, ``stride`` and ``white`` (p ≥ 0.01).
     signature : list of str
-        Signals with η² ≥ :data:`SIGNATURE_ETA2`, strongest first; a signal that moves
-        with one already listed (|corr| > 0.98 on these data) is left out.
+        Signals with η² ≥ :data:`SIGNATURE_ETA2` on the residual or beyond the current
+        map (``eta2_beyond_current``), strongest first; a signal that moves with one
+        already listed (|corr| > 0.98 on these data) is left out.
     aliases : dict
         Signals indistinguishable on these data: name -> the signal standing for it.
     """
@@ -183,9 +250,7 @@ class Diagnostics:
             follows = f"no single signal (η² < {SIGNATURE_ETA2:.2f} for all)"
         else:
             eta = {a["signal"]: a for a in self.associations}
-            follows = ", ".join(
-                f"{s} (η² {eta[s]['eta2']:.2f}, r {eta[s]['corr']:+.2f})" for s in self.signature
-            )
+            follows = ", ".join(_describe(eta[s]) for s in self.signature)
         xc = "; ".join(
             f"peak corr with {k} {v['corr']:+.2f} at lag {v['lag_s'] * 1e3:+.0f} ms"
             for k, v in self.cross_correlation.items()
@@ -210,6 +275,13 @@ class Diagnostics:
                 for k, v in d["cross_correlation"].items()
             }
         return d
+
+
+def _describe(assoc: dict) -> str:
+    beyond = assoc.get("eta2_beyond_current")
+    if beyond is not None and beyond > assoc["eta2"]:
+        return f"{assoc['signal']} (η² {beyond:.2f} beyond the current and its direction)"
+    return f"{assoc['signal']} (η² {assoc['eta2']:.2f}, r {assoc['corr']:+.2f})"
 
 
 def diagnose(res: ResidualSet, max_lag_s: float = 0.1) -> Diagnostics:
@@ -282,7 +354,9 @@ def diagnose(res: ResidualSet, max_lag_s: float = 0.1) -> Diagnostics:
             ],
         },
         signature=[
-            a["signal"] for a in assoc if a["eta2"] >= SIGNATURE_ETA2 and a["signal"] not in aliases
+            a["signal"]
+            for a in assoc
+            if _strength(a) >= SIGNATURE_ETA2 and a["signal"] not in aliases
         ],
         aliases=aliases,
     )
