@@ -277,7 +277,6 @@ def _iteration(
         evidence_traces, evidence = train, _with_jacobian(current, train, settings).residual
     else:
         evidence_traces, evidence = screen.traces, screen.residual
-    if screen is not None:
         _say(settings, f"screening on {screen.describe()}")
 
     refits: dict[str, dict] = {}
