@@ -9,8 +9,14 @@ ramps (``clutchlab stand --ramps``), the physics is fitted on fast + slow
 fast + slow (pooled RMSE as now; the median and the mean of the per-experiment RMSE) and
 fitted on all of fast + slow and scored on the 5 s + 20 s ramps.
 
-Prints its rule first. Usage:
-``python studies/hybrid_form_rates.py --data DIR --out forms.json [--plants ...] [--seeds 0]``
+With ``--residual-latch classifier,local_event`` it also compares the latch decision of the
+hybrid's residual form (the RBF SVC on features that hold the physics prediction, or the
+local latch-event law that the standalone form uses): each residual form is scored on the
+5 s + 20 s ramps, and the form choice is made once with each.
+
+Prints its rules first. Usage:
+``python studies/hybrid_form_rates.py --data DIR --out forms.json [--plants ...] [--seeds 0]
+[--residual-latch classifier,local_event]``
 """
 
 from __future__ import annotations
@@ -30,6 +36,13 @@ Decision rule (fixed before the run; the medium ramp is not in these datasets):
   pooled RMSE does, and never picks a form more than 1.02x worse where the pooled one did
   not. Otherwise the pooled RMSE stays. 'regret' = chosen form's RMSE / best form's RMSE."""
 
+LATCH_RULE = """\
+Decision rule for the residual form's latch decision (fixed before the run; the medium ramp
+is not in these datasets), the rule that made local_event the standalone's default:
+  the residual form takes local_event if its 5 s + 20 s RMSE, mean over seeds, is lower than
+  with the classifier on >= 4 of 5 circuits and within 1.05x on every circuit, and the form
+  choice with it picks a form within 1.02x of the best on at least as many datasets."""
+
 PLANTS = ("stand", "saturating_lugre", "quadratic_play", "stribeck_supply", "preisach_accumulator")
 CRITERIA = ("pooled", "median", "mean")
 
@@ -45,10 +58,11 @@ def _rmse(model, traces) -> float:
     return float(np.sqrt(np.mean(np.concatenate(e) ** 2)))
 
 
-def study(path: Path, fit: Path) -> dict:
+def study(path: Path, fit: Path, residual_latch: str | None = None) -> dict:
     from clutchlab.data import load_dataset
     from clutchlab.physics.fit import PhysicsFitter
     from clutchlab.residual_ml import HybridModel, PhysicsPredictor
+    from clutchlab.residual_ml.hybrid import default_residual
 
     if not fit.exists():
         cmd = [sys.executable, "-m", "clutchlab.cli", "fit-physics", str(path)]
@@ -59,6 +73,9 @@ def study(path: Path, fit: Path) -> dict:
     per_exp: dict[str, list[float]] = {}
 
     class Recording(HybridModel):
+        def _residual(self):
+            return default_residual(residual_latch)  # the standalone form is unchanged
+
         def _loeo_errors(self, traces, outputs):
             errors = super()._loeo_errors(traces, outputs)
             for form, per in errors.items():
@@ -73,7 +90,7 @@ def study(path: Path, fit: Path) -> dict:
     }
     truth = {}
     for form in ("residual", "standalone", "physics"):
-        truth[form] = _rmse(HybridModel(physics=phys, form=form).fit(train), test)
+        truth[form] = _rmse(Recording(physics=phys, form=form).fit(train), test)
     return {"criteria": crit, "held_back_rmse": truth, "chosen_now": auto.form_}
 
 
@@ -83,8 +100,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--plants", default=",".join(PLANTS))
     ap.add_argument("--seeds", default="0")
+    ap.add_argument(
+        "--residual-latch",
+        default="",
+        help="latch decisions of the residual form to compare, e.g. classifier,local_event "
+        "(default: the library's)",
+    )
     args = ap.parse_args(argv)
+    latches = [v for v in args.residual_latch.split(",") if v] or [None]
     print(RULE, flush=True)
+    if len(latches) > 1:
+        print(LATCH_RULE, flush=True)
     rows = []
     for plant in args.plants.split(","):
         for seed in (int(s) for s in args.seeds.split(",")):
@@ -92,23 +118,63 @@ def main(argv: list[str] | None = None) -> int:
             from latch_event import rates_dataset
 
             path = rates_dataset(args.data, plant, seed)
-            r = study(path, args.data / f"{plant}_rates_s{seed}.fit.json")
-            truth = r["held_back_rmse"]
-            best = min(truth, key=truth.get)
-            picks = {c: min(r["criteria"][c], key=r["criteria"][c].get) for c in CRITERIA}
-            regret = {c: truth[p] / truth[best] for c, p in picks.items()}
-            rows.append({"plant": plant, "seed": seed, **r, "best": best, "picks": picks})
-            print(
-                f"{plant:22s} s{seed}  5 s + 20 s RMSE "
-                + ", ".join(f"{f} {v:.3f}" for f, v in truth.items())
-                + "  | picks: "
-                + ", ".join(f"{c} {picks[c]} ({regret[c]:.2f})" for c in CRITERIA),
-                flush=True,
-            )
-            args.out.write_text(json.dumps(rows, indent=1))
-    wins = {c: sum(r["picks"][c] == r["best"] for r in rows) for c in CRITERIA}
-    print(f"\nbest form picked: {wins} of {len(rows)}")
+            for latch in latches:
+                r = study(path, args.data / f"{plant}_rates_s{seed}.fit.json", latch)
+                truth = r["held_back_rmse"]
+                best = min(truth, key=truth.get)
+                picks = {c: min(r["criteria"][c], key=r["criteria"][c].get) for c in CRITERIA}
+                regret = {c: truth[p] / truth[best] for c, p in picks.items()}
+                row = {"plant": plant, "seed": seed, "residual_latch": latch, **r}
+                rows.append({**row, "best": best, "picks": picks, "regret": regret})
+                print(
+                    f"{plant:22s} s{seed} {latch or 'default':12s} 5 s + 20 s RMSE "
+                    + ", ".join(f"{f} {v:.3f}" for f, v in truth.items())
+                    + "  | picks: "
+                    + ", ".join(f"{c} {picks[c]} ({regret[c]:.2f})" for c in CRITERIA),
+                    flush=True,
+                )
+                args.out.write_text(json.dumps(rows, indent=1))
+    for latch in latches:
+        sub = [r for r in rows if r["residual_latch"] == latch]
+        wins = {c: sum(r["picks"][c] == r["best"] for r in sub) for c in CRITERIA}
+        good = sum(r["regret"]["pooled"] <= 1.02 for r in sub)
+        print(
+            f"\n{latch or 'default'}: best form picked {wins} of {len(sub)}; pooled choice "
+            f"within 1.02x of the best on {good} of {len(sub)}"
+        )
+    if len(latches) > 1:
+        _latch_verdict(rows, latches)
     return 0
+
+
+def _latch_verdict(rows: list[dict], latches: list) -> None:
+    """Print the residual-latch rule's verdict (first entry of ``latches`` is the incumbent)."""
+    old, new = latches[0], latches[1]
+    plants = sorted({r["plant"] for r in rows})
+
+    def mean_rmse(latch, plant):
+        v = [
+            r["held_back_rmse"]["residual"]
+            for r in rows
+            if r["plant"] == plant and r["residual_latch"] == latch
+        ]
+        return float(np.mean(v))
+
+    lower = within = 0
+    for plant in plants:
+        a, b = mean_rmse(old, plant), mean_rmse(new, plant)
+        lower += b < a
+        within += b <= 1.05 * a
+        print(f"  {plant:22s} residual form {old} {a:.3f} -> {new} {b:.3f} ({b / a:.2f}x)")
+    good = {
+        lt: sum(r["regret"]["pooled"] <= 1.02 for r in rows if r["residual_latch"] == lt)
+        for lt in (old, new)
+    }
+    met = lower >= min(4, len(plants) - 1) and within == len(plants) and good[new] >= good[old]
+    print(
+        f"lower on {lower} of {len(plants)}, within 1.05x on {within}; form choice within "
+        f"1.02x: {good[old]} -> {good[new]}; rule {'met' if met else 'not met'}"
+    )
 
 
 if __name__ == "__main__":

@@ -108,3 +108,19 @@ def test_physics_form_predicts_the_physics_with_its_loeo_error_as_std(split, tru
     auto.form_ = "physics"  # as if chosen: its std is the physics form's LOEO RMSE
     _, std = auto.predict(trace, return_std=True)
     assert np.all(std == auto.form_scores_["physics"])
+
+
+def test_the_residual_forms_latch_decision_is_a_choice_with_the_classifier_as_default(
+    split, truth_physics
+):
+    from clutchlab.residual_ml.hybrid import RESIDUAL_LATCH_MODEL, default_residual
+
+    assert RESIDUAL_LATCH_MODEL == "classifier"
+    assert default_residual().latch_model == "classifier"
+    train, _ = split
+    res = default_residual("local_event")
+    model = HybridModel(physics=truth_physics, residual=res, form="residual").fit(train)
+    assert model.residual_.latch_model_ == "local_event"
+    # the standalone form of the default residual keeps its own (local) latch law
+    alone = HybridModel(physics=truth_physics, form="standalone").fit(train)
+    assert alone.residual_.latch_model_ == "local_event"

@@ -40,18 +40,26 @@ HYBRID_FEATURES: tuple[str, ...] = (*DIDT_FEATURES, "physics_bar")
 HYBRID_CLASSIFIER_FEATURES: tuple[str, ...] | None = None
 
 
-def default_residual() -> SVCPartitionedGP:
+#: Latch decision of the default residual model (see :func:`default_residual`).
+RESIDUAL_LATCH_MODEL = "classifier"
+
+
+def default_residual(latch_model: str | None = None) -> SVCPartitionedGP:
     """The default residual model: SVC-partitioned GP on :data:`HYBRID_FEATURES`.
 
-    Its latch decision stays the RBF-SVC classifier, on features that hold the physics
-    prediction: the residual's regimes then follow the physics' own latch state, which the
-    local latch-event law (on current, rate and dither only) would not see.
+    Parameters
+    ----------
+    latch_model : {"classifier", "event", "local_event"}, optional
+        Its latch decision; default :data:`RESIDUAL_LATCH_MODEL`, the RBF-SVC classifier on
+        features that hold the physics prediction (the residual's regimes then follow the
+        physics' own latch state, which a latch-event law on current, rate and dither
+        only would not see).
     """
     return SVCPartitionedGP(
         features=HYBRID_FEATURES,
         classifier_features=HYBRID_CLASSIFIER_FEATURES,
         latched_reference="none",  # the physics already follows line pressure
-        latch_model="classifier",
+        latch_model=RESIDUAL_LATCH_MODEL if latch_model is None else latch_model,
     )
 
 
