@@ -38,12 +38,17 @@ def _cmd_fit_physics(args: argparse.Namespace) -> int:
     try:
         fitter.fit(dataset)
     except FitError as exc:
+        # A fit that ran and failed (--strict and stopped at a limit, or nothing improved
+        # on the start) carries its best iterate and exits 1, as documented; bad input
+        # (no result) stays an error of exit 2 (ClutchlabError in main).
         best = getattr(exc, "result", None)
-        if best is not None:
-            partial = out.with_name(out.stem + ".best-iterate.json")
-            best.to_json(partial)
-            print(f"best iterate written to {partial}")
-        raise
+        if best is None:
+            raise
+        partial = out.with_name(out.stem + ".best-iterate.json")
+        best.to_json(partial)
+        print(f"best iterate written to {partial}")
+        print(f"clutchlab fit-physics: error: {exc}", file=sys.stderr)
+        return 1
     res = fitter.result_
     fitter.save(out)
     if fitter.staged_ is not None:
