@@ -203,12 +203,7 @@ class HybridModel(TraceEstimator):
             train = [i for i in range(len(traces)) if i not in held]
             if not train:
                 continue
-            res = self._fit_residual(
-                mean_only(self._residual()),
-                [traces[i] for i in train],
-                [outputs[i] for i in train],
-            )
-            alone = mean_only(self._standalone()).fit([traces[i] for i in train])
+            res, alone = self._fold_models(traces, outputs, train)
             for i in held:
                 t = traces[i]
                 n = dither_period_samples(t)
@@ -220,6 +215,15 @@ class HybridModel(TraceEstimator):
                 errors["standalone"].append(dither_period_mean(alone.predict(t), n) - y)
                 errors["physics"].append(dither_period_mean(raw, n) - y)
         return errors
+
+    def _fold_models(self, traces, outputs, train: list[int]):
+        """Residual and standalone models (mean only) fitted on the experiments ``train``."""
+        res = self._fit_residual(
+            mean_only(self._residual()),
+            [traces[i] for i in train],
+            [outputs[i] for i in train],
+        )
+        return res, mean_only(self._standalone()).fit([traces[i] for i in train])
 
     def _outputs(
         self, phys, trace: Trace, needed: tuple[str, ...] = ()
