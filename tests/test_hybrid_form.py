@@ -124,3 +124,16 @@ def test_the_residual_forms_latch_decision_is_a_choice_with_the_classifier_as_de
     # the standalone form of the default residual keeps its own (local) latch law
     alone = HybridModel(physics=truth_physics, form="standalone").fit(train)
     assert alone.residual_.latch_model_ == "local_event"
+
+
+def test_the_standalone_handicap_decides_between_loeo_scores_and_is_checked():
+    from clutchlab.residual_ml.hybrid import STANDALONE_HANDICAP
+
+    scores = {"residual": 0.20, "standalone": 0.40, "physics": 0.50}
+    assert STANDALONE_HANDICAP == 3.0
+    assert HybridModel()._choose_form(scores) == "standalone"  # 0.40 / 3 < 0.20
+    assert HybridModel(standalone_handicap=1.0)._choose_form(scores) == "residual"
+    assert HybridModel()._choose_form({"residual": 0.03, "standalone": 0.3}) == "residual"
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ModelError, match="standalone_handicap"):
+            HybridModel(standalone_handicap=bad)._choose_form(scores)

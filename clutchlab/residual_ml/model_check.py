@@ -202,6 +202,7 @@ _PARAM_RULES: dict[str, Callable | None] = {
     "residual": None,
     "form": _one_of(("auto", "residual", "standalone", "physics")),
     "form_folds": _integer(2),
+    "standalone_handicap": _number(0.0, strict=True),
 }
 
 

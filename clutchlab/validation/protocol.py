@@ -493,6 +493,8 @@ class Protocol:
         if getattr(model, "form_", None) is not None:  # a hybrid's residual form, and why
             details["residual_form"] = model.form_
             details["residual_form_loeo_rmse_bar"] = dict(getattr(model, "form_scores_", {}))
+            if hasattr(model, "standalone_handicap"):
+                details["residual_form_standalone_handicap"] = float(model.standalone_handicap)
         return VariantScore(
             name=name,
             metrics=metrics,
