@@ -134,6 +134,6 @@ def test_the_standalone_handicap_decides_between_loeo_scores_and_is_checked():
     assert HybridModel()._choose_form(scores) == "standalone"  # 0.40 / 3 < 0.20
     assert HybridModel(standalone_handicap=1.0)._choose_form(scores) == "residual"
     assert HybridModel()._choose_form({"residual": 0.03, "standalone": 0.3}) == "residual"
-    for bad in (0.0, -1.0, float("nan")):
+    for bad in (0.0, -1.0, float("nan"), "abc", None):
         with pytest.raises(ModelError, match="standalone_handicap"):
             HybridModel(standalone_handicap=bad)._choose_form(scores)

@@ -15,6 +15,8 @@ out.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from sklearn.base import clone
 from sklearn.utils.validation import validate_data
@@ -200,9 +202,14 @@ class HybridModel(TraceEstimator):
 
     def _choose_form(self, scores: dict[str, float]) -> str:
         """The form with the lowest LOEO RMSE, the standalone's divided by its handicap."""
-        kappa = float(self.standalone_handicap)
-        if not np.isfinite(kappa) or kappa <= 0:
-            raise ModelError(f"standalone_handicap must be a number > 0, not {kappa!r}")
+        try:
+            kappa = float(self.standalone_handicap)
+        except (TypeError, ValueError):
+            kappa = math.nan
+        if not math.isfinite(kappa) or kappa <= 0:
+            raise ModelError(
+                f"standalone_handicap must be a number > 0, not {self.standalone_handicap!r}"
+            )
         if not scores:
             return "residual"
         ranked = {f: v / kappa if f == "standalone" else v for f, v in scores.items()}
