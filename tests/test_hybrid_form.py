@@ -90,9 +90,10 @@ def test_form_round_trips_and_a_bad_form_is_refused(split, tmp_path):
     with pytest.raises(ModelError):
         HybridModel(physics=_Recording(), form="both").fit(train)
     path = tmp_path / "h.json"
-    save_model(HybridModel(physics=PhysicsPredictor(), form="standalone").fit(train), path)
+    fitted = HybridModel(physics=PhysicsPredictor(), form="standalone", standalone_handicap=2.0)
+    save_model(fitted.fit(train), path)
     loaded = load_model(path)
-    assert loaded.form_ == "standalone"
+    assert loaded.form_ == "standalone" and loaded.standalone_handicap == 2.0
     np.testing.assert_allclose(loaded.predict(test[0]), model.predict(test[0]), atol=1e-9)
 
 
