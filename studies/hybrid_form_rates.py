@@ -116,21 +116,24 @@ def calibrate(paths: list[Path]) -> float | None:
         if r.get("residual_latch") in (None, "classifier")
     ]
 
-    def within(kappa: float) -> list[bool]:
-        out = []
-        for r in rows:
-            score = dict(r["criteria"]["pooled"])
-            score["standalone"] /= kappa
-            truth = r["held_back_rmse"]
-            out.append(truth[min(score, key=score.get)] <= 1.02 * min(truth.values()))
-        return out
+    from clutchlab.residual_ml import HybridModel
 
+    def within(kappa: float) -> list[bool]:
+        """Per row: is the library's choice at this handicap within 1.02x of the best form?"""
+        choose = HybridModel(standalone_handicap=kappa)._choose_form
+        return [
+            r["held_back_rmse"][choose(r["criteria"]["pooled"])]
+            <= 1.02 * min(r["held_back_rmse"].values())
+            for r in rows
+        ]
+
+    ok = {k: within(k) for k in HANDICAP_GRID}
     base = within(1.0)
-    counts = {k: sum(within(k)) for k in HANDICAP_GRID}
+    counts = {k: sum(v) for k, v in ok.items()}
     for k in HANDICAP_GRID:
         lost = [
             f"{r['plant']} s{r['seed']}"
-            for r, a, b in zip(rows, base, within(k), strict=True)
+            for r, a, b in zip(rows, base, ok[k], strict=True)
             if a and not b
         ]
         print(
@@ -138,7 +141,7 @@ def calibrate(paths: list[Path]) -> float | None:
         )
     best = max(counts.values())
     kappa = min(k for k in HANDICAP_GRID if counts[k] == best)
-    lost = any(a and not b for a, b in zip(base, within(kappa), strict=True))
+    lost = any(a and not b for a, b in zip(base, ok[kappa], strict=True))
     met = counts[kappa] > counts[1.0] and not lost
     print(f"kappa {kappa}: rule {'met' if met else 'not met'}")
     return kappa if met else None
