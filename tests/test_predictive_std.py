@@ -239,7 +239,12 @@ def test_model_choice_folds_skip_the_std_only_fits():
     est = mean_only(SVCPartitionedGP())
     assert est.latch_uncertainty == "none" and est.rate_uncertainty == "none"
     assert est.noise_model == "constant"
-    assert mean_only(GPBaseline(max_points=7)).get_params() == GPBaseline(max_points=7).get_params()
+    gp = mean_only(GPBaseline(max_points=7))  # the single GP: its own std options, off
+    assert gp.rate_uncertainty == "none" and gp.residual_variance == "none"
+    assert gp.max_points == 7
+    from sklearn.linear_model import LinearRegression
+
+    assert mean_only(LinearRegression()).get_params() == LinearRegression().get_params()
 
 
 def test_the_noise_floor_follows_the_dither_frequency(data, fitted):

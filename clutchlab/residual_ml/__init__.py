@@ -30,6 +30,7 @@ from .classifiers import (
 from .compare import ClassifierComparison, compare_classifiers
 from .estimators import (
     DEFAULT_LATCH_MODEL,
+    GP_PRESSURE_RATE_SCALE,
     LATCH_BANDWIDTH,
     LATCH_MODELS,
     LATCH_RATE_SCALE,
@@ -59,6 +60,7 @@ from .local_gp import LocalGPRegressor, log_marginal_likelihood
 from .model_check import check_model, check_model_document
 from .persist import load_model, save_model
 from .physics import DefaultPhysics, PhysicsPredictor
+from .residual_variance import fit_variance_floor, loeo_residuals, variance_floor
 from .step import StepPredictor, step_predictor
 from .variants import VARIANTS, make_variant
 
@@ -69,6 +71,7 @@ __all__ = [
     "DIDT_FEATURES",
     "EVENT",
     "FEATURES",
+    "GP_PRESSURE_RATE_SCALE",
     "HYBRID_FEATURES",
     "KERNELS",
     "LAG_GRID_S",
@@ -106,12 +109,14 @@ __all__ = [
     "check_model_document",
     "compare_classifiers",
     "direction_of_travel",
+    "fit_variance_floor",
     "grid_bins",
     "kernel_spec",
     "latch_labels",
     "leave_one_experiment_out",
     "load_model",
     "local_law",
+    "loeo_residuals",
     "log_marginal_likelihood",
     "make_classifier",
     "make_variant",
@@ -120,4 +125,5 @@ __all__ = [
     "select_lag",
     "step_predictor",
     "target_pressure",
+    "variance_floor",
 ]

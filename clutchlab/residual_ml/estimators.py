@@ -46,9 +46,11 @@ from .latch_timing import (
 from .local_gp import LocalGPRegressor
 from .paths import knot_indices, piecewise_classes, predict_on_path
 from .rate_bridge import bridge_weight, group_log_rates
+from .residual_variance import fit_variance_floor, loeo_residuals, variance_floor
 
 __all__ = [
     "DEFAULT_LATCH_MODEL",
+    "GP_PRESSURE_RATE_SCALE",
     "LATCH_BANDWIDTH",
     "LATCH_MODELS",
     "LATCH_RATE_SCALE",
@@ -80,18 +82,25 @@ LATCH_RATE_SCALE = LATCH_RATE_SCALES[DEFAULT_LATCH_MODEL]
 #: model and its ``κ`` (``studies/latch_timing.py --scale pressure``: the smallest value of
 #: the same grid with ≥ 90 % regulated-region coverage on every circuit in its worst seed).
 PRESSURE_RATE_SCALE = 1.5
+#: Default ``κ_p`` of the single GPs' rate bridge (``GPBaseline`` / ``GPWithDerivative``
+#: ``pressure_rate_scale``): there it also carries the latch switch between the trained
+#: rates, which one GP moves with its dI/dt feature. Calibrated by
+#: ``studies/gp_uncertainty.py`` on held-back training-side ramps (BENCHMARKS.md).
+GP_PRESSURE_RATE_SCALE = 1.5
 #: Default bandwidth of the local latch-event law (``latch_bandwidth``): the value of the
 #: grid 0.2, 0.35, 0.5, 0.7, 1 with the lowest latch-timing error on held-back
 #: training-side ramps (5 s and 20 s, trained on 2.5 s + 40 s) of the stand and four zoo
 #: plants, seeds 0–2 (``studies/latch_event.py --local``; 0.2 and 0.35 tie within 0.2 %).
 LATCH_BANDWIDTH = 0.2
-#: The predictive-std options of :class:`SVCPartitionedGP` and their values (the default
-#: first, the GP's own std last): the model check and :func:`mean_only` read them too.
+#: The predictive-std options of the estimators and their values (the default first, the
+#: GP's own std last; an estimator has those of its parameters): the model check and
+#: :func:`mean_only` read them too.
 STD_OPTIONS: MappingProxyType[str, tuple[str, str]] = MappingProxyType(
     {
         "latch_uncertainty": ("mixture", "none"),
         "rate_uncertainty": ("bridge", "none"),
         "noise_model": ("frequency", "constant"),
+        "residual_variance": ("loeo", "none"),
     }
 )
 #: Below this |dI/dt| (mA/s) a sample holds: no rate to interpolate.
@@ -104,8 +113,9 @@ def mean_only(est):
     """``est`` with the std-only parts of its fit switched off (its mean is unchanged).
 
     For fits whose predictions are only scored by their mean (folds of a model choice): the
-    :data:`STD_OPTIONS` of :class:`SVCPartitionedGP` cost extra decision fits and residual
-    evaluations and do not move the mean. Other estimators are returned as they are.
+    :data:`STD_OPTIONS` cost extra decision fits, leave-one-experiment-out refits and
+    residual evaluations and do not move the mean. Other estimators are returned as they
+    are.
     """
     params = est.get_params(deep=False)
     off = {k: choices[-1] for k, choices in STD_OPTIONS.items() if k in params}
@@ -149,6 +159,62 @@ class _GPParams:
 
         return fn
 
+    def _didt_column(self) -> int:
+        """Column of the dI/dt feature among all features (−1 when absent)."""
+        return decision_current_columns(self.feature_names_)[1]
+
+    def _trained_log_rates(self, blocks: list[Block]) -> list[float]:
+        """Log ramp rate of each trained rate group (one median |dI/dt| per experiment)."""
+        didt = self._didt_column()
+        if didt < 0 or blocks[0].name == "arrays":
+            return []
+        per_exp = []
+        for blk in blocks:
+            rate = np.abs(blk.X[:, didt])
+            moving = rate > _MOVING_MA_S
+            if moving.any():
+                per_exp.append(float(np.log(np.median(rate[moving]))))
+        return [float(np.mean([per_exp[j] for j in g])) for g in group_log_rates(per_exp)]
+
+    def _rate_bridge_var(self, X: np.ndarray, knots: np.ndarray, mean_at) -> np.ndarray | None:
+        """Per-sample variance (bar²) of interpolating the pressure between the trained rates.
+
+        ``pressure_rate_scale`` times the change of the mean between the two bracketing
+        trained rates (the sample's features with its dI/dt set to each; ``mean_at(Xs,
+        knots)`` gives the mean at the knots' rows ``Xs``), through
+        :mod:`~clutchlab.residual_ml.rate_bridge`'s bridge; 0 on samples that hold. None
+        when ``rate_uncertainty`` is ``"none"``, without a dI/dt feature or with fewer than
+        two trained rates.
+        """
+        anchors = getattr(self, "train_log_rates_", [])
+        didt = self._didt_column()
+        if self.rate_uncertainty != "bridge" or len(anchors) < 2 or didt < 0:
+            return None
+        rate = np.abs(X[knots, didt])
+        moving = rate > _MOVING_MA_S
+        var = np.zeros(knots.size)
+        if moving.any():
+            kn = knots[moving]
+            k, v = bridge_weight(np.log(rate[moving]), anchors)
+            sign = np.sign(X[kn, didt])
+            ends = []
+            for side in (k, k + 1):
+                Xs = X[kn].copy()
+                Xs[:, didt] = sign * np.exp(np.asarray(anchors)[side])
+                ends.append(mean_at(Xs, kn))
+            var[moving] = (self.pressure_rate_scale * (ends[1] - ends[0])) ** 2 * v
+        var = np.interp(np.arange(X.shape[0]), knots, var)
+        return np.where(np.abs(X[:, didt]) > _MOVING_MA_S, var, 0.0)
+
+    def _check_std_options(self) -> None:
+        """ModelError unless each :data:`STD_OPTIONS` parameter holds one of its values."""
+        params = self.get_params(deep=False)
+        for name, choices in STD_OPTIONS.items():
+            if name in params and params[name] not in choices:
+                raise ModelError(
+                    f"{name} must be {' or '.join(map(repr, choices))}, got {params[name]!r}"
+                )
+
 
 class GPBaseline(_GPParams, TraceEstimator):
     """Stage 1 of the paper: one GP on nominal current, dither amplitude and frequency.
@@ -186,6 +252,24 @@ class GPBaseline(_GPParams, TraceEstimator):
         Most samples between prediction knots (default 100).
     random_state : int or None
         Seed of the GP's subset and restarts (default 0).
+    rate_uncertainty : {"bridge", "none"}
+        ``bridge`` (default): the predictive std of a sample on a ramp also holds the
+        uncertainty of interpolating between the trained ramp rates — the GP's change
+        between the two bracketing trained rates (the sample's features with its dI/dt set
+        to each), times ``pressure_rate_scale``, through
+        :mod:`~clutchlab.residual_ml.rate_bridge`'s bridge. For one GP over both latch
+        states this also covers the latch switch, whose current moves with the rate. Needs
+        a dI/dt feature and two trained rates (so nothing for :class:`GPBaseline`'s default
+        features); ``none``: not added.
+    pressure_rate_scale : float
+        ``κ_p`` of that term (dimensionless; default :data:`GP_PRESSURE_RATE_SCALE`).
+    residual_variance : {"loeo", "none"}
+        ``loeo`` (default): the observation noise of the predictive std is at least a
+        floor learned from the GP's leave-one-experiment-out residuals over the features
+        (:mod:`~clutchlab.residual_ml.residual_variance`: the latched plateau's
+        line-pressure wander, the snap the smooth mean rounds off). Needs two training
+        experiments; costs one factorization per experiment and one more GP fit. ``none``:
+        the GP's constant noise. The mean is unchanged either way.
 
     Attributes
     ----------
@@ -195,6 +279,12 @@ class GPBaseline(_GPParams, TraceEstimator):
         Feature columns, in order.
     train_experiments_ : list of str
         Names of the training experiments (empty when fitted on arrays).
+    train_log_rates_ : list of float
+        The trained ramp rates, ``ln(|dI/dt| / (mA/s))`` per rate group (empty without a
+        dI/dt feature or on array input).
+    variance_floor_ : LocalGPRegressor or None
+        The GP of the log squared leave-one-experiment-out residual (None with
+        ``residual_variance="none"``, one training experiment, or array input).
     """
 
     _default_features = BASE_FEATURES
@@ -216,11 +306,17 @@ class GPBaseline(_GPParams, TraceEstimator):
         knot_tol: float = 0.1,
         max_knot_gap: int = 100,
         random_state: int | None = 0,
+        rate_uncertainty: str = "bridge",
+        pressure_rate_scale: float = GP_PRESSURE_RATE_SCALE,
+        residual_variance: str = "loeo",
     ) -> None:
         self.features = features
         self.didt_periods = didt_periods
         self.target = target
         self.lag_s = lag_s
+        self.rate_uncertainty = rate_uncertainty
+        self.pressure_rate_scale = pressure_rate_scale
+        self.residual_variance = residual_variance
         self.kernel = kernel
         self.ard = ard
         self.bin_width = bin_width
@@ -233,16 +329,36 @@ class GPBaseline(_GPParams, TraceEstimator):
         self.random_state = random_state
 
     def _fit_blocks(self, blocks: list[Block]) -> None:
+        self._check_std_options()
         b = self._stack(blocks)
         self.gp_ = self._gp().fit(b.X, b.y, sample_weight=b.weight)
+        self.train_log_rates_ = self._trained_log_rates(blocks)
+        self.variance_floor_ = None
+        if self.residual_variance == "loeo" and len(blocks) >= 2 and blocks[0].name != "arrays":
+            Xr, r = loeo_residuals(self.gp_, blocks)
+            self.variance_floor_ = fit_variance_floor(Xr, r, self.random_state)
+
+    def _observation_noise(self):
+        """Per-row observation-noise variance (bar²): at least the residual-variance floor
+        (None: the GP's constant noise)."""
+        floor = getattr(self, "variance_floor_", None)
+        if floor is None:
+            return None
+        gp_noise = float(self.gp_.noise_var_)
+        return lambda x: np.maximum(gp_noise, variance_floor(floor, np.asarray(x)))
 
     def _predict_matrix(self, X: np.ndarray, path: bool, return_std: bool):
-        fn = self._gp_fn(self.gp_, return_std)
+        fn = self._gp_fn(self.gp_, return_std, self._observation_noise() if return_std else None)
         if not path:
             return fn(X)
         knots = knot_indices(X, self.gp_.resolution_, self.knot_tol, self.max_knot_gap)
         classes = np.zeros(X.shape[0], dtype=np.int8)
-        return predict_on_path(X, classes, knots, {0: fn}, return_std)
+        out = predict_on_path(X, classes, knots, {0: fn}, return_std)
+        if not return_std:
+            return out
+        mean, std = out
+        var = self._rate_bridge_var(X, knots, lambda Xs, _: self.gp_.predict(Xs))
+        return mean, (std if var is None else np.sqrt(std**2 + var))
 
     def resolution(self) -> np.ndarray:
         """Per-feature kernel resolution used to place prediction knots (feature units)."""
@@ -499,11 +615,7 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         self.classifier_columns_ = self._clf_cols()
         if self.latch_model not in LATCH_MODELS:
             raise ModelError(f"latch_model must be one of {LATCH_MODELS}, got {self.latch_model!r}")
-        for name, choices in STD_OPTIONS.items():
-            if getattr(self, name) not in choices:
-                raise ModelError(
-                    f"{name} must be {' or '.join(map(repr, choices))}, got {getattr(self, name)!r}"
-                )
+        self._check_std_options()
         self.latch_timing_ = None
         if len(present) >= 2:
             Xc = b.X[:, self.classifier_columns_]
@@ -536,10 +648,6 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
     def _freq_column(self) -> int:
         names = self.feature_names_
         return names.index("dither_freq_Hz") if "dither_freq_Hz" in names else -1
-
-    def _didt_column(self) -> int:
-        """Column of the dI/dt feature among all features (−1 when absent)."""
-        return decision_current_columns(self.feature_names_)[1]
 
     def _observation_noise(self, g: int):
         """Per-row observation-noise variance (bar²) of regime ``g``, or None (the GP's)."""
@@ -589,19 +697,6 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
             coef, _ = nnls(design, np.array([floor[k] for k in sorted(floor)]))
             out[g] = (float(coef[0]), float(coef[1]))
         return out
-
-    def _trained_log_rates(self, blocks: list[Block]) -> list[float]:
-        """Log ramp rate of each trained rate group (one median |dI/dt| per experiment)."""
-        didt = self._didt_column()
-        if didt < 0 or blocks[0].name == "arrays":
-            return []
-        per_exp = []
-        for blk in blocks:
-            rate = np.abs(blk.X[:, didt])
-            moving = rate > _MOVING_MA_S
-            if moving.any():
-                per_exp.append(float(np.log(np.median(rate[moving]))))
-        return [float(np.mean([per_exp[j] for j in g])) for g in group_log_rates(per_exp)]
 
     def _fit_decision(self, blocks: list[Block], b: Block | None = None):
         """Classifier (or None) and lean decision function fitted on ``blocks``."""
@@ -682,30 +777,17 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
 
     def _widen_for_rate(self, X, classes, knots, std, fns) -> np.ndarray:
         """``std`` with the pressure's rate-interpolation variance (``rate_uncertainty``)."""
-        anchors = getattr(self, "train_log_rates_", [])
-        didt = self._didt_column()
-        if self.rate_uncertainty != "bridge" or len(anchors) < 2 or didt < 0:
-            return std
-        rate = np.abs(X[knots, didt])
-        moving = rate > _MOVING_MA_S
-        var = np.zeros(knots.size)
-        if moving.any():
-            kn = knots[moving]
-            k, v = bridge_weight(np.log(rate[moving]), anchors)
-            sign = np.sign(X[kn, didt])
-            ends = []
-            for side in (k, k + 1):
-                Xs = X[kn].copy()
-                Xs[:, didt] = sign * np.exp(np.asarray(anchors)[side])
-                mu = np.empty(kn.size)
-                for g in (0, 1):
-                    sel = classes[kn] == g
-                    if sel.any():
-                        mu[sel] = fns[g](Xs[sel])[0]
-                ends.append(mu)
-            var[moving] = (self.pressure_rate_scale * (ends[1] - ends[0])) ** 2 * v
-        var = np.interp(np.arange(X.shape[0]), knots, var)
-        return np.sqrt(std**2 + np.where(np.abs(X[:, didt]) > _MOVING_MA_S, var, 0.0))
+
+        def mean_at(Xs: np.ndarray, kn: np.ndarray) -> np.ndarray:
+            mu = np.empty(kn.size)
+            for g in (0, 1):
+                sel = classes[kn] == g
+                if sel.any():
+                    mu[sel] = fns[g](Xs[sel])[0]
+            return mu
+
+        var = self._rate_bridge_var(X, knots, mean_at)
+        return std if var is None else np.sqrt(std**2 + var)
 
     def _widen_at_switches(self, X, classes, mean, std, ref, fns) -> np.ndarray:
         """``std`` where a wrong latch state is possible: the mixture's equivalent std."""

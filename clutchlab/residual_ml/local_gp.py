@@ -45,6 +45,7 @@ and noise, and gives the same predictions for the same hyperparameters.
 
 from __future__ import annotations
 
+import copy
 import math
 import warnings
 
@@ -701,6 +702,41 @@ class LocalGPRegressor(RegressorMixin, BaseEstimator):
             if return_std:
                 return mean, self._std_scaled(xs)
         return mean
+
+    def conditioned_on(self, X, y, sample_weight=None) -> LocalGPRegressor:
+        """This GP conditioned on other data, hyperparameters kept (nothing optimized).
+
+        The copy keeps the fitted hyperparameters, the input and target scaling and the
+        final bin grid, and is binned and factorized on ``X, y`` instead — e.g. the fitted
+        GP without one training experiment, for leave-one-experiment-out predictions at
+        the cost of one factorization (no marginal-likelihood optimization). Its std is
+        computed from its own final bins.
+
+        Parameters
+        ----------
+        X : array_like
+            n × d inputs, same units as in :meth:`fit`.
+        y : array_like
+            n targets (target units).
+        sample_weight : array_like, optional
+            n effective-observation weights (default 1 each).
+
+        Returns
+        -------
+        LocalGPRegressor
+            The conditioned copy (this GP is unchanged).
+        """
+        check_is_fitted(self, "dual_coef_")
+        X = np.asarray(X, dtype=float)
+        y = np.asarray(y, dtype=float)
+        w = _check_sample_weight(sample_weight, X)
+        out = copy.copy(self)
+        bins = grid_bins(
+            self._scale(X), (y - self.y_mean_) / self.y_scale_, w, self.bin_widths_ / self.x_scale_
+        )
+        out._set_posterior(bins.x, bins.y, bins.weight)
+        out._set_std_posterior(out.X_bins_, out.w_bins_, out.bin_widths_, out._L)
+        return out
 
     # -- persistence -------------------------------------------------------------------------
 

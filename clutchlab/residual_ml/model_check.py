@@ -429,7 +429,7 @@ class _Checker:
                 "decision",
                 "gps",
             ),
-        }.get(cls, ("gp",))
+        }.get(cls, ("gp", "train_log_rates", "variance_floor"))
         self.unknown(state, common + own, where)
         names = self.key(state, "feature_names", where, _names_any)
         self.key(state, "train_experiments", where, _str_list)
@@ -446,6 +446,10 @@ class _Checker:
         if cls is SVCPartitionedGP:
             self.partitioned(state, where, prefix, d)
             return
+        self.key(state, "train_log_rates", where, _number_list, required=False)
+        floor = self.key(state, "variance_floor", where, required=False)
+        if floor is not _MISSING and floor is not None:
+            self.gp(floor, f"{where}.variance_floor", prefix + "floor.", d)
         meta = self.key(state, "gp", where)
         if meta is _MISSING:
             self.claim(prefix + "gp.")

@@ -168,6 +168,13 @@ def _state(est, arrays: dict, prefix: str) -> dict:
     meta, arr = est.gp_.get_state()
     state["gp"] = meta
     _put(arrays, prefix + "gp", arr)
+    state["train_log_rates"] = [float(u) for u in getattr(est, "train_log_rates_", [])]
+    floor = getattr(est, "variance_floor_", None)
+    state["variance_floor"] = None
+    if floor is not None:
+        meta, arr = floor.get_state()
+        state["variance_floor"] = meta
+        _put(arrays, prefix + "floor", arr)
     return state
 
 
@@ -210,11 +217,19 @@ def _restore(est, state: dict, arrays, prefix: str) -> None:
             est.decision_ = cls.from_arrays(_get(arrays, prefix + "clf"))
         est.gps_ = {}
         for g, meta in state["gps"].items():
-            gp = LocalGPRegressor().set_params(kernel=meta["kernel"], ard=meta["ard"])
-            est.gps_[int(g)] = gp.set_state(meta, _get(arrays, f"{prefix}gp{g}"))
+            est.gps_[int(g)] = _gp_from(meta, _get(arrays, f"{prefix}gp{g}"))
         return
-    gp = LocalGPRegressor().set_params(kernel=state["gp"]["kernel"], ard=state["gp"]["ard"])
-    est.gp_ = gp.set_state(state["gp"], _get(arrays, prefix + "gp"))
+    est.gp_ = _gp_from(state["gp"], _get(arrays, prefix + "gp"))
+    # Files written before the rate bridge and the residual-variance floor: neither.
+    est.train_log_rates_ = [float(u) for u in state.get("train_log_rates", [])]
+    floor = state.get("variance_floor")
+    est.variance_floor_ = None if floor is None else _gp_from(floor, _get(arrays, prefix + "floor"))
+
+
+def _gp_from(meta: dict, arrays: dict) -> LocalGPRegressor:
+    """A :class:`LocalGPRegressor` from its saved state."""
+    gp = LocalGPRegressor().set_params(kernel=meta["kernel"], ard=meta["ard"])
+    return gp.set_state(meta, arrays)
 
 
 def model_document(model, npz_name: str) -> tuple[dict, dict[str, np.ndarray]]:
