@@ -68,8 +68,11 @@ def test_classifiers_and_train_cli(tmp_path):
     assert "all training" in res.stdout and "model written to" in res.stdout
     assert "GP gp: rbf, length scales [" in res.stdout  # the fit summary
     doc = json.loads(mj.read_text())
-    assert set(doc["gp_hyperparameters"]) == {"gp"}
-    assert doc["hyperparameters_at_bounds"] == doc["gp_hyperparameters"]["gp"]["at_bounds"]
+    parts = doc["gp_hyperparameters"]
+    assert set(parts) == {"gp", "variance_floor"}  # the mean's GP and its variance floor
+    assert doc["hyperparameters_at_bounds"] == [
+        f"{part}: {entry}" for part in parts for entry in parts[part]["at_bounds"]
+    ]
     assert doc["variant"] == "gp_base" and set(doc["training"]["per_experiment"]) == {
         "fast_50Hz_A",
         "fast_70Hz_C",

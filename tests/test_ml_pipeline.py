@@ -284,8 +284,10 @@ def test_classifier_comparison_table_and_figure(train, tmp_path):
         compare_classifiers([train[0]])
 
 
-def test_gp_hyperparameters_by_part(fitted):
-    assert set(fitted["gp_base"].gp_hyperparameters()) == {"gp"}
+def test_gp_hyperparameters_by_part(fitted, train):
+    assert set(fitted["gp_base"].gp_hyperparameters()) == {"gp", "variance_floor"}
+    plain = GPBaseline(residual_variance="none", n_hyper=200, max_points=200)
+    assert set(plain.fit(train).gp_hyperparameters()) == {"gp"}
     assert set(fitted["paper_svc_gp"].gp_hyperparameters()) == {"unlatched", "latched"}
     parts = fitted["hybrid"].gp_hyperparameters()
     assert set(parts) == {"residual.unlatched", "residual.latched"}

@@ -293,8 +293,9 @@ class TraceEstimator(RegressorMixin, BaseEstimator):
     def gp_hyperparameters(self) -> dict[str, dict]:
         """Fitted hyperparameters of every GP of the model, by part, JSON-ready.
 
-        Parts: ``gp`` (one GP), ``unlatched`` / ``latched`` (one per latch state), a
-        hybrid's prefixed ``residual.``. Each entry is
+        Parts: ``gp`` (one GP) and its ``variance_floor`` (the GP of its log squared
+        held-out residual, when fitted), ``unlatched`` / ``latched`` (one per latch state),
+        a hybrid's prefixed ``residual.``. Each entry is
         :meth:`~clutchlab.residual_ml.local_gp.LocalGPRegressor.hyperparameters`, with
         ``at_bounds`` listing those that ended on a bound of their range.
         """
@@ -305,8 +306,9 @@ class TraceEstimator(RegressorMixin, BaseEstimator):
         if hasattr(self, "gps_"):
             names = {0: "unlatched", 1: "latched"}
             return {names[g]: gp.hyperparameters() for g, gp in sorted(self.gps_.items())}
-        gp = getattr(self, "gp_", None)
-        return {"gp": gp.hyperparameters()} if gp is not None else {}
+        parts = {"gp": getattr(self, "gp_", None)}
+        parts["variance_floor"] = getattr(self, "variance_floor_", None)
+        return {k: gp.hyperparameters() for k, gp in parts.items() if gp is not None}
 
     def hyperparameters_at_bounds(self) -> list[str]:
         """``"part: name (side bound value)"`` for every GP hyperparameter on a bound."""
