@@ -15,9 +15,10 @@ Usage:
 
 * ``python studies/gp_uncertainty.py --data DIR --out F.json [--seeds 0,1,2] [--plants ...]
   [--kappas 0,0.5,1,1.5,2,3]`` calibrates ``κ_p`` (the rule is printed first);
-* ``python studies/gp_uncertainty.py --medium DIR --data DIR --out F.json`` scores the
-  defaults against the GP's own std on the standard datasets' medium ramp (train fast +
-  slow, the 9 medium experiments scored; nothing chosen there).
+* ``python studies/gp_uncertainty.py --medium DIR --data DIR --out F.json [--variant gp_base]``
+  scores the defaults of ``gp_didt`` (or ``gp_base``, which has the floor but no dI/dt, so
+  no rate term) against the GP's own std on the standard datasets' medium ramp (train fast
+  + slow, the 9 medium experiments scored; nothing chosen there).
 """
 
 from __future__ import annotations
@@ -102,16 +103,16 @@ def coverage(path: Path, kappas: list[float]) -> dict:
     return out
 
 
-def medium_coverage(path: Path) -> dict:
-    """``gp_didt``'s ±2σ coverage and RMSE on the medium ramp: the GP's std, the defaults."""
+def medium_coverage(path: Path, variant: str = "gp_didt") -> dict:
+    """A single GP's ±2σ coverage and RMSE on the medium ramp: the GP's std, the defaults."""
     from clutchlab.data import load_dataset
-    from clutchlab.residual_ml import GPWithDerivative
+    from clutchlab.residual_ml import VARIANTS
     from clutchlab.validation import Protocol
 
     protocol = Protocol(load_dataset(path), train=("fast", "slow"), test=("medium",))
     out = {}
     for kind, params in MEDIUM_KINDS.items():
-        model, fit_s = protocol.fit(GPWithDerivative(**params))
+        model, fit_s = protocol.fit(VARIANTS[variant](**params))
         score = protocol.score(kind, model, fit_s=fit_s)
         out[kind] = {
             **score.details["coverage_2sigma"],
@@ -126,16 +127,17 @@ def score_medium(args) -> int:
     from clutchlab.residual_ml import GP_PRESSURE_RATE_SCALE
 
     print(
-        "Scoring gp_didt's defaults (residual_variance = 'loeo', rate_uncertainty = 'bridge', "
-        f"pressure_rate_scale = {GP_PRESSURE_RATE_SCALE}) against the GP's own std on the "
-        "medium ramp: train fast + slow, score the 9 medium experiments; nothing is chosen here.",
+        f"Scoring {args.variant}'s defaults (residual_variance = 'loeo', rate_uncertainty = "
+        f"'bridge', pressure_rate_scale = {GP_PRESSURE_RATE_SCALE}) against the GP's own std "
+        "on the medium ramp: train fast + slow, score the 9 medium experiments; nothing is "
+        "chosen here.",
         flush=True,
     )
     args.medium.mkdir(parents=True, exist_ok=True)
     rows = []
     for plant in args.plants.split(","):
         for seed in (int(s) for s in args.seeds.split(",")):
-            r = medium_coverage(standard_dataset(args.medium, plant, seed))
+            r = medium_coverage(standard_dataset(args.medium, plant, seed), args.variant)
             rows.append({"plant": plant, "seed": seed, **r})
             print(
                 f"{plant:22s} {seed}  "
@@ -172,6 +174,12 @@ def main(argv: list[str] | None = None) -> int:
         "--medium",
         type=Path,
         help="score the defaults on the standard datasets in this folder (medium ramp)",
+    )
+    ap.add_argument(
+        "--variant",
+        choices=("gp_didt", "gp_base"),
+        default="gp_didt",
+        help="the single GP --medium scores (default gp_didt)",
     )
     args = ap.parse_args(argv)
     if args.medium is not None:
