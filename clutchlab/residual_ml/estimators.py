@@ -336,7 +336,7 @@ class GPBaseline(_GPParams, TraceEstimator):
         self.variance_floor_ = None
         if self.residual_variance == "loeo" and len(blocks) >= 2 and blocks[0].name != "arrays":
             Xr, r = loeo_residuals(self.gp_, blocks)
-            self.variance_floor_ = fit_variance_floor(Xr, r, self.random_state)
+            self.variance_floor_ = fit_variance_floor(Xr, r, self._gp())
 
     def _observation_noise(self):
         """Per-row observation-noise variance (bar²): at least the residual-variance floor

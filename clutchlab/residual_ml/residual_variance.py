@@ -31,6 +31,7 @@ import os
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
+from sklearn.base import clone
 
 from ._threads import single_thread
 from .local_gp import LocalGPRegressor
@@ -83,7 +84,9 @@ def loeo_residuals(gp: LocalGPRegressor, blocks, stride: int = 10) -> tuple[np.n
     return np.vstack([x for x, _ in out]), np.concatenate([r for _, r in out])
 
 
-def fit_variance_floor(X: np.ndarray, r: np.ndarray, random_state=0) -> LocalGPRegressor:
+def fit_variance_floor(
+    X: np.ndarray, r: np.ndarray, gp: LocalGPRegressor | None = None
+) -> LocalGPRegressor:
     """The GP of ``ln r²`` over the features (RBF, ARD; see the module docstring).
 
     Parameters
@@ -92,17 +95,17 @@ def fit_variance_floor(X: np.ndarray, r: np.ndarray, random_state=0) -> LocalGPR
         m × d features.
     r : numpy.ndarray
         m residuals (bar).
-    random_state : int or None
-        Seed of the GP's hyperparameter subset.
+    gp : LocalGPRegressor, optional
+        Unfitted GP whose settings (binning, subset, seed) the floor's GP takes, with the
+        RBF kernel — the estimator's own; default ``LocalGPRegressor(random_state=0)``.
 
     Returns
     -------
     LocalGPRegressor
         Fitted on ``ln(r² + 1e-6 bar²)``.
     """
-    return LocalGPRegressor(kernel="rbf", random_state=random_state).fit(
-        X, np.log(np.square(r) + _R2_FLOOR_BAR2)
-    )
+    base = gp if gp is not None else LocalGPRegressor(random_state=0)
+    return clone(base).set_params(kernel="rbf").fit(X, np.log(np.square(r) + _R2_FLOOR_BAR2))
 
 
 def variance_floor(floor_gp: LocalGPRegressor, X: np.ndarray) -> np.ndarray:
