@@ -24,14 +24,13 @@ Usage:
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np
 
 # The held-back-rate and standard datasets of the latch studies (same plants, ramps, seeds):
 # one writer each, so the studies read the same data. The script's folder is on sys.path.
-from latch_event import PLANTS, rates_dataset
+from latch_event import PLANTS, each_dataset, rates_dataset
 from latch_timing import REGIONS, SHORT, standard_dataset
 
 RULE = """\
@@ -79,19 +78,19 @@ def coverage(path: Path, kappas: list[float]) -> dict:
     model = GPWithDerivative().fit(train)
     s = AnalysisSettings()
     refs = [ExperimentReference.of(t, s) for t in test]
-    # The bridge's variance is κ_p² times that at κ_p = 1: two predictions give every κ_p.
+    # One fit gives every row: the GP's own std is this fit without its floor (a fit with
+    # residual_variance="none" has the same GP and no floor), and the bridge's variance is
+    # κ_p² times that at κ_p = 1.
+    floor = model.variance_floor_
     parts = {}
-    for name, params in (
-        ("gp", {"rate_uncertainty": "none", "residual_variance": "none"}),
-        ("floor", {"rate_uncertainty": "bridge", "pressure_rate_scale": 0.0}),
-        ("unit", {"rate_uncertainty": "bridge", "pressure_rate_scale": 1.0}),
+    for name, kept, params in (
+        ("gp", None, {"rate_uncertainty": "none"}),
+        ("floor", floor, {"rate_uncertainty": "bridge", "pressure_rate_scale": 0.0}),
+        ("unit", floor, {"rate_uncertainty": "bridge", "pressure_rate_scale": 1.0}),
     ):
-        saved = model.variance_floor_
-        if params.get("residual_variance") == "none":
-            model.variance_floor_ = None
-        model.set_params(**{k: v for k, v in params.items() if k != "residual_variance"})
+        model.variance_floor_ = kept
+        model.set_params(**params)
         parts[name] = [model.predict(t, return_std=True) for t in test]
-        model.variance_floor_ = saved
     means = [m for m, _ in parts["floor"]]
     out = {"by_kappa": {"gp": _coverage(refs, means, [sd for _, sd in parts["gp"]], s)}}
     for k in kappas:
@@ -134,23 +133,21 @@ def score_medium(args) -> int:
         flush=True,
     )
     args.medium.mkdir(parents=True, exist_ok=True)
-    rows = []
-    for plant in args.plants.split(","):
-        for seed in (int(s) for s in args.seeds.split(",")):
-            r = medium_coverage(standard_dataset(args.medium, plant, seed), args.variant)
-            rows.append({"plant": plant, "seed": seed, **r})
-            print(
-                f"{plant:22s} {seed}  "
-                + "   ".join(
-                    f"{k}: "
-                    + " ".join(f"{SHORT[g]} {v[g]:.3f}" for g in REGIONS)
-                    + f" rmse {v['rmse_bar']:.3f} fit {v['fit_s']:.0f} s"
-                    for k, v in r.items()
-                    if k in MEDIUM_KINDS
-                ),
-                flush=True,
+    rows = each_dataset(
+        args,
+        lambda p, s: standard_dataset(args.medium, p, s),
+        lambda path: medium_coverage(path, args.variant),
+        lambda r: (
+            f"{r['plant']:22s} {r['seed']}  "
+            + "   ".join(
+                f"{k}: "
+                + " ".join(f"{SHORT[g]} {v[g]:.3f}" for g in REGIONS)
+                + f" rmse {v['rmse_bar']:.3f} fit {v['fit_s']:.0f} s"
+                for k, v in r.items()
+                if k in MEDIUM_KINDS
             )
-            args.out.write_text(json.dumps(rows, indent=1))
+        ),
+    )
     print("\nper circuit, defaults: mean over seeds [worst] (the GP's own std: mean)")
     for plant in dict.fromkeys(r["plant"] for r in rows):
         mine = [r for r in rows if r["plant"] == plant]
@@ -187,17 +184,15 @@ def main(argv: list[str] | None = None) -> int:
     kappas = [float(k) for k in args.kappas.split(",")]
     print(RULE, flush=True)
     args.data.mkdir(parents=True, exist_ok=True)
-    rows = []
-    for plant in args.plants.split(","):
-        for seed in (int(s) for s in args.seeds.split(",")):
-            r = coverage(rates_dataset(args.data, plant, seed), kappas)
-            rows.append({"plant": plant, "seed": seed, **r})
-            print(
-                f"{plant:22s} {seed}  window: "
-                + "  ".join(f"k={k}: {v['latch_window']:.2f}" for k, v in r["by_kappa"].items()),
-                flush=True,
-            )
-            args.out.write_text(json.dumps(rows, indent=1))
+    rows = each_dataset(
+        args,
+        lambda p, s: rates_dataset(args.data, p, s),
+        lambda path: coverage(path, kappas),
+        lambda r: (
+            f"{r['plant']:22s} {r['seed']}  window: "
+            + "  ".join(f"k={k}: {v['latch_window']:.2f}" for k, v in r["by_kappa"].items())
+        ),
+    )
     print("\ncoverage per region in the worst seed, and the mean 2 sigma band (bar) per region")
     meets = {}
     for k in ("gp", *(str(k) for k in kappas)):

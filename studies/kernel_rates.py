@@ -15,14 +15,13 @@ Usage: ``python studies/kernel_rates.py --data DIR --out F.json [--seeds 0,1,2]`
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np
 
 # The held-back-rate datasets of the latch-event study (same plants, ramps and seeds): one
 # writer, so the studies read the same data. The script's folder is on sys.path.
-from latch_event import PLANTS, rates_dataset
+from latch_event import PLANTS, each_dataset, rates_dataset
 
 KERNELS = ("rbf", "rq")
 
@@ -58,19 +57,15 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     print(RULE, flush=True)
     args.data.mkdir(parents=True, exist_ok=True)
-    rows = []
-    for plant in args.plants.split(","):
-        for seed in (int(s) for s in args.seeds.split(",")):
-            r = score(rates_dataset(args.data, plant, seed))
-            rows.append({"plant": plant, "seed": seed, **r})
-            print(
-                f"{plant:22s} {seed}  "
-                + "  ".join(
-                    f"{k} {r[k]['rmse_bar']:.3f} bar ({r[k]['fit_s']:.0f} s)" for k in KERNELS
-                ),
-                flush=True,
-            )
-            args.out.write_text(json.dumps(rows, indent=1))
+    rows = each_dataset(
+        args,
+        lambda p, s: rates_dataset(args.data, p, s),
+        score,
+        lambda r: (
+            f"{r['plant']:22s} {r['seed']}  "
+            + "  ".join(f"{k} {r[k]['rmse_bar']:.3f} bar ({r[k]['fit_s']:.0f} s)" for k in KERNELS)
+        ),
+    )
     print("\nper circuit, mean over seeds [worst]: rbf -> rq")
     lower, worse = 0, []
     for plant in dict.fromkeys(r["plant"] for r in rows):

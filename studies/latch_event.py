@@ -52,6 +52,26 @@ PLANTS = ("stand", "saturating_lugre", "quadratic_play", "stribeck_supply", "pre
 MODELS = ("classifier", "event")
 
 
+def each_dataset(args, dataset, score, line) -> list[dict]:
+    """Score every dataset of ``args.plants`` × ``args.seeds`` (comma-separated), in order.
+
+    ``dataset(plant, seed)`` gives its folder, ``score(path)`` a dict of results, and
+    ``line(row)`` the line printed for the row ``{"plant", "seed", **score(path)}``. The rows
+    so far are rewritten to ``args.out`` (JSON) after each dataset, atomically: a study
+    stopped midway leaves the rows it finished, never a half-written file.
+    """
+    rows: list[dict] = []
+    for plant in args.plants.split(","):
+        for seed in (int(s) for s in args.seeds.split(",")):
+            row = {"plant": plant, "seed": seed, **score(dataset(plant, seed))}
+            rows.append(row)
+            print(line(row), flush=True)
+            tmp = args.out.with_name(args.out.name + ".tmp")
+            tmp.write_text(json.dumps(rows, indent=1))
+            tmp.replace(args.out)
+    return rows
+
+
 def rates_dataset(root: Path, plant: str, seed: int) -> Path:
     """The plant's dataset with ramps fast / r5 / r20 / slow (written once, then reused)."""
     from clutchlab.data import save_dataset
@@ -112,19 +132,17 @@ def main(argv: list[str] | None = None) -> int:
         return compare_local(args)
     print(RULE, flush=True)
     print(f"\n{'circuit':22s} seed   on clf/event   off clf/event   rmse clf/event")
-    rows = []
-    for plant in args.plants.split(","):
-        for seed in (int(s) for s in args.seeds.split(",")):
-            r = score(rates_dataset(args.data, plant, seed))
-            c, e = r["classifier"], r["event"]
-            rows.append({"plant": plant, "seed": seed, **r})
-            print(
-                f"{plant:22s} {seed:4d}  {c['latch_on_err_mA']:5.1f} / {e['latch_on_err_mA']:5.1f}"
-                f"   {c['latch_off_err_mA']:5.1f} / {e['latch_off_err_mA']:5.1f}"
-                f"    {c['rmse_bar']:.3f} / {e['rmse_bar']:.3f}",
-                flush=True,
-            )
-            args.out.write_text(json.dumps(rows, indent=1))
+
+    def line(r: dict) -> str:
+        c, e = r["classifier"], r["event"]
+        return (
+            f"{r['plant']:22s} {r['seed']:4d}  "
+            f"{c['latch_on_err_mA']:5.1f} / {e['latch_on_err_mA']:5.1f}"
+            f"   {c['latch_off_err_mA']:5.1f} / {e['latch_off_err_mA']:5.1f}"
+            f"    {c['rmse_bar']:.3f} / {e['rmse_bar']:.3f}"
+        )
+
+    rows = each_dataset(args, lambda p, s: rates_dataset(args.data, p, s), score, line)
     print("\nper circuit, mean over seeds (worst): on+off error clf -> event; rmse clf -> event")
     better, ok_rmse = 0, True
     for plant in dict.fromkeys(r["plant"] for r in rows):
@@ -165,21 +183,19 @@ def compare_local(args) -> int:
     hs = [float(h) for h in args.bandwidths.split(",")]
     models = {"classifier": {"latch_model": "classifier"}}
     models |= {f"local h={h}": {"latch_model": "local_event", "latch_bandwidth": h} for h in hs}
-    rows = []
-    for plant in args.plants.split(","):
-        for seed in (int(s) for s in args.seeds.split(",")):
-            r = score(rates_dataset(args.data, plant, seed), models)
-            rows.append({"plant": plant, "seed": seed, **r})
-            print(
-                f"{plant:22s} {seed}  "
-                + "  ".join(
-                    f"{k}: on {v['latch_on_err_mA']:.1f} off {v['latch_off_err_mA']:.1f} "
-                    f"rmse {v['rmse_bar']:.3f}"
-                    for k, v in r.items()
-                ),
-                flush=True,
+    rows = each_dataset(
+        args,
+        lambda p, s: rates_dataset(args.data, p, s),
+        lambda path: score(path, models),
+        lambda r: (
+            f"{r['plant']:22s} {r['seed']}  "
+            + "  ".join(
+                f"{k}: on {r[k]['latch_on_err_mA']:.1f} off {r[k]['latch_off_err_mA']:.1f} "
+                f"rmse {r[k]['rmse_bar']:.3f}"
+                for k in models
             )
-            args.out.write_text(json.dumps(rows, indent=1))
+        ),
+    )
     plants = list(dict.fromkeys(r["plant"] for r in rows))
 
     def mean(kind, plant, what):

@@ -31,14 +31,13 @@ Usage:
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np
 
 # The held-back-rate datasets of the latch-event study (same plants, ramps and seeds): one
 # writer, so both studies read the same data. The script's folder is on sys.path.
-from latch_event import PLANTS, rates_dataset
+from latch_event import PLANTS, each_dataset, rates_dataset
 
 RULES = {
     "latch": """\
@@ -193,23 +192,21 @@ def score_medium(args) -> int:
         flush=True,
     )
     args.medium.mkdir(parents=True, exist_ok=True)
-    rows = []
-    for plant in args.plants.split(","):
-        for seed in (int(s) for s in args.seeds.split(",")):
-            r = medium_coverage(standard_dataset(args.medium, plant, seed))
-            rows.append({"plant": plant, "seed": seed, **r})
-            print(
-                f"{plant:22s} {seed}  "
-                + "   ".join(
-                    f"{k}: reg {v['regulated']:.3f} lat {v['latched']:.3f} "
-                    f"win {v['latch_window']:.3f} rmse {v['rmse_bar']:.3f} "
-                    f"on {v['latch_on_err_mA']:.1f} off {v['latch_off_err_mA']:.1f} mA"
-                    for k, v in r.items()
-                    if k in MEDIUM_KINDS
-                ),
-                flush=True,
+    rows = each_dataset(
+        args,
+        lambda p, s: standard_dataset(args.medium, p, s),
+        medium_coverage,
+        lambda r: (
+            f"{r['plant']:22s} {r['seed']}  "
+            + "   ".join(
+                f"{k}: reg {v['regulated']:.3f} lat {v['latched']:.3f} "
+                f"win {v['latch_window']:.3f} rmse {v['rmse_bar']:.3f} "
+                f"on {v['latch_on_err_mA']:.1f} off {v['latch_off_err_mA']:.1f} mA"
+                for k, v in r.items()
+                if k in MEDIUM_KINDS
             )
-            args.out.write_text(json.dumps(rows, indent=1))
+        ),
+    )
     print("\nper circuit, default (GP std alone): mean over seeds [worst]")
     for plant in dict.fromkeys(r["plant"] for r in rows):
         mine = [r for r in rows if r["plant"] == plant]
@@ -266,20 +263,18 @@ def noise_coverage(path: Path) -> dict:
 def compare_noise(args) -> int:
     """``--compare-noise``: the noise models on the held-back ramps, and the rule."""
     print(NOISE_RULE, flush=True)
-    rows = []
-    for plant in args.plants.split(","):
-        for seed in (int(s) for s in args.seeds.split(",")):
-            r = noise_coverage(rates_dataset(args.data, plant, seed))
-            rows.append({"plant": plant, "seed": seed, **r})
-            print(
-                f"{plant:22s} {seed}  "
-                + "   ".join(
-                    f"{k}: " + " ".join(f"{SHORT[reg]} {r[k][reg]:.3f}" for reg in REGIONS)
-                    for k in ("constant", "frequency")
-                ),
-                flush=True,
+    rows = each_dataset(
+        args,
+        lambda p, s: rates_dataset(args.data, p, s),
+        noise_coverage,
+        lambda r: (
+            f"{r['plant']:22s} {r['seed']}  "
+            + "   ".join(
+                f"{k}: " + " ".join(f"{SHORT[reg]} {r[k][reg]:.3f}" for reg in REGIONS)
+                for k in ("constant", "frequency")
             )
-            args.out.write_text(json.dumps(rows, indent=1))
+        ),
+    )
     print("\nper circuit, mean over seeds: constant -> frequency")
     higher, worse = 0, []
     for plant in dict.fromkeys(r["plant"] for r in rows):
@@ -348,20 +343,22 @@ def main(argv: list[str] | None = None) -> int:
     region = RULE_REGION[args.scale]
     print(RULES[args.scale].format(over=OVER_SEEDS[args.over_seeds]), flush=True)
     args.data.mkdir(parents=True, exist_ok=True)
-    rows = []
-    for plant in args.plants.split(","):
-        for seed in (int(s) for s in args.seeds.split(",")):
-            r = coverage(rates_dataset(args.data, plant, seed), kappas, args.scale)
-            rows.append({"plant": plant, "seed": seed, **r})
-            tm = r["timing"] or {}
-            print(
-                f"{plant:22s} {seed}  sigma_fit on/off "
-                f"{tm.get('fit_rms_mA', {}).get('on', float('nan')):.1f} / "
-                f"{tm.get('fit_rms_mA', {}).get('off', float('nan')):.1f} mA  {region}: "
-                + "  ".join(f"k={k}: {v[region]:.2f}" for k, v in r["by_kappa"].items()),
-                flush=True,
-            )
-            args.out.write_text(json.dumps(rows, indent=1))
+
+    def line(r: dict) -> str:
+        fit_rms = (r["timing"] or {}).get("fit_rms_mA", {})
+        return (
+            f"{r['plant']:22s} {r['seed']}  sigma_fit on/off "
+            f"{fit_rms.get('on', float('nan')):.1f} / "
+            f"{fit_rms.get('off', float('nan')):.1f} mA  {region}: "
+            + "  ".join(f"k={k}: {v[region]:.2f}" for k, v in r["by_kappa"].items())
+        )
+
+    rows = each_dataset(
+        args,
+        lambda p, s: rates_dataset(args.data, p, s),
+        lambda path: coverage(path, kappas, args.scale),
+        line,
+    )
     pool = POOL[args.over_seeds]
     print(
         f"\ncoverage per region and the band in the {region} region (bar), "
