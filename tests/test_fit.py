@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 from sklearn.exceptions import NotFittedError
@@ -190,10 +192,10 @@ def test_time_out_before_the_refinement_keeps_the_pre_fit(small_data, monkeypatc
     solve = PhysicsFitter._solve_starts
     calls = []
 
-    def timed_out_refinement(problem, starts, settings, t_start):
+    def timed_out_refinement(problem, starts, settings, t_start, reserve_s=0.0):
         calls.append(len(problem.experiments))
         if len(calls) == 1:
-            return solve(problem, starts, settings, t_start)
+            return solve(problem, starts, settings, t_start, reserve_s)
         return {"cost": np.inf, "z": None, "stats": None}  # what a spent time limit returns
 
     monkeypatch.setattr(PhysicsFitter, "_solve_starts", staticmethod(timed_out_refinement))
@@ -208,8 +210,42 @@ def test_time_out_before_the_refinement_keeps_the_pre_fit(small_data, monkeypatc
         _fit(small_data, prefit_samples=100, strict=True)
 
 
+@pytest.mark.parametrize("limit_s", [20.0, 1000.0])
+def test_no_iteration_is_started_that_cannot_finish_within_the_limit(
+    small_data, monkeypatch, limit_s
+):
+    """The pre-fit's time per iteration and sample, scaled to the refinement's samples, is
+    kept in reserve: the refinement's solver may not start an iteration in that reserve,
+    and the refinement is not started at all when its first Jacobian and one step would
+    not fit (the pre-fit's optimum is then the model, marked not converged)."""
+    solve = PhysicsFitter._solve_starts
+    reserves = []
+    pause_s = 6.0
+
+    def slow_pre_fit(problem, starts, settings, t_start, reserve_s=0.0):
+        reserves.append(reserve_s)
+        best = solve(problem, starts, settings, t_start, reserve_s)
+        if len(reserves) == 1:  # one slow iteration: 3 x 6 s > 0.85 x 20 s
+            problem.n_jac_evals = 1
+            time.sleep(pause_s)
+        return best
+
+    monkeypatch.setattr(PhysicsFitter, "_solve_starts", staticmethod(slow_pre_fit))
+    if limit_s < 100:
+        with pytest.warns(FitWarning, match=r"Not_Started_Short_Of_Time \(refine\)"):
+            fitter = _fit(small_data, prefit_samples=100, time_limit_s=limit_s)
+        assert reserves == [0.0] and not fitter.result_.success
+        start = CircuitModel().default_params()
+        assert any(fitter.result_.params()[n] != start[n] for n in DEFAULT_FREE)
+    else:
+        fitter = _fit(small_data, prefit_samples=100, time_limit_s=limit_s)
+        # same experiment in both stages: the reserve is the pre-fit's whole stage time
+        assert len(reserves) == 2 and reserves[1] >= pause_s
+        assert "Not_Started" not in fitter.result_.status
+
+
 def test_a_fit_that_never_improved_is_an_error(small_data, monkeypatch):
-    def nothing(problem, starts, settings, t_start):
+    def nothing(problem, starts, settings, t_start, reserve_s=0.0):
         return {"cost": np.inf, "z": None, "stats": None}
 
     monkeypatch.setattr(PhysicsFitter, "_solve_starts", staticmethod(nothing))

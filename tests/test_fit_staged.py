@@ -16,6 +16,7 @@ from clutchlab.physics.fit.fitter import resolve_free
 from clutchlab.physics.fit.staged import (
     StagedStart,
     free_latch_structure,
+    match_latch_snaps,
     measured_latch_indices,
     quasi_static_traces,
     staged_start,
@@ -143,3 +144,87 @@ def test_no_staged_start_with_a_user_start(zoo_small):
         warnings.simplefilter("ignore", FitWarning)
         fitter.fit(zoo_small)
     assert fitter.staged_ is None
+
+
+def _snap_currents(model, params, trace):
+    """Latch-on / latch-off nominal current (mA) of the model's own simulated snaps."""
+    y = simulate(model, params, trace).pressure_bar
+    k_on, k_off = measured_latch_indices(trace.with_signals(clutch_pressure_bar=y))
+    i = dither_period_mean(trace.get("current_cmd_mA"), dither_period_samples(trace))
+    return np.array([i[k_on], i[k_off]])
+
+
+def _measured_currents(trace):
+    k_on, k_off = measured_latch_indices(trace)
+    i = dither_period_mean(trace.get("current_cmd_mA"), dither_period_samples(trace))
+    return np.array([i[k_on], i[k_off]])
+
+
+@pytest.mark.parametrize("law", ["spring", "thresholds"])
+def test_latch_snaps_are_matched_on_a_circuit_that_is_not_ours(zoo_small, law):
+    """The threshold reading alone leaves the model's snaps tens of mA off on this plant;
+    the matching brings both within a few mA, judged by a fresh simulation."""
+    model = CircuitModel()
+    settings = FitSettings(progress=False)
+    free = resolve_free(model, settings)
+    params, info = staged_start(model, zoo_small, settings, model.default_params(), free, 30.0)
+    if law == "thresholds":
+        model, params = free_latch_structure(model, params, info)
+        free = resolve_free(model, settings)
+    slow = zoo_small[1]
+    measured = _measured_currents(slow)
+    before = np.abs(_snap_currents(model, params, slow) - measured)
+    matched = match_latch_snaps(model, params, zoo_small, free, settings, info)
+    after = np.abs(_snap_currents(model, matched, slow) - measured)
+    assert after.max() <= max(3.0, 0.3 * before.max()), (before, after)
+    rec = info.latch_match_mA
+    assert rec["simulations"] <= 7
+    # the matching simulates with the fit's 2 substeps, the check with the default 4
+    assert np.allclose([abs(rec["on_after"]), abs(rec["off_after"])], after, atol=1.0)
+    assert "latch snaps matched" in info.summary()
+    moved = {n for n in matched if matched[n] != params[n]}
+    latch = {"spring": {"latch_F0", "latch_k"}, "thresholds": {"lthr_p_on", "lthr_p_off"}}[law]
+    assert moved and moved <= latch
+
+
+def test_latch_snap_matching_recovers_a_known_latch():
+    """Data from clutchlab's own model with a stiffer, weaker latch spring: started from the
+    datasheet latch, the matching finds spring values that snap where the data do."""
+    from clutchlab.physics.stand import StandConfig, run_stand
+
+    model = CircuitModel()
+    cfg = StandConfig(
+        builtin_effects=False,
+        settings=(DitherSetting(50.0, "A"),),
+        ramps=RAMPS,
+        seed=3,
+        overrides={"latch_F0": 27.0, "latch_k": 3.0},
+    )
+    data = list(run_stand(cfg, progress=False).dataset)
+    settings = FitSettings(progress=False)
+    free = resolve_free(model, settings)
+    info = StagedStart(static_experiments=[data[1].name])  # the datasheet curve is the truth
+    matched = match_latch_snaps(model, model.default_params(), data, free, settings, info)
+    slow = data[1]
+    err = np.abs(_snap_currents(model, matched, slow) - _measured_currents(slow))
+    assert err.max() <= 2.0, (err, info.latch_match_mA)
+    assert abs(info.latch_match_mA["on_before"]) > 5.0
+
+
+def test_latch_snap_matching_leaves_a_fixed_latch_and_a_model_without_snaps(zoo_small):
+    model = CircuitModel()
+    settings = FitSettings(progress=False, free=("vfs_K_m", "reg_F0"))
+    start = model.default_params()
+    info = StagedStart()
+    assert match_latch_snaps(model, start, zoo_small, settings.free, settings, info) is start
+    assert info.latch_match_mA == {}
+    # Without a static stage nothing is matched.
+    free = resolve_free(model, FitSettings(progress=False))
+    assert match_latch_snaps(model, start, zoo_small, free, settings, info) is start
+    assert any("no static stage" in n for n in info.notes)
+    # A model that never reaches line pressure cannot be matched: kept, and said so.
+    info = StagedStart(static_experiments=[zoo_small[1].name])
+    weak = start.replace(vfs_K_m=model.default_params().spec("vfs_K_m").lower)
+    kept = match_latch_snaps(model, weak, zoo_small, free, settings, info)
+    assert kept is weak
+    assert any("does not snap" in n for n in info.notes)

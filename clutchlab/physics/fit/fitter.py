@@ -22,12 +22,24 @@ from .nlp import solve_ipopt
 from .problem import FitProblem
 from .result import FitResult, identifiability
 from .settings import DEFAULT_FREE, FitSettings
-from .staged import free_latch_structure, regulator_lag_structure, staged_start
+from .staged import (
+    free_latch_structure,
+    match_latch_snaps,
+    regulator_lag_structure,
+    staged_start,
+)
 from .stages import prefit_settings, prefit_subset, refine_settings
 
 __all__ = ["PhysicsFitter", "resolve_free"]
 
 _OK = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+#: Share of the time limit the solver stages may use; the rest is kept for the result (the
+#: Jacobian at the optimum when the solver stopped at its limit, the per-experiment errors).
+SOLVER_TIME_FRACTION = 0.8
+#: Status of a stage the fit did not start: not enough time left for one iteration of it.
+SHORT_OF_TIME = "Not_Started_Short_Of_Time"
+#: Share of the time limit the staged start's latch-snap matching may use.
+LATCH_MATCH_TIME_FRACTION = 0.1
 
 
 def resolve_free(model: CircuitModel, settings: FitSettings) -> tuple[str, ...]:
@@ -50,6 +62,12 @@ def resolve_free(model: CircuitModel, settings: FitSettings) -> tuple[str, ...]:
     if not free:
         raise FitError("no free parameters")
     return free
+
+
+def _stopped_by_time(best: dict) -> bool:
+    """The solver of this best start stopped at its wall-time limit."""
+    stats = best["stats"]
+    return stats is not None and stats["return_status"] == "Maximum_WallTime_Exceeded"
 
 
 class PhysicsFitter:
@@ -187,6 +205,15 @@ class PhysicsFitter:
             if self.staged_.regulator_lag_ms is not None and settings.free is None:
                 model, start = regulator_lag_structure(model, start, self.staged_)
                 free = resolve_free(model, settings)
+            start = match_latch_snaps(
+                model,
+                start,
+                traces,
+                free,
+                settings,
+                self.staged_,
+                LATCH_MATCH_TIME_FRACTION * settings.time_limit_s,
+            )
         history: list[float] = []
         bar = tqdm(
             total=settings.max_iter,
@@ -205,8 +232,20 @@ class PhysicsFitter:
         kept = None  # (problem, best) of the last stage that produced an iterate
         statuses: list[str] = []
         stages = self._stages(traces, settings)
+        sample_s = None  # wall time of one iteration per sample, measured on the last stage
         try:
             for stage, (stage_traces, stage_settings) in enumerate(stages):
+                n_samples = sum(len(t) for t in stage_traces)
+                # One iteration of this stage, as the previous one ran: kept in reserve, so
+                # that the solver starts no iteration it cannot finish within the limit;
+                # a stage that cannot take its first Jacobian and one step is not started.
+                reserve = 0.0 if sample_s is None else sample_s * n_samples
+                elapsed = time.perf_counter() - t_start
+                left = SOLVER_TIME_FRACTION * settings.time_limit_s - elapsed
+                if stage > 0 and left < 2.0 * reserve:
+                    statuses.append(SHORT_OF_TIME)
+                    break
+                t_stage = time.perf_counter()
                 bar.set_description(f"fit-physics ({len(stage_traces)} exp)")
                 problem = FitProblem(model, stage_traces, free, stage_settings, start)
                 problem.on_jacobian = on_jacobian
@@ -215,9 +254,15 @@ class PhysicsFitter:
                     starts += self._multistarts(problem, settings)
                 problem.start_workers(stage_traces, settings.workers)
                 try:
-                    best = self._solve_starts(problem, starts, stage_settings, t_start)
+                    best = self._solve_starts(problem, starts, stage_settings, t_start, reserve)
+                    if best["z"] is not None and _stopped_by_time(best):
+                        # The result's standard errors need the Jacobian at this iterate,
+                        # which a solver stopped mid-way has not computed: on the workers.
+                        problem.evaluate(best["z"], True)
                 finally:
                     problem.close()
+                n_iter = max(problem.n_jac_evals, 1)
+                sample_s = (time.perf_counter() - t_stage) / n_iter / n_samples
                 # No start of this stage ran when the time limit was reached before it.
                 statuses.append(
                     best["stats"]["return_status"]
@@ -300,8 +345,9 @@ class PhysicsFitter:
         return [lo + (hi - lo) * np.clip(frac[:, k], 0.02, 0.98) for k in range(n)]
 
     @staticmethod
-    def _solve_starts(problem, starts, settings, t_start):
-        """Run IPOPT from each start; keep the lowest cost."""
+    def _solve_starts(problem, starts, settings, t_start, reserve_s=0.0):
+        """Run IPOPT from each start; keep the lowest cost. The solver's wall limit leaves
+        ``reserve_s`` (s) of the fit's limit: the time of the iteration it may be in."""
         lo, hi = problem.bounds_z()
         slo, shi = problem.state_bounds()
         lbz, ubz = np.concatenate([lo, slo]), np.concatenate([hi, shi])
@@ -313,9 +359,13 @@ class PhysicsFitter:
                     "the model diverges at the start parameters on "
                     f"{[e.name for e in problem.experiments]}"
                 )
-            # The last 15 % of the limit is kept for the result (per-experiment errors,
+            # The rest of the limit is kept for the result (per-experiment errors,
             # uncertainty pass), so the whole fit stays within its limit.
-            remaining = 0.85 * settings.time_limit_s - (time.perf_counter() - t_start)
+            remaining = (
+                SOLVER_TIME_FRACTION * settings.time_limit_s
+                - (time.perf_counter() - t_start)
+                - reserve_s
+            )
             if remaining <= 0:
                 break
             try:

@@ -5,9 +5,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
+from ...budgets import FIT_BUDGET_S
 from ...errors import FitError
 
-__all__ = ["DEFAULT_FREE", "FitSettings"]
+__all__ = ["DEFAULT_FREE", "FIT_BUDGET_S", "FitSettings"]
 
 #: Parameters of the base circuit freed by default: the ones a set of current
 #: ramps excites — VFS force curve and preload (gain, threshold), regulator spring
@@ -90,8 +91,10 @@ class FitSettings:
         IPOPT convergence tolerance.
     time_limit_s : float
         Wall-clock limit of the whole fit (s): staged start, solver and result; the
-        solver stops at 85 % of it (the rest is kept for the result's per-experiment
-        errors and uncertainty pass), and the best iterate is kept when reached.
+        solver stops at 80 % of it (the rest is kept for the result's per-experiment
+        errors and uncertainty pass), starts no iteration that the previous ones say it
+        cannot finish by then, and skips a refinement that cannot take one step; the
+        best iterate is kept when a limit is reached.
     multistart : int
         Extra starts drawn (Latin hypercube) inside the bounds, besides the defaults.
     seed : int

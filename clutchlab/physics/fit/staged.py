@@ -17,7 +17,13 @@ samples and steep at them. The staged start gives it a start near the data first
    (simulated with the static stage's parameters) gives the latch-on and latch-off
    pilot pressures; set directly with ``latch_free_thresholds``, or as the spring
    preload and rate of the datasheet valve, within their bounds.
-4. **lag signature**: two time constants read off the fastest and the slowest
+4. **latch snaps matched**: the threshold reading assumes the latch switches where its
+   static force balance says; the model's latch valve moves, so it snaps a little later.
+   A few simulations of the quasi-static experiments move the two latch parameters (in
+   pilot-pressure coordinates, per-coordinate secant steps) until the model snaps at the
+   measured currents (:func:`match_latch_snaps`). This runs after the fit has chosen its
+   latch and lag structure, on the structure it will fit.
+5. **lag signature**: two time constants read off the fastest and the slowest
    training ramps — how much the regulated band widens with the pressure rate
    (``τ_band``) and how far the latch currents move with the current rate
    (``τ_latch``) — for the data and for the model at the staged start. The model's
@@ -53,6 +59,7 @@ __all__ = [
     "fastest_traces",
     "free_latch_structure",
     "lag_signature",
+    "match_latch_snaps",
     "measured_latch_indices",
     "measured_thresholds",
     "quasi_static_traces",
@@ -80,6 +87,13 @@ _LINE_DEFAULT_BAR = 17.7
 _LATCH_MARGIN_BAR = 1.0
 #: The static stage ends this long before the latch snaps (s).
 _BEFORE_SNAP_S = 0.5
+#: Simulations the latch-snap matching may spend (each: two quasi-static experiments).
+_MATCH_ROUNDS = 7
+#: Finite-difference step (bar) of the matching's first Jacobian, and its largest step.
+_MATCH_FD_BAR = 0.1
+_MATCH_STEP_BAR = 1.0
+#: Snap currents within this of the measured ones (mA, worse of latch-on and -off) end it.
+_MATCH_TOL_MA = 1.0
 
 
 @dataclass
@@ -101,6 +115,10 @@ class StagedStart:
         (keys prefixed ``data_`` / ``model_``), when measurable.
     regulator_lag_ms : float or None
         Start time constant (ms) of ``reg_pilot_lag`` when the signature asks for it.
+    latch_match_mA : dict of str to float
+        Latch-snap matching: the model's latch-on / latch-off current minus the measured
+        one (mA, median over the quasi-static experiments) before (``on_before``,
+        ``off_before``) and after (``on_after``, ``off_after``), and ``simulations``.
     latch_tie_violated : bool
         The measured thresholds do not fit the datasheet latch: with its areas and
         stroke, the spring rate they need lies outside its bounds (a latch-off far below
@@ -117,6 +135,7 @@ class StagedStart:
     lag_signature: dict[str, float] = field(default_factory=dict)
     regulator_lag_ms: float | None = None
     static_experiments: list[str] = field(default_factory=list)
+    latch_match_mA: dict[str, float] = field(default_factory=dict)
     latch_tie_violated: bool = False
     wall_s: float = 0.0
     notes: list[str] = field(default_factory=list)
@@ -129,6 +148,14 @@ class StagedStart:
         if self.thresholds_bar is not None:
             on, off = self.thresholds_bar
             parts.append(f"latch pilot thresholds {on:.2f} / {off:.2f} bar from the data")
+        if self.latch_match_mA:
+            m = self.latch_match_mA
+            parts.append(
+                "latch snaps matched to the data (model − measured, on / off: "
+                f"{m['on_before']:+.1f} / {m['off_before']:+.1f} → "
+                f"{m['on_after']:+.1f} / {m['off_after']:+.1f} mA, "
+                f"{int(m['simulations'])} simulations)"
+            )
         if self.lag_signature:
             sig = self.lag_signature
             parts.append(
@@ -344,12 +371,55 @@ def measured_thresholds(
     return float(np.median(on)), float(np.median(off))
 
 
+def _latch_law(model: CircuitModel, free) -> str | None:
+    """Which latch parameters the fit moves: ``"thresholds"`` (``latch_free_thresholds``),
+    ``"spring"`` (the datasheet valve's preload and rate) or None (neither free)."""
+    names = {p.name for p in model.parameters}
+    if "lthr_p_on" in names:
+        return "thresholds" if {"lthr_p_on", "lthr_p_off"} <= set(free) else None
+    return "spring" if {"latch_F0", "latch_k"} <= set(free) else None
+
+
+def _spring_from_thresholds(params: ParameterSet, p_on: float, p_off: float) -> tuple[float, float]:
+    """Datasheet latch preload (N) and rate (N/mm) that switch at pilot pressures ``p_on``
+    and ``p_off`` (bar) by its static force balance (areas and stroke from ``params``)."""
+    a1 = math.pi / 4.0 * (params["latch_d1"] * 1e-3) ** 2
+    a2 = math.pi / 4.0 * (params["latch_d2"] * 1e-3) ** 2
+    f0 = p_on * 1e5 * a1
+    return f0, (p_off * 1e5 * a2 - f0) / (params["latch_stroke"] * 1e-3) / 1e3
+
+
+def _thresholds_from_spring(params: ParameterSet) -> tuple[float, float]:
+    """Inverse of :func:`_spring_from_thresholds` (bar)."""
+    a1 = math.pi / 4.0 * (params["latch_d1"] * 1e-3) ** 2
+    a2 = math.pi / 4.0 * (params["latch_d2"] * 1e-3) ** 2
+    f0, k = params["latch_F0"], params["latch_k"]
+    return f0 / (1e5 * a1), (f0 + k * params["latch_stroke"]) / (1e5 * a2)
+
+
+def _thresholds_of(law: str, params: ParameterSet) -> np.ndarray:
+    """Latch-on / latch-off pilot pressures (bar) of ``params``' latch."""
+    if law == "thresholds":
+        return np.array([params["lthr_p_on"], params["lthr_p_off"]])
+    return np.array(_thresholds_from_spring(params))
+
+
+def _with_thresholds(law: str, params: ParameterSet, p_on: float, p_off: float, bounds):
+    """``params`` with the latch set to switch at ``p_on`` / ``p_off`` (bar), clipped to the
+    bounds; and the names of the parameters that needed the clip."""
+    if law == "thresholds":
+        values = {"lthr_p_on": p_on, "lthr_p_off": p_off}
+    else:
+        f0, k = _spring_from_thresholds(params, p_on, p_off)
+        values = {"latch_F0": f0, "latch_k": k}
+    kept = {n: _clip(params, n, v, bounds) for n, v in values.items()}
+    return params.replace(**kept), {n for n in values if kept[n] != values[n]}
+
+
 def _threshold_stage(model, start, traces, latch, settings, free, info):
     """Latch thresholds from the model's pilot pressure at the measured latch currents."""
-    names = {p.name for p in model.parameters}
-    free_thr = "lthr_p_on" in names and {"lthr_p_on", "lthr_p_off"} <= set(free)
-    free_spring = {"latch_F0", "latch_k"} <= set(free) and "lthr_p_on" not in names
-    if not (free_thr or free_spring):
+    law = _latch_law(model, free)
+    if law is None:
         info.notes.append("latch parameters not free: thresholds left at the start")
         return start
     found = measured_thresholds(model, start, traces, latch, settings.substeps)
@@ -358,27 +428,139 @@ def _threshold_stage(model, start, traces, latch, settings, free, info):
         return start
     p_on, p_off = found
     info.thresholds_bar = (p_on, p_off)
-    if free_thr:
-        values = {
-            "lthr_p_on": _clip(start, "lthr_p_on", p_on, settings.bounds),
-            "lthr_p_off": _clip(start, "lthr_p_off", p_off, settings.bounds),
-        }
-    else:
-        a1 = math.pi / 4.0 * (start["latch_d1"] * 1e-3) ** 2
-        a2 = math.pi / 4.0 * (start["latch_d2"] * 1e-3) ** 2
-        f0 = p_on * 1e5 * a1
-        k = (p_off * 1e5 * a2 - f0) / (start["latch_stroke"] * 1e-3) / 1e3
-        values = {
-            "latch_F0": _clip(start, "latch_F0", f0, settings.bounds),
-            "latch_k": _clip(start, "latch_k", k, settings.bounds),
-        }
-        if values["latch_k"] != k:
-            info.latch_tie_violated = True
+    params, clipped = _with_thresholds(law, start, p_on, p_off, settings.bounds)
+    if "latch_k" in clipped:
+        info.latch_tie_violated = True
+        k = _spring_from_thresholds(start, p_on, p_off)[1]
+        info.notes.append(
+            f"the datasheet latch cannot release at {p_off:.2f} bar with latch-on at "
+            f"{p_on:.2f} bar (its area ratio ties them; latch_k would be {k:.3g} N/mm)"
+        )
+    return params
+
+
+def _snap_offsets(model, params, traces, latch, substeps) -> np.ndarray | None:
+    """The model's latch-on and latch-off current minus the measured one (mA), median over
+    ``traces``; None when the model does not snap on both branches of every trace."""
+    rows = []
+    sim = SimulationSettings(substeps=substeps)
+    for tr in traces:
+        y = simulate(model, params, tr, sim).outputs["clutch_pressure_bar"]
+        own = measured_latch_indices(tr.with_signals(clutch_pressure_bar=y))
+        if own is None:
+            return None
+        i, k = _period_mean(tr, _current(tr)), latch[tr.name]
+        rows.append([i[own[0]] - i[k[0]], i[own[1]] - i[k[1]]])
+    return np.median(np.asarray(rows), axis=0)
+
+
+def match_latch_snaps(
+    model: CircuitModel,
+    params: ParameterSet,
+    traces: list[Trace],
+    free: tuple[str, ...],
+    settings: FitSettings,
+    info: StagedStart,
+    budget_s: float = math.inf,
+) -> ParameterSet:
+    """Move the latch parameters until the model snaps at the measured latch currents.
+
+    On the (at most two) quasi-static training experiments with a measured snap, the model's
+    latch-on and latch-off currents are compared with the measured ones. The two latch
+    parameters, in pilot-pressure coordinates (the thresholds; the datasheet latch through
+    its force balance), take Newton steps on that 2 × 2 system: a finite-difference Jacobian,
+    then Broyden updates, steps of at most ``_MATCH_STEP_BAR``, for at most
+    ``_MATCH_ROUNDS`` simulations in all or until both snaps are within ``_MATCH_TOL_MA``.
+    The best point is kept; the start when nothing improves it or when the model does not
+    snap on both branches. Nothing is matched without a static stage (``info``) — the
+    pilot pressure is then not known well enough — and a step that would put a latch
+    parameter on its bound ends the matching. No new round starts after ``budget_s``.
+
+    Parameters
+    ----------
+    model : CircuitModel
+        Structure the fit will use (after its latch and lag choices).
+    params : ParameterSet
+        Start parameters (after the staged start).
+    traces : list of Trace
+        Training experiments (the quasi-static ones are used).
+    free : tuple of str
+        The fit's free parameters; the latch is matched only when its two are free.
+    settings : FitSettings
+        Bounds and integrator substeps.
+    info : StagedStart
+        Record of the staged start; ``values``, ``latch_match_mA`` and ``notes`` are
+        filled in.
+    budget_s : float
+        Wall time (s) after which no further simulation round starts.
+
+    Returns
+    -------
+    ParameterSet
+        ``params`` with the matched latch parameters.
+    """
+    law = _latch_law(model, free)
+    if law is None:
+        return params
+    if not info.static_experiments:
+        # Without a fitted static characteristic (no quasi-static rising branch) the latch
+        # would absorb the characteristic's error and the ramp's lag.
+        info.notes.append("no static stage: latch snaps not matched")
+        return params
+    qs = quasi_static_traces(traces)
+    latch = {tr.name: k for tr in qs if (k := measured_latch_indices(tr)) is not None}
+    used = [tr for tr in qs if tr.name in latch][:2]
+    if not used:
+        return params
+    n_sim, t0 = 0, time.perf_counter()
+
+    def offsets(p):
+        nonlocal n_sim
+        n_sim += 1
+        return _snap_offsets(model, p, used, latch, settings.substeps)
+
+    def at(x):
+        p, clipped = _with_thresholds(law, params, *x, settings.bounds)
+        return p, _thresholds_of(law, p), bool(clipped)
+
+    x = _thresholds_of(law, params)
+    f = offsets(params)
+    if f is None:
+        info.notes.append("the start model does not snap on both branches: latch not matched")
+        return params
+    first, best = f, (float(np.max(np.abs(f))), params, f)
+    jac = np.zeros((2, 2))
+    for j in range(2):  # finite differences
+        p_j, x_j, clipped = at(x + _MATCH_FD_BAR * np.eye(2)[j])
+        f_j = None if clipped else offsets(p_j)
+        if f_j is None:
             info.notes.append(
-                f"the datasheet latch cannot release at {p_off:.2f} bar with latch-on at "
-                f"{p_on:.2f} bar (its area ratio ties them; latch_k would be {k:.3g} N/mm)"
+                "latch-snap matching: no snap at a perturbed threshold, or a bound; not matched"
             )
-    return start.replace(**values)
+            return params
+        jac[:, j] = (f_j - f) / (x_j[j] - x[j])
+    while best[0] > _MATCH_TOL_MA and n_sim < _MATCH_ROUNDS and time.perf_counter() - t0 < budget_s:
+        dx = np.linalg.lstsq(jac, -f, rcond=None)[0]
+        dx *= min(1.0, _MATCH_STEP_BAR / max(float(np.max(np.abs(dx))), 1e-12))
+        p_new, x_new, clipped = at(x + dx)
+        if clipped:  # a latch on its bounds would be absorbing another error
+            break
+        f_new = offsets(p_new)
+        if f_new is None or float(np.max(np.abs(f_new))) >= best[0]:
+            break
+        dx = x_new - x
+        jac += np.outer((f_new - f) - jac @ dx, dx) / max(float(dx @ dx), 1e-12)
+        x, f = x_new, f_new
+        best = (float(np.max(np.abs(f))), p_new, f)
+    info.values.update({n: best[1][n] for n in free if best[1][n] != params[n]})
+    info.latch_match_mA = {
+        "on_before": float(first[0]),
+        "off_before": float(first[1]),
+        "on_after": float(best[2][0]),
+        "off_after": float(best[2][1]),
+        "simulations": float(n_sim),
+    }
+    return best[1]
 
 
 #: The data's τ_band / τ_latch must exceed the model's by this factor to add the lag.
