@@ -7,6 +7,8 @@ import shlex
 import sys
 from pathlib import Path
 
+from .budgets import FIT_BUDGET_S
+
 __all__ = ["command_line", "register", "run_demo_command"]
 
 
@@ -128,8 +130,9 @@ def register(sub) -> None:
     p.add_argument(
         "--fit-time-limit",
         type=float,
-        default=120.0,
-        help="physics fit wall limit, s (120, the fit budget; the best iterate by then is the "
+        default=FIT_BUDGET_S,
+        help=f"physics fit wall limit, s ({FIT_BUDGET_S:g}, the fit budget; the best iterate by "
+        "then is the "
         "model, marked not converged)",
     )
     p.add_argument("--fit-max-iter", type=int, default=None, help="physics fit iteration limit")

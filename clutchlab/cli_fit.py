@@ -6,6 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from .budgets import FIT_BUDGET_S
+
 __all__ = ["register"]
 
 
@@ -89,8 +91,9 @@ def register(sub) -> None:
     p.add_argument(
         "--time-limit",
         type=float,
-        default=120.0,
-        help="wall limit of the whole fit (s; default 120, the fit budget); the best iterate "
+        default=FIT_BUDGET_S,
+        help=f"wall limit of the whole fit (s; default {FIT_BUDGET_S:g}, the fit budget); the "
+        "best iterate "
         "found by then is the model",
     )
     p.add_argument(

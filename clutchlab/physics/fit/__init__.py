@@ -9,7 +9,7 @@ from .sensitivity import (
     sensitivity_chunk,
     simulate_sensitivities,
 )
-from .settings import DEFAULT_FREE, FitSettings
+from .settings import DEFAULT_FREE, FIT_BUDGET_S, FitSettings
 from .stages import prefit_settings, prefit_subset, refine_settings
 from .structure import (
     STRUCTURES,
@@ -21,6 +21,7 @@ from .structure import (
 
 __all__ = [
     "DEFAULT_FREE",
+    "FIT_BUDGET_S",
     "STRUCTURES",
     "CandidateScore",
     "FitProblem",
