@@ -237,12 +237,13 @@ class PhysicsFitter:
             for stage, (stage_traces, stage_settings) in enumerate(stages):
                 n_samples = sum(len(t) for t in stage_traces)
                 # One iteration of this stage, as the previous one ran: kept in reserve, so
-                # that the solver starts no iteration it cannot finish within the limit;
-                # a stage that cannot take its first Jacobian and one step is not started.
+                # that the solver starts no iteration it cannot finish within the limit. A
+                # stage that cannot even take its first Jacobian is not started; one that
+                # can is, as that Jacobian also gives the result's standard errors.
                 reserve = 0.0 if sample_s is None else sample_s * n_samples
                 elapsed = time.perf_counter() - t_start
                 left = SOLVER_TIME_FRACTION * settings.time_limit_s - elapsed
-                if stage > 0 and left < 2.0 * reserve:
+                if stage > 0 and left < reserve:
                     statuses.append(SHORT_OF_TIME)
                     break
                 t_stage = time.perf_counter()

@@ -93,8 +93,8 @@ class FitSettings:
         Wall-clock limit of the whole fit (s): staged start, solver and result; the
         solver stops at 80 % of it (the rest is kept for the result's per-experiment
         errors and uncertainty pass), starts no iteration that the previous ones say it
-        cannot finish by then, and skips a refinement that cannot take one step; the
-        best iterate is kept when a limit is reached.
+        cannot finish by then, and skips a refinement that cannot take its first
+        Jacobian; the best iterate is kept when a limit is reached.
     multistart : int
         Extra starts drawn (Latin hypercube) inside the bounds, besides the defaults.
     seed : int
