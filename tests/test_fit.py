@@ -192,10 +192,10 @@ def test_time_out_before_the_refinement_keeps_the_pre_fit(small_data, monkeypatc
     solve = PhysicsFitter._solve_starts
     calls = []
 
-    def timed_out_refinement(problem, starts, settings, t_start, reserve_s=0.0):
+    def timed_out_refinement(problem, starts, settings, t_start):
         calls.append(len(problem.experiments))
         if len(calls) == 1:
-            return solve(problem, starts, settings, t_start, reserve_s)
+            return solve(problem, starts, settings, t_start)
         return {"cost": np.inf, "z": None, "stats": None}  # what a spent time limit returns
 
     monkeypatch.setattr(PhysicsFitter, "_solve_starts", staticmethod(timed_out_refinement))
@@ -210,42 +210,56 @@ def test_time_out_before_the_refinement_keeps_the_pre_fit(small_data, monkeypatc
         _fit(small_data, prefit_samples=100, strict=True)
 
 
-@pytest.mark.parametrize("limit_s", [20.0, 1000.0])
-def test_no_iteration_is_started_that_cannot_finish_within_the_limit(
-    small_data, monkeypatch, limit_s
-):
-    """The pre-fit's time per iteration and sample, scaled to the refinement's samples, is
-    kept in reserve: the refinement's solver may not start an iteration in that reserve,
-    and the refinement is not started at all when not even its first Jacobian would fit
-    (the pre-fit's optimum is then the model, marked not converged)."""
+def test_a_refinement_whose_first_jacobian_cannot_fit_is_not_started(small_data, monkeypatch):
+    """The pre-fit's time per iteration and sample, scaled to the refinement's samples,
+    says whether the refinement's first Jacobian fits in what is left of the solver's
+    share of the limit; when it does not, the refinement is not started and the pre-fit's
+    optimum is the model, marked not converged."""
     solve = PhysicsFitter._solve_starts
-    reserves = []
-    pause_s = 8.0
+    calls = []
 
-    def slow_pre_fit(problem, starts, settings, t_start, reserve_s=0.0):
-        reserves.append(reserve_s)
-        best = solve(problem, starts, settings, t_start, reserve_s)
-        if len(reserves) == 1:  # one slow iteration: 2 x 8 s = 0.8 x 20 s
+    def slow_pre_fit(problem, starts, settings, t_start):
+        calls.append(len(problem.experiments))
+        best = solve(problem, starts, settings, t_start)
+        if len(calls) == 1:  # one slow iteration: 8 s of the 16 s the solver may use
             problem.n_jac_evals = 1
-            time.sleep(pause_s)
+            time.sleep(8.0)
         return best
 
     monkeypatch.setattr(PhysicsFitter, "_solve_starts", staticmethod(slow_pre_fit))
-    if limit_s < 100:
-        with pytest.warns(FitWarning, match=r"Not_Started_Short_Of_Time \(refine\)"):
-            fitter = _fit(small_data, prefit_samples=100, time_limit_s=limit_s)
-        assert reserves == [0.0] and not fitter.result_.success
-        start = CircuitModel().default_params()
-        assert any(fitter.result_.params()[n] != start[n] for n in DEFAULT_FREE)
-    else:
-        fitter = _fit(small_data, prefit_samples=100, time_limit_s=limit_s)
-        # same experiment in both stages: the reserve is the pre-fit's whole stage time
-        assert len(reserves) == 2 and reserves[1] >= pause_s
-        assert "Not_Started" not in fitter.result_.status
+    with pytest.warns(FitWarning, match=r"Not_Started_Short_Of_Time \(refine\)"):
+        fitter = _fit(small_data, prefit_samples=100, time_limit_s=20.0)
+    assert calls == [1] and not fitter.result_.success
+    start = CircuitModel().default_params()
+    assert any(fitter.result_.params()[n] != start[n] for n in DEFAULT_FREE)
+
+
+def test_the_solver_starts_no_iteration_it_cannot_finish():
+    """Each iteration is predicted to take as long as the last one (the first, as long as
+    the initialization): the solver stops when the next one would end after the deadline."""
+    from clutchlab.physics.fit.nlp import IterationDeadline
+
+    now = [0.0]
+    d = IterationDeadline(10.0, clock=lambda: now[0])
+    for t, stop in [(2.0, False), (4.0, False), (6.0, False), (7.0, False), (9.0, True)]:
+        now[0] = t
+        assert d.should_stop() is stop, t
+    assert d.stopped
+
+
+def test_a_fit_stopped_by_its_deadline_reports_the_wall_time_limit(small_data):
+    """Stopped by the iteration deadline, the fit reports IPOPT's wall-time status and ends
+    within its limit."""
+    limit = {"time_limit_s": 4.0, "max_iter": 500, "tol": 1e-14, "staged_start": False}
+    t0 = time.perf_counter()
+    with pytest.warns(FitWarning, match=r"Maximum_WallTime_Exceeded"):
+        fitter = _fit(small_data, ipopt_options={"acceptable_iter": 0}, **limit)
+    assert time.perf_counter() - t0 < limit["time_limit_s"] + 2.0
+    assert fitter.result_.iterations >= 1
 
 
 def test_a_fit_that_never_improved_is_an_error(small_data, monkeypatch):
-    def nothing(problem, starts, settings, t_start, reserve_s=0.0):
+    def nothing(problem, starts, settings, t_start):
         return {"cost": np.inf, "z": None, "stats": None}
 
     monkeypatch.setattr(PhysicsFitter, "_solve_starts", staticmethod(nothing))

@@ -236,14 +236,14 @@ class PhysicsFitter:
         try:
             for stage, (stage_traces, stage_settings) in enumerate(stages):
                 n_samples = sum(len(t) for t in stage_traces)
-                # One iteration of this stage, as the previous one ran: kept in reserve, so
-                # that the solver starts no iteration it cannot finish within the limit. A
-                # stage that cannot even take its first Jacobian is not started; one that
-                # can is, as that Jacobian also gives the result's standard errors.
-                reserve = 0.0 if sample_s is None else sample_s * n_samples
+                # A stage that cannot even take its first Jacobian (one iteration of the
+                # previous stage per sample, scaled to this one) is not started; one that
+                # can is, as that Jacobian also gives the result's standard errors. Within
+                # a stage the solver starts no iteration it cannot finish (nlp.py).
+                first = 0.0 if sample_s is None else sample_s * n_samples
                 elapsed = time.perf_counter() - t_start
                 left = SOLVER_TIME_FRACTION * settings.time_limit_s - elapsed
-                if stage > 0 and left < reserve:
+                if stage > 0 and left < first:
                     statuses.append(SHORT_OF_TIME)
                     break
                 t_stage = time.perf_counter()
@@ -255,7 +255,7 @@ class PhysicsFitter:
                     starts += self._multistarts(problem, settings)
                 problem.start_workers(stage_traces, settings.workers)
                 try:
-                    best = self._solve_starts(problem, starts, stage_settings, t_start, reserve)
+                    best = self._solve_starts(problem, starts, stage_settings, t_start)
                     if best["z"] is not None and _stopped_by_time(best):
                         # The result's standard errors need the Jacobian at this iterate,
                         # which a solver stopped mid-way has not computed: on the workers.
@@ -346,9 +346,8 @@ class PhysicsFitter:
         return [lo + (hi - lo) * np.clip(frac[:, k], 0.02, 0.98) for k in range(n)]
 
     @staticmethod
-    def _solve_starts(problem, starts, settings, t_start, reserve_s=0.0):
-        """Run IPOPT from each start; keep the lowest cost. The solver's wall limit leaves
-        ``reserve_s`` (s) of the fit's limit: the time of the iteration it may be in."""
+    def _solve_starts(problem, starts, settings, t_start):
+        """Run IPOPT from each start; keep the lowest cost."""
         lo, hi = problem.bounds_z()
         slo, shi = problem.state_bounds()
         lbz, ubz = np.concatenate([lo, slo]), np.concatenate([hi, shi])
@@ -362,11 +361,8 @@ class PhysicsFitter:
                 )
             # The rest of the limit is kept for the result (per-experiment errors,
             # uncertainty pass), so the whole fit stays within its limit.
-            remaining = (
-                SOLVER_TIME_FRACTION * settings.time_limit_s
-                - (time.perf_counter() - t_start)
-                - reserve_s
-            )
+            elapsed = time.perf_counter() - t_start
+            remaining = SOLVER_TIME_FRACTION * settings.time_limit_s - elapsed
             if remaining <= 0:
                 break
             try:
@@ -382,7 +378,9 @@ class PhysicsFitter:
                 )
             except RuntimeError as exc:  # a callback raised: keep what we have
                 z, stats = z0, {"return_status": f"error: {exc}", "iter_count": 0, "success": False}
-            z = np.clip(z, lbz, ubz)
+            # no iteration: the start itself (whose Jacobian the solver has computed), not
+            # the start after IPOPT's push off the bounds
+            z = np.clip(z0 if stats["iter_count"] == 0 else z, lbz, ubz)
             cost = problem.cost(z)
             if cost < best["cost"]:
                 best = {"cost": cost, "z": z, "stats": stats}

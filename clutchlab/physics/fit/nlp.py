@@ -8,13 +8,18 @@ dropped, as in constrained Gauss–Newton for multiple shooting).
 
 from __future__ import annotations
 
+import time
+
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
 from .problem import FitProblem
 
-__all__ = ["solve_ipopt"]
+__all__ = ["IterationDeadline", "solve_ipopt"]
+
+#: IPOPT's status when :class:`IterationDeadline` stopped it; reported as the wall-time limit.
+_USER_STOP = "User_Requested_Stop"
 
 
 def _sparsity(m: sp.csc_matrix) -> ca.Sparsity:
@@ -91,6 +96,56 @@ class _Jac(ca.Callback):
         return [_dm(m, self.pattern)]
 
 
+class IterationDeadline:
+    """Stop the solver before an iteration it cannot finish by ``deadline``.
+
+    Called at the end of every iteration (the first call ends the initialization): the
+    next iteration is predicted to take as long as the last one, and the solver stops
+    when it would end after ``deadline`` (a :func:`time.perf_counter` time, s).
+    """
+
+    def __init__(self, deadline: float, clock=time.perf_counter):
+        self.deadline, self.clock = deadline, clock
+        self.last = clock()
+        self.stopped = False
+
+    def should_stop(self) -> bool:
+        """True when the next iteration, as long as the last, would end after the deadline."""
+        now = self.clock()
+        step, self.last = now - self.last, now
+        self.stopped = now + step > self.deadline
+        return self.stopped
+
+
+class _StopCallback(ca.Callback):
+    """IPOPT's iteration callback around an :class:`IterationDeadline` (1 = stop)."""
+
+    def __init__(self, n_x: int, n_g: int, deadline: IterationDeadline):
+        ca.Callback.__init__(self)
+        self.n_x, self.n_g, self.deadline = n_x, n_g, deadline
+        self.construct("iteration_deadline", {})
+
+    def get_n_in(self):
+        return ca.nlpsol_n_out()
+
+    def get_n_out(self):
+        return 1
+
+    def get_name_in(self, i):
+        return ca.nlpsol_out(i)
+
+    def get_name_out(self, i):
+        return "ret"
+
+    def get_sparsity_in(self, i):
+        n = {"f": 1, "x": self.n_x, "lam_x": self.n_x, "g": self.n_g, "lam_g": self.n_g}
+        k = n.get(ca.nlpsol_out(i))
+        return ca.Sparsity.dense(k) if k is not None else ca.Sparsity(0, 0)
+
+    def eval(self, arg):
+        return [1 if self.deadline.should_stop() else 0]
+
+
 def solve_ipopt(
     problem: FitProblem,
     z0: np.ndarray,
@@ -103,6 +158,9 @@ def solve_ipopt(
     reg: float = 1e-6,
 ):
     """Solve; return ``(z, stats)`` where stats has IPOPT's return status and iterations.
+
+    ``time_limit_s`` is IPOPT's wall limit, and no iteration is started that would end
+    after it (:class:`IterationDeadline`; reported as ``Maximum_WallTime_Exceeded``).
 
     ``reg`` (bar² per unit of z²) is a small Levenberg damping added to the Gauss–Newton
     Hessian so that directions the residuals do not see (the fast states of a
@@ -136,8 +194,12 @@ def solve_ipopt(
         ["x", "p", "lam_f", "lam_g"],
         ["triu_hess_gamma_x_x"],
     )
+    deadline = IterationDeadline(time.perf_counter() + time_limit_s)
+    stop = _StopCallback(problem.n_z, problem.n_g, deadline)
+    keep.append(stop)
     opts = {
         "hess_lag": hess,
+        "iteration_callback": stop,
         "print_time": False,
         "ipopt": {
             "max_iter": max_iter,
@@ -158,8 +220,11 @@ def solve_ipopt(
         args |= {"lbg": 0.0, "ubg": 0.0}
     sol = solver(**args)
     stats = solver.stats()
+    status = stats.get("return_status", "?")
+    if status == _USER_STOP and deadline.stopped:
+        status = "Maximum_WallTime_Exceeded"
     return np.asarray(sol["x"]).ravel(), {
-        "return_status": stats.get("return_status", "?"),
+        "return_status": status,
         "iter_count": int(stats.get("iter_count", -1)),
         "success": bool(stats.get("success", False)),
     }
