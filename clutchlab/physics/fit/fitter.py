@@ -35,7 +35,7 @@ __all__ = ["PhysicsFitter", "resolve_free"]
 _OK = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 #: Share of the time limit the solver stages may use; the rest is kept for the result (the
 #: Jacobian at the optimum when the solver stopped at its limit, the per-experiment errors).
-SOLVER_TIME_FRACTION = 0.8
+SOLVER_TIME_FRACTION = 0.85
 #: Status of a stage the fit did not start: not enough time left for one iteration of it.
 SHORT_OF_TIME = "Not_Started_Short_Of_Time"
 #: Share of the time limit the staged start's latch-snap matching may use.
