@@ -149,7 +149,12 @@ def pilot_lag_stand(tmp_path_factory):
 
 
 def test_a_library_lag_is_not_claimed_for_a_regulator_pilot_lag(pilot_lag_stand):
-    fit = FitSettings(progress=False, max_iter=30, workers=1)  # the default free parameters
+    # The default free parameters, from the datasheet values: this test is about the
+    # alternatives rule, which needs a candidate that qualifies. From the staged start
+    # (whose latch snaps are matched to the data) the base fit leaves too little of the
+    # pilot lag for any candidate to be significant (measured: sensor_lag p = 0.50), and
+    # nothing is claimed for that simpler reason.
+    fit = FitSettings(progress=False, max_iter=30, workers=1, staged_start=False)
     settings = DiscoverySettings(
         fit=fit,
         progress=False,
