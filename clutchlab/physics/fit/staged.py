@@ -380,19 +380,27 @@ def _latch_law(model: CircuitModel, free) -> str | None:
     return "spring" if {"latch_F0", "latch_k"} <= set(free) else None
 
 
+def _latch_areas(params: ParameterSet) -> tuple[float, float]:
+    """The datasheet latch's pilot (latch-on) and differential (latch-off) areas (m²)."""
+    return tuple(math.pi / 4.0 * (params[d] * 1e-3) ** 2 for d in ("latch_d1", "latch_d2"))
+
+
+def _measured_latches(traces: list[Trace]) -> dict[str, tuple[int, int]]:
+    """Experiment name -> measured (latch-on, latch-off) sample indices, where both exist."""
+    return {tr.name: k for tr in traces if (k := measured_latch_indices(tr)) is not None}
+
+
 def _spring_from_thresholds(params: ParameterSet, p_on: float, p_off: float) -> tuple[float, float]:
     """Datasheet latch preload (N) and rate (N/mm) that switch at pilot pressures ``p_on``
     and ``p_off`` (bar) by its static force balance (areas and stroke from ``params``)."""
-    a1 = math.pi / 4.0 * (params["latch_d1"] * 1e-3) ** 2
-    a2 = math.pi / 4.0 * (params["latch_d2"] * 1e-3) ** 2
+    a1, a2 = _latch_areas(params)
     f0 = p_on * 1e5 * a1
     return f0, (p_off * 1e5 * a2 - f0) / (params["latch_stroke"] * 1e-3) / 1e3
 
 
 def _thresholds_from_spring(params: ParameterSet) -> tuple[float, float]:
     """Inverse of :func:`_spring_from_thresholds` (bar)."""
-    a1 = math.pi / 4.0 * (params["latch_d1"] * 1e-3) ** 2
-    a2 = math.pi / 4.0 * (params["latch_d2"] * 1e-3) ** 2
+    a1, a2 = _latch_areas(params)
     f0, k = params["latch_F0"], params["latch_k"]
     return f0 / (1e5 * a1), (f0 + k * params["latch_stroke"]) / (1e5 * a2)
 
@@ -508,7 +516,7 @@ def match_latch_snaps(
         info.notes.append("no static stage: latch snaps not matched")
         return params
     qs = quasi_static_traces(traces)
-    latch = {tr.name: k for tr in qs if (k := measured_latch_indices(tr)) is not None}
+    latch = _measured_latches(qs)
     used = [tr for tr in qs if tr.name in latch][:2]
     if not used:
         return params
@@ -686,12 +694,10 @@ def staged_start(
     t0 = time.perf_counter()
     info = StagedStart()
     qs = quasi_static_traces(traces)
-    latch = {}
+    latch = _measured_latches(qs)
     for tr in qs:
-        k = measured_latch_indices(tr)
-        if k is not None:
-            latch[tr.name] = k
-            i = _period_mean(tr, _current(tr))
+        if tr.name in latch:
+            k, i = latch[tr.name], _period_mean(tr, _current(tr))
             info.latch_currents_mA[tr.name] = (float(i[k[0]]), float(i[k[1]]))
     params = _static_stage(model, start, qs, latch, settings, free, budget_s, info)
     params = _threshold_stage(model, params, qs[:3], latch, settings, free, info)
