@@ -91,7 +91,7 @@ class FitSettings:
         IPOPT convergence tolerance.
     time_limit_s : float
         Wall-clock limit of the whole fit (s): staged start, solver and result; the
-        solver stops at 85 % of it (the rest is kept for the result's per-experiment
+        solver stops at 88 % of it (the rest is kept for the result's per-experiment
         errors and uncertainty pass), starts no iteration that the previous ones say it
         cannot finish by then, and skips a refinement that cannot take its first
         Jacobian; the best iterate is kept when a limit is reached.
