@@ -277,6 +277,10 @@ class PhysicsFitter:
         z_par = None
         kept = None  # (problem, best) of the last stage that produced an iterate
         statuses: list[str] = []
+        # per stage that produced an iterate: its cost at its own start (its first
+        # Jacobian) and at its best; stages fit different experiments, so costs are
+        # compared within a stage only
+        stage_costs: list[tuple[float, float]] = []
         stages = self._stages(traces, settings)
         sample_s = None  # wall time of one iteration per sample, measured on the last stage
         try:
@@ -293,6 +297,7 @@ class PhysicsFitter:
                     statuses.append(SHORT_OF_TIME)
                     break
                 t_stage = time.perf_counter()
+                h0 = len(history)
                 bar.set_description(f"fit-physics ({len(stage_traces)} exp)")
                 problem = FitProblem(model, stage_traces, free, stage_settings, start)
                 problem.on_jacobian = on_jacobian
@@ -324,6 +329,9 @@ class PhysicsFitter:
                 if best["z"] is not None:
                     z_par = best["z"][: problem.n_par]
                     kept = (problem, best)
+                    stage_costs.append(
+                        (history[h0] if len(history) > h0 else math.inf, best["cost"])
+                    )
                 elif kept is not None:  # keep the previous stage's iterate, not the start
                     problem, best = kept
                 if len(stages) > 1 and stage == 0 and statuses and statuses[0] not in _OK:
@@ -351,8 +359,10 @@ class PhysicsFitter:
         result.success = converged
         if not converged:
             status = result.status if statuses else "no start completed"
-            start_cost = history[0] if history else math.inf
-            improved = best["z"] is not None and best["cost"] < start_cost
+            # improved on its start: some stage ended below where it started (each stage
+            # starts from the previous one's best)
+            improved = best["z"] is not None and any(b < a for a, b in stage_costs)
+            start_cost = stage_costs[-1][0] if stage_costs else math.inf
             wall = time.perf_counter() - t_start
             if settings.strict or not improved:
                 why = "" if improved else " and did not improve on its start"
@@ -364,8 +374,8 @@ class PhysicsFitter:
                 raise err
             warnings.warn(
                 f"the fit stopped at a limit before converging ({status}) after {wall:.1f} s: "
-                f"its best iterate (cost {best['cost']:.6g}, start {start_cost:.6g}) is the "
-                "model, marked not converged",
+                f"its best iterate (cost {best['cost']:.6g}, {start_cost:.6g} at the start of "
+                "its stage) is the model, marked not converged",
                 FitWarning,
                 stacklevel=2,
             )
