@@ -18,7 +18,7 @@ from ..model import CircuitModel
 from ..parameters import ParameterSet
 from ..settings import SimulationSettings
 from ..simulate import simulate
-from .nlp import PREDICTED_CONVERGED, solve_ipopt
+from .nlp import solve_ipopt
 from .problem import FitProblem
 from .result import FitResult, identifiability
 from .settings import DEFAULT_FREE, FitSettings
@@ -32,7 +32,7 @@ from .stages import prefit_settings, prefit_subset, refine_settings
 
 __all__ = ["PhysicsFitter", "resolve_free"]
 
-_OK = ("Solve_Succeeded", "Solved_To_Acceptable_Level", PREDICTED_CONVERGED)
+_OK = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 #: Share of the time limit the solver stages may use; the rest is kept for the result (the
 #: Jacobian at the optimum when the solver stopped at its limit, the per-experiment errors:
 #: ~3 s on two processes for the default training set) and for the prediction error of the
@@ -306,12 +306,7 @@ class PhysicsFitter:
                     starts += self._multistarts(problem, settings)
                 problem.start_workers(stage_traces, settings.workers)
                 try:
-                    # the pre-fit only starts the refinement: it stops once the
-                    # Gauss–Newton model predicts little more to gain on its subset
-                    stop_tol = (
-                        settings.prefit_obj_change_tol if stage == 0 and len(stages) > 1 else None
-                    )
-                    best = self._solve_starts(problem, starts, stage_settings, t_start, stop_tol)
+                    best = self._solve_starts(problem, starts, stage_settings, t_start)
                     if best["z"] is not None and _stopped_by_time(best):
                         # The result's standard errors need the Jacobian at this iterate,
                         # which a solver stopped mid-way has not computed: on the workers.
@@ -407,9 +402,8 @@ class PhysicsFitter:
         return [lo + (hi - lo) * np.clip(frac[:, k], 0.02, 0.98) for k in range(n)]
 
     @staticmethod
-    def _solve_starts(problem, starts, settings, t_start, predicted_decrease_tol=None):
-        """Run IPOPT from each start; keep the lowest cost (``predicted_decrease_tol``: see
-        :func:`~clutchlab.physics.fit.nlp.solve_ipopt`)."""
+    def _solve_starts(problem, starts, settings, t_start):
+        """Run IPOPT from each start; keep the lowest cost."""
         lo, hi = problem.bounds_z()
         slo, shi = problem.state_bounds()
         lbz, ubz = np.concatenate([lo, slo]), np.concatenate([hi, shi])
@@ -437,7 +431,6 @@ class PhysicsFitter:
                     settings.tol,
                     remaining,
                     settings.ipopt_options,
-                    predicted_decrease_tol=predicted_decrease_tol,
                 )
             except RuntimeError as exc:  # a callback raised: keep what we have
                 z, stats = z0, {"return_status": f"error: {exc}", "iter_count": 0, "success": False}

@@ -16,13 +16,10 @@ import scipy.sparse as sp
 
 from .problem import FitProblem
 
-__all__ = ["PREDICTED_CONVERGED", "IterationDeadline", "PredictedDecrease", "solve_ipopt"]
+__all__ = ["IterationDeadline", "solve_ipopt"]
 
-#: IPOPT's status when an iteration callback stopped it (:class:`IterationDeadline`: reported
-#: as the wall-time limit; :class:`PredictedDecrease`: as :data:`PREDICTED_CONVERGED`).
+#: IPOPT's status when :class:`IterationDeadline` stopped it; reported as the wall-time limit.
 _USER_STOP = "User_Requested_Stop"
-#: Status of a solve stopped by :class:`PredictedDecrease`: converged to an acceptable level.
-PREDICTED_CONVERGED = "Acceptable_Predicted_Decrease"
 
 
 def _sparsity(m: sp.csc_matrix) -> ca.Sparsity:
@@ -120,93 +117,12 @@ class IterationDeadline:
         return self.stopped
 
 
-class PredictedDecrease:
-    """Stop once the Gauss–Newton model predicts little more to gain.
-
-    At each iterate whose residual Jacobian the solver has computed already (nothing is
-    evaluated for this rule), the Gauss–Newton step is computed with the parameters it
-    would push through a bound held at that bound, and the cost decrease the model
-    predicts for it is compared with the cost. The solver stops when that share stays
-    below ``tol`` on ``successive`` iterates in a row. Unlike IPOPT's acceptable level,
-    this does not wait for the (scaled) gradient to vanish along directions in which the
-    cost barely moves.
-
-    Parameters
-    ----------
-    problem : FitProblem
-        The problem (its evaluation cache holds the Jacobians).
-    lbz, ubz : ndarray
-        Bounds of ``z``.
-    tol : float
-        Predicted decrease as a fraction of the cost (½‖r‖², bar²).
-    successive : int
-        Iterates in a row below ``tol``.
-    reg : float
-        Levenberg damping of the model's Hessian, as in :func:`solve_ipopt`.
-    """
-
-    def __init__(self, problem, lbz, ubz, tol: float, successive: int = 2, reg: float = 1e-6):
-        self.problem, self.lbz, self.ubz = problem, np.asarray(lbz), np.asarray(ubz)
-        self.tol, self.successive, self.reg = float(tol), int(successive), float(reg)
-        self.shares: list[float] = []  # predicted decrease / cost, per checked iterate
-        self.count = 0
-        self.stopped = False
-
-    def share(self, z: np.ndarray) -> float | None:
-        """Predicted decrease / cost at ``z``; None when its Jacobian is not cached."""
-        hit = self.problem.cached(z)
-        if hit is None:
-            return None
-        r, jac = hit["r"], hit["J"].toarray()
-        cost = 0.5 * float(r @ r)
-        if cost <= 0:
-            return 0.0
-        g = jac.T @ r
-        h = jac.T @ jac + self.reg * np.eye(len(z))
-        # Gauss–Newton step with the parameters it would push through a bound held there
-        # (an active set grown until the step stays inside the box)
-        free = np.ones(len(z), dtype=bool)
-        d = np.zeros_like(z)
-        for _ in range(len(z)):
-            if not free.any():
-                break
-            held = ~free  # their steps end on their bounds
-            rhs = g[free] + h[np.ix_(free, held)] @ d[held]
-            d[free] = -np.linalg.solve(h[np.ix_(free, free)], rhs)
-            out = free & ((z + d > self.ubz) | (z + d < self.lbz))
-            if not out.any():
-                break
-            d[out] = np.clip(z + d, self.lbz, self.ubz)[out] - z[out]
-            free &= ~out
-        d = np.clip(z + d, self.lbz, self.ubz) - z
-        pred = -(float(g @ d) + 0.5 * float(d @ h @ d))
-        return max(pred, 0.0) / cost
-
-    def should_stop(self, z: np.ndarray) -> bool:
-        """True after ``successive`` iterates in a row whose predicted share is below tol."""
-        sh = self.share(np.asarray(z, dtype=float).ravel())
-        if sh is None:
-            self.count = 0
-            return False
-        self.shares.append(sh)
-        self.count = self.count + 1 if sh < self.tol else 0
-        self.stopped = self.count >= self.successive
-        return self.stopped
-
-
 class _StopCallback(ca.Callback):
-    """IPOPT's iteration callback around an :class:`IterationDeadline` and, optionally, a
-    :class:`PredictedDecrease` rule (1 = stop)."""
+    """IPOPT's iteration callback around an :class:`IterationDeadline` (1 = stop)."""
 
-    def __init__(
-        self,
-        n_x: int,
-        n_g: int,
-        deadline: IterationDeadline,
-        converged: PredictedDecrease | None = None,
-    ):
+    def __init__(self, n_x: int, n_g: int, deadline: IterationDeadline):
         ca.Callback.__init__(self)
-        self.n_x, self.n_g, self.deadline, self.converged = n_x, n_g, deadline, converged
+        self.n_x, self.n_g, self.deadline = n_x, n_g, deadline
         self.construct("iteration_deadline", {})
 
     def get_n_in(self):
@@ -227,10 +143,6 @@ class _StopCallback(ca.Callback):
         return ca.Sparsity.dense(k) if k is not None else ca.Sparsity(0, 0)
 
     def eval(self, arg):
-        if self.converged is not None and self.converged.should_stop(
-            np.asarray(arg[ca.nlpsol_out().index("x")]).ravel()
-        ):
-            return [1]
         return [1 if self.deadline.should_stop() else 0]
 
 
@@ -244,16 +156,11 @@ def solve_ipopt(
     time_limit_s: float,
     extra: dict | None = None,
     reg: float = 1e-6,
-    predicted_decrease_tol: float | None = None,
 ):
     """Solve; return ``(z, stats)`` where stats has IPOPT's return status and iterations.
 
     ``time_limit_s`` is IPOPT's wall limit, and no iteration is started that would end
     after it (:class:`IterationDeadline`; reported as ``Maximum_WallTime_Exceeded``).
-    With ``predicted_decrease_tol`` the solver also stops once the Gauss–Newton model
-    predicts a decrease below that fraction of the cost on two iterates in a row
-    (:class:`PredictedDecrease`; reported as :data:`PREDICTED_CONVERGED`; single shooting
-    only, i.e. without continuity constraints).
 
     ``reg`` (bar² per unit of z²) is a small Levenberg damping added to the Gauss–Newton
     Hessian so that directions the residuals do not see (the fast states of a
@@ -288,12 +195,7 @@ def solve_ipopt(
         ["triu_hess_gamma_x_x"],
     )
     deadline = IterationDeadline(time.perf_counter() + time_limit_s)
-    converged = (
-        PredictedDecrease(problem, lbz, ubz, predicted_decrease_tol, reg=reg)
-        if predicted_decrease_tol is not None and not problem.n_g
-        else None
-    )
-    stop = _StopCallback(problem.n_z, problem.n_g, deadline, converged)
+    stop = _StopCallback(problem.n_z, problem.n_g, deadline)
     keep.append(stop)
     opts = {
         "hess_lag": hess,
@@ -319,13 +221,10 @@ def solve_ipopt(
     sol = solver(**args)
     stats = solver.stats()
     status = stats.get("return_status", "?")
-    if status == _USER_STOP and converged is not None and converged.stopped:
-        status = PREDICTED_CONVERGED
-    elif status == _USER_STOP and deadline.stopped:
+    if status == _USER_STOP and deadline.stopped:
         status = "Maximum_WallTime_Exceeded"
     return np.asarray(sol["x"]).ravel(), {
         "return_status": status,
         "iter_count": int(stats.get("iter_count", -1)),
-        "success": bool(stats.get("success", False)) or status == PREDICTED_CONVERGED,
-        "predicted_decrease": [] if converged is None else list(converged.shares),
+        "success": bool(stats.get("success", False)),
     }

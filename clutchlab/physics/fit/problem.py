@@ -396,12 +396,6 @@ class FitProblem:
         self._cache[key] = out
         return out
 
-    def cached(self, z: np.ndarray) -> dict | None:
-        """The evaluation at ``z`` with its residual Jacobian when one is cached, else None
-        (nothing is evaluated)."""
-        hit = self._cache.get(np.asarray(z, dtype=float).ravel().tobytes())
-        return hit if hit is not None and hit.get("J") is not None else None
-
     # ---- parallel evaluation ------------------------------------------------------------
     def _run_segments(self, z: np.ndarray, jacobian: bool) -> dict[int, tuple] | None:
         if self._pool is None:

@@ -83,13 +83,10 @@ class FitSettings:
     refine_max_iter : int
         Iteration limit of the refinement on all training experiments.
     prefit_obj_change_tol : float
-        The pre-fit stops once the Gauss–Newton model predicts a cost decrease below
-        this fraction of the cost on two successive iterates (single shooting; status
-        ``Acceptable_Predicted_Decrease``), or at IPOPT's acceptable level (the cost
-        changes by less than this fraction on two successive iterations and the scaled
-        optimality error is below 0.1: ``acceptable_obj_change_tol``,
-        ``acceptable_tol``): its optimum only starts the refinement, so a tight pre-fit
-        tolerance buys nothing.
+        The pre-fit stops once the cost changes by less than this fraction on two
+        successive iterations and the scaled optimality error is below 0.1 (IPOPT
+        ``acceptable_obj_change_tol``, ``acceptable_tol``): its optimum only starts
+        the refinement, so a tight pre-fit tolerance buys nothing.
     tol : float
         IPOPT convergence tolerance.
     time_limit_s : float

@@ -60,9 +60,7 @@ def prefit_subset(traces: list[Trace], budget: int) -> list[Trace]:
 
 def prefit_settings(settings: FitSettings) -> FitSettings:
     """Settings of the pre-fit stage: IPOPT stops at an acceptable level once the cost
-    changes by less than ``prefit_obj_change_tol`` (the user's IPOPT options win); the
-    fitter also stops it once the Gauss–Newton model predicts less than that fraction
-    (:class:`~clutchlab.physics.fit.nlp.PredictedDecrease`)."""
+    changes by less than ``prefit_obj_change_tol`` (the user's IPOPT options win)."""
     return replace(
         settings,
         ipopt_options={
