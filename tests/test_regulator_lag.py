@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from clutchlab.data import Trace
 from clutchlab.errors import ModelError
 from clutchlab.physics import CircuitModel, simulate
 from clutchlab.physics.fit import FitSettings
@@ -22,6 +23,7 @@ from clutchlab.physics.fit.staged import (
     regulator_lag_structure,
     staged_start,
 )
+from clutchlab.physics.settings import SimulationSettings
 from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
 from clutchlab.physics.stand.plants import PlantConfig, run_plant
 
@@ -109,3 +111,34 @@ def test_signature_needs_two_rates_and_a_latch(zoo_small):
 def test_unknown_law_parameter_is_refused():
     with pytest.raises(ModelError):
         CircuitModel().with_effects("reg_pilot_lag").params(rlag_x=1.0)
+
+
+@pytest.mark.parametrize("substeps", [1, 2])
+def test_the_lagged_pilot_leaves_the_spool_stable(zoo_small, substeps):
+    """The spool's own displacement is not lagged: a lagged pilot-chamber spring is
+    negative damping. With the law as first written, these values (an iterate of a
+    zoo fit) and a prime pressure below the declared initial 0.5 bar sent this run to
+    3.1 bar at zero current (2 substeps); in that fit's settling run to 298 bar, its
+    sensitivities to 1e75, and IPOPT stopped with Error_In_Step_Computation."""
+    model = CircuitModel().with_effects("reg_pilot_lag")
+    params = model.params(
+        vfs_K_m=14.73,
+        vfs_i_knee=306.4,
+        vfs_F_pre=0.518,
+        reg_F0=-3.433,
+        reg_F_c=0.0671,
+        vfs_d_orf=0.876,
+        latch_F0=27.99,
+        latch_k=1.356,
+        rlag_w=1.0,
+        rlag_tau=67.3,
+    )
+    fast = zoo_small[0]
+    # prime pressure below the declared initial 0.5 bar: the spool starts out of balance
+    low = dict(fast.signals, prime_pressure_bar=np.full(len(fast.time_s), 0.455))
+    fast = Trace(fast.name, low, meta=fast.meta)
+    run = SimulationSettings(settle_s=0.0, substeps=substeps)
+    p = simulate(model, params, fast, run).pressure_bar
+    start = fast.time_s - fast.time_s[0] < 0.5  # the current is still below the VFS's knee
+    assert np.all(np.isfinite(p))
+    assert np.max(p[start]) < 1.5, np.max(p[start])

@@ -26,6 +26,7 @@ import math
 import casadi as ca
 
 from ..assembly import Assembly, StateSpec
+from ..components.accumulator import node_compliance
 from ..components.base import param
 from ..components.latch import LatchValve, latch_thresholds
 from ..smooth import logistic
@@ -205,8 +206,12 @@ class FreeLatchThresholds(Effect):
 class RegulatorPilotLag(Effect):
     """A first-order lag of the pilot pressure on the regulator spool's pilot face alone.
 
-    The regulator sees ``p_r = p_a + w (q − p_a)`` with ``τ dq/dt = p_a − q``; the latch
-    valve still sees ``p_a``. In the datasheet circuit one lag (the VFS accumulator
+    The regulator sees ``p_r = p_a + w (q − p_a)`` with
+    ``dq/dt = (p_a − q)/τ − A_pil·v_r / C_a`` (``C_a``: the pilot node's compliance,
+    m³/Pa); the latch valve still sees ``p_a``. The spool's own displacement moves
+    ``q`` as it moves ``p_a`` (the pilot chamber's hydraulic spring acts at once): only
+    the pilot pressure the VFS delivers is lagged. Lagging the spring as well made it
+    negative damping, and the spool unstable in thin oil or from an unbalanced start. In the datasheet circuit one lag (the VFS accumulator
     orifice) sets both the rate-dependent width of the regulated hysteresis band and
     the delay of the latch snap behind the current; a circuit whose clutch fills
     through a slower path than its latch pilot (a damping orifice, a clutch
@@ -230,5 +235,14 @@ class RegulatorPilotLag(Effect):
 
     def apply(self, asm: Assembly) -> None:
         q = asm.state(StateSpec("p_rlag", "bar", 0.5, "lagged regulator pilot", self.name))
-        asm.define("der:p_rlag", lambda a: (a.x("p_a") - q) / a.p("rlag_tau"), "Pa/s")
+
+        def der(a):
+            # The spool's own displacement moves the pilot pressure on both sides of the
+            # lag at once (it is the hydraulic spring of the pilot chamber, not a pilot
+            # signal): lagging it too would turn that stiff spring into negative damping.
+            a_pil = math.pi / 4.0 * a.p("reg_d_pil") ** 2
+            spring = a_pil * a.x("v_r") / node_compliance(a, "vacc", "p_a", a.x("p_a"))
+            return (a.x("p_a") - q) / a.p("rlag_tau") - spring
+
+        asm.define("der:p_rlag", der, "Pa/s")
         asm.wrap("p_reg_pilot", lambda a, prev: prev + a.p("rlag_w") * (q - prev))
