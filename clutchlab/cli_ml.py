@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -231,7 +232,18 @@ def _latch_decision(model) -> str | None:
         return None
     text = _LATCH_NAMES.get(kind, kind)
     if kind == "local_event":
-        text += f", bandwidth {est.decision_.bandwidth:g}"
+        dec = est.decision_
+        text += f", bandwidth {dec.bandwidth:g}"
+        if dec.uses_line:
+            text += (
+                f", switch currents follow line pressure by {dec.line_coef:+.1f} mA/bar "
+                f"(held-out error x{dec.line_ratio:.2f}, permutation p {dec.line_p_value:.3f})"
+            )
+        elif math.isfinite(dec.line_ratio):
+            text += (
+                f", no line-pressure coupling (held-out error x{dec.line_ratio:.2f}, "
+                f"permutation p {dec.line_p_value:.3f})"
+            )
     elif kind == "classifier" and getattr(est, "classifier", None):
         text += f" {est.classifier}"
     acc = getattr(est, "classifier_train_accuracy_", None)

@@ -52,6 +52,30 @@ def tiny_stand(seed: int):
     return run_stand(config, progress=False).dataset
 
 
+def tiny_supply_coupled(seed: int):
+    """Fifteen short experiments of the ``stribeck_supply`` zoo plant, whose latch switches
+    move with line pressure: fast / medium / slow (1 / 2 / 4 s ramps) × five dither
+    settings, two substeps (seed of the unit, noise and wander)."""
+    from clutchlab.physics.stand import DitherSetting, RampProfile
+    from clutchlab.physics.stand.plants.run import PlantConfig, run_plant
+
+    config = PlantConfig(
+        "stribeck_supply",
+        settings=tuple(
+            DitherSetting(f, a)
+            for f, a in ((30.0, "A"), (70.0, "B"), (50.0, "C"), (30.0, "C"), (70.0, "A"))
+        ),
+        ramps=(
+            RampProfile("fast", 1.0, 0.3),
+            RampProfile("medium", 2.0, 0.3),
+            RampProfile("slow", 4.0, 0.3),
+        ),
+        substeps=2,
+        seed=seed,
+    )
+    return run_plant(config, progress=False).dataset
+
+
 def check_latch_law_model(model, data, tmp_path, kind: str) -> None:
     """A partitioned GP whose latch law is ``kind``: it latches and releases on an unseen
     ramp, survives save / load, and its step predictor equals the batch path."""
@@ -87,9 +111,11 @@ def check_latch_law_fmu(data, tmp_path, kind: str, **small) -> None:
     model = SVCPartitionedGP(features=features, latch_model=kind, **small).fit(train)
     spec = decision_spec(model.decision_, model.classifier_columns_)
     assert spec.kind == kind
+    assert (spec.event_line is not None) == getattr(model.decision_, "uses_line", False)
     fmu = build_fmu(ml_program_from(model, with_std=False), tmp_path / f"{kind}.fmu")
     model.set_params(knot_tol=0.0)
     tr = data["medium_70Hz_B"]
     sim = FmuPhysics(fmu).simulate(tr)
     np.testing.assert_array_equal(sim.outputs["latch_state"], model.predict_latch(tr))
     assert np.abs(sim.pressure_bar - model.predict(tr)).max() < 0.01
+    return model

@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from synthetic import check_latch_law_fmu, check_latch_law_model, tiny_stand
+from synthetic import check_latch_law_fmu, check_latch_law_model, tiny_stand, tiny_supply_coupled
 
 from clutchlab.errors import ModelError, ModelFileError
 from clutchlab.residual_ml import (
@@ -16,7 +16,11 @@ from clutchlab.residual_ml import (
     local_law,
 )
 from clutchlab.residual_ml.latch_event import fit_event_decision
-from clutchlab.residual_ml.latch_local import fit_local_event_decision
+from clutchlab.residual_ml.latch_local import (
+    LINE_COUPLING_RATIO,
+    fit_local_event_decision,
+    held_out_residuals,
+)
 
 SMALL = {"n_hyper": 300, "max_points": 300}
 NAMES = ["current_lag_mA", "dither_amp_mA", "dither_freq_Hz", "didt_mA_s", "direction"]
@@ -31,9 +35,13 @@ SETTINGS = {
 RATES = (27.5, 440.0)
 
 
-def _events():
+#: The thresholds of :data:`SETTINGS` with one slope per direction.
+SHARED_SLOPES = {k: ((on[0], 0.15), (off[0], 0.25)) for k, (on, off) in SETTINGS.items()}
+
+
+def _events(settings=SETTINGS):
     rows = []
-    for (a, f), ((t_on, k_on), (t_off, k_off)) in SETTINGS.items():
+    for (a, f), ((t_on, k_on), (t_off, k_off)) in settings.items():
         for r in RATES:
             rows.append((np.array([t_on + k_on * r, a, f, r, 1.0]), 1))
             rows.append((np.array([t_off - k_off * r, a, f, -r, -1.0]), -1))
@@ -145,3 +153,98 @@ def test_the_default_falls_back_to_the_classifier_and_reads_its_own_kappa(local_
     assert one.latch_model_ == "classifier"
     assert one._latch_rate_scale() == LATCH_RATE_SCALES["classifier"]
     assert one.set_params(latch_rate_scale=0.25)._latch_rate_scale() == 0.25
+
+
+def _coupled_events(beta: float, seed: int = 0):
+    """The events of :data:`SHARED_SLOPES`, each moved by ``beta`` (mA/bar) times a line
+    pressure that wanders by ±0.3 bar, and that line pressure (bar). (Where the slopes
+    differ between settings as much as in :data:`SETTINGS`, a held-out event's borrowed
+    slope misses by tens of mA and a coupling of a few mA is not worth keeping.)"""
+    rng = np.random.default_rng(seed)
+    events = _events(SHARED_SLOPES)
+    line = 17.7 + 0.15 * rng.standard_normal(len(events))
+    moved = [
+        (row + np.array([beta * (p - 17.7), 0, 0, 0, 0]), s)
+        for (row, s), p in zip(events, line, strict=True)
+    ]
+    return moved, line
+
+
+def test_held_out_residuals_are_those_of_one_linear_predictor():
+    dec = fit_local_event_decision(_events(), NAMES, bandwidth=0.2)
+    rng = np.random.default_rng(1)
+    u, v = rng.standard_normal(len(dec.on)), rng.standard_normal(len(dec.on))
+    r = lambda w: held_out_residuals(dec.on, dec.scale, 0.2, w)  # noqa: E731
+    np.testing.assert_allclose(r(2.0 * u - 3.0 * v), 2.0 * r(u) - 3.0 * r(v), atol=1e-9)
+
+
+def test_a_latch_that_follows_line_pressure_is_found_and_its_law_corrected():
+    events, line = _coupled_events(45.0)
+    dec = fit_local_event_decision(events, NAMES, bandwidth=0.2, line=line)
+    assert dec.uses_line and dec.line_coef == pytest.approx(45.0, rel=0.05)
+    assert dec.line_ratio < 0.1 and dec.line_p_value <= 0.01
+    # At the switch current of each setting and rate between the trained ones, with the
+    # line pressure of that moment, the decision is at its threshold.
+    for (a, f), ((t_on, k_on), _) in SHARED_SLOPES.items():
+        for r, p in ((110.0, 17.5), (220.0, 18.0)):
+            x = np.array([[t_on + k_on * r + 45.0 * (p - 17.7), a, f, r, 1.0]])
+            assert abs(dec(x, line=np.array([p]))[0]) < 1.0
+    with pytest.raises(ModelError, match="line pressure"):
+        dec(x)
+    back = LocalEventDecision.from_arrays(dec.arrays())
+    np.testing.assert_array_equal(back(x, line=np.array([17.9])), dec(x, line=np.array([17.9])))
+    # Without the coupling in the events the test does not keep one.
+    noisy, _ = _coupled_events(0.0, seed=1)  # no coupling; switch currents ±1 mA
+    noisy = [
+        (row + np.array([1.0 * z, 0, 0, 0, 0]), s)
+        for (row, s), z in zip(
+            noisy, np.random.default_rng(2).standard_normal(len(noisy)), strict=True
+        )
+    ]
+    plain = fit_local_event_decision(noisy, NAMES, bandwidth=0.2, line=line)
+    assert not plain.uses_line and plain.line_ratio > LINE_COUPLING_RATIO
+    # A file written before the coupling holds none.
+    old = {k: v for k, v in dec.arrays().items() if k != "line"}
+    assert not LocalEventDecision.from_arrays(old).uses_line
+    with pytest.raises(ModelError, match="finite"):
+        fit_local_event_decision(events, NAMES, bandwidth=0.2, line=line[:-1])
+
+
+@pytest.fixture(scope="module")
+def coupled():
+    return tiny_supply_coupled(0)
+
+
+@pytest.fixture(scope="module")
+def coupled_model(coupled):
+    return SVCPartitionedGP(**SMALL).fit(coupled.select(ramps=["fast", "slow"]))
+
+
+def test_the_partitioned_gp_keeps_a_line_coupling_where_the_latch_has_one(
+    coupled, coupled_model, data, tmp_path
+):
+    train = coupled.select(ramps=["fast", "slow"])
+    model = coupled_model
+    dec = model.decision_
+    assert dec.uses_line and 20.0 < dec.line_coef < 80.0 and dec.line_ratio <= LINE_COUPLING_RATIO
+    check_latch_law_model(model, coupled, tmp_path, "local_event")
+    off = SVCPartitionedGP(latch_line="off", **SMALL).fit(train)
+    assert not off.decision_.uses_line
+    # On the stand (no coupling) the test runs and keeps none.
+    stand = SVCPartitionedGP(**SMALL).fit(data.select(ramps=["fast", "slow"]))
+    assert not stand.decision_.uses_line and np.isfinite(stand.decision_.line_ratio)
+    with pytest.raises(ModelError, match="latch_line"):
+        SVCPartitionedGP(latch_line="on", **SMALL).fit(train)
+
+
+def test_a_line_coupled_latch_law_exports_to_an_exact_fmu(coupled, tmp_path):
+    model = check_latch_law_fmu(coupled, tmp_path, "local_event", **SMALL)
+    assert model.decision_.uses_line
+
+
+def test_train_names_the_coupling_it_kept(coupled_model, local_model):
+    from clutchlab.cli_ml import _latch_decision
+
+    text = _latch_decision(coupled_model)
+    assert "follow line pressure by +" in text and "permutation p" in text
+    assert "no line-pressure coupling" in _latch_decision(local_model)

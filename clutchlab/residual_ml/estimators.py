@@ -430,6 +430,12 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
     latch_bandwidth : float
         Bandwidth ``h`` of ``latch_model="local_event"`` in standard deviations of the
         latch events' dither amplitude and frequency (default :data:`LATCH_BANDWIDTH`).
+    latch_line : {"auto", "off"}
+        ``auto`` (default): with ``latched_reference="line"`` and line pressure logged, the
+        local law tests inside the training set whether the switch currents follow line
+        pressure and keeps the coupling when it lowers their leave-one-event-out error
+        enough (:func:`~clutchlab.residual_ml.latch_local.line_coupling`; the decision then
+        needs line pressure). ``off``: never.
     latched_reference : {"line", "none"}
         ``line`` (default): the latched GP learns the clutch pressure *below line
         pressure* (the latched plateau is line pressure less a small offset that
@@ -508,6 +514,7 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         svc_max_points: int = 4000,
         latch_model: str = DEFAULT_LATCH_MODEL,
         latch_bandwidth: float = LATCH_BANDWIDTH,
+        latch_line: str = "auto",
         latched_reference: str = "line",
         latch_uncertainty: str = "mixture",
         latch_rate_scale: float | None = None,
@@ -538,6 +545,7 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         self.svc_max_points = svc_max_points
         self.latch_model = latch_model
         self.latch_bandwidth = latch_bandwidth
+        self.latch_line = latch_line
         self.latched_reference = latched_reference
         self.latch_uncertainty = latch_uncertainty
         self.latch_rate_scale = latch_rate_scale
@@ -575,8 +583,8 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
             )
         return [self.feature_names_.index(f) for f in self.classifier_features]
 
-    def _decide(self, X: np.ndarray) -> np.ndarray:
-        return self.decision_(X[:, self.classifier_columns_])
+    def _decide(self, X: np.ndarray, ref: np.ndarray | None = None) -> np.ndarray:
+        return _decision_values(self.decision_, X[:, self.classifier_columns_], ref)
 
     def _block(self, trace: Trace, physics: dict[str, np.ndarray] | None = None) -> Block:
         b = super()._block(trace, physics)
@@ -618,9 +626,9 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         self._check_std_options()
         self.latch_timing_ = None
         if len(present) >= 2:
-            Xc = b.X[:, self.classifier_columns_]
             self.classifier_, self.decision_ = self._fit_decision(blocks, b)
-            pred = (self.decision_(Xc[clean]) > 0).astype(int)
+            ref = None if b.ref is None else b.ref[clean]
+            pred = (self._decide(b.X[clean], ref) > 0).astype(int)
             self.classifier_train_accuracy_ = float(np.mean(pred == b.labels[clean]))
             self.single_state_ = None
         else:
@@ -710,10 +718,21 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
             # The default law needs two events of each direction; with fewer (one
             # training experiment, a latch that never releases) the classifier decides.
             if min(sum(s == d for _, s in events) for d in (1, -1)) >= 2:
-                return None, fit_local_event_decision(events, names, self.latch_bandwidth)
+                line = self._event_line(blocks)
+                return None, fit_local_event_decision(events, names, self.latch_bandwidth, line)
         clean = b.labels >= 0
         clf = self._make_classifier().fit(b.X[clean][:, cols], b.labels[clean])
         return clf, lean_decision(clf)
+
+    def _event_line(self, blocks: list[Block]) -> np.ndarray | None:
+        """Line pressure (bar) at each latch event of ``blocks`` (the order of
+        :func:`latch_events`), or None without a line reference."""
+        if self.latch_line not in ("auto", "off"):
+            raise ModelError(f"latch_line must be 'auto' or 'off', got {self.latch_line!r}")
+        off = self.latch_line == "off" or self.latched_reference != "line"
+        if off or any(blk.ref is None for blk in blocks):
+            return None
+        return np.array([blk.ref[k] for blk in blocks for k, _ in switches(blk.state)])
 
     def _timing_columns(self) -> tuple[int, int]:
         """Columns of the decision's current and dI/dt features (−1 when absent)."""
@@ -745,7 +764,9 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
                 return None
             X = blocks[k].X
             knots = knot_indices(X, res, self.knot_tol, self.max_knot_gap)
-            return piecewise_classes(X, knots, lambda Z: decide(Z[:, cols]))
+            return _path_classes(
+                lambda Z, ref: _decision_values(decide, Z[:, cols], ref), X, knots, blocks[k].ref
+            )
 
         # The folds are independent and their binning, sorting and libsvm calls release the
         # GIL: two threads take ~0.6x the wall time of one on 2 cores; results keep the
@@ -830,12 +851,14 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
             return dec.kind
         return "classifier"
 
-    def _classes(self, X: np.ndarray, knots: np.ndarray | None) -> np.ndarray:
+    def _classes(
+        self, X: np.ndarray, knots: np.ndarray | None, ref: np.ndarray | None = None
+    ) -> np.ndarray:
         if self.decision_ is None:
             return np.full(X.shape[0], self.single_state_, dtype=np.int8)
         if knots is None:
-            return (self._decide(X) > 0).astype(np.int8)
-        return piecewise_classes(X, knots, self._decide)
+            return (self._decide(X, ref) > 0).astype(np.int8)
+        return _path_classes(self._decide, X, knots, ref)
 
     def _fns(self, return_std: bool) -> dict:
         fns = {
@@ -879,7 +902,7 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
             )
         fns = self._fns(return_std)
         if not path:
-            classes = self._classes(X, None)
+            classes = self._classes(X, None, ref)
             mean = np.empty(X.shape[0])
             std = np.empty(X.shape[0]) if return_std else None
             for g in (0, 1):
@@ -892,7 +915,7 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
                         mean[rows] = out
         else:
             knots = knot_indices(X, self.resolution(), self.knot_tol, self.max_knot_gap)
-            classes = self._classes(X, knots)
+            classes = self._classes(X, knots, ref)
             out = predict_on_path(X, classes, knots, fns, return_std)
             mean, std = out if return_std else (out, None)
             if return_std:
@@ -921,5 +944,22 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         for t in traces:
             F = self._trace_matrix(t)
             knots = knot_indices(F, self.resolution(), self.knot_tol, self.max_knot_gap)
-            outs.append(self._classes(F, knots))
+            outs.append(self._classes(F, knots, self._trace_ref(t)))
         return outs[0] if len(outs) == 1 and not isinstance(X, list | tuple) else outs
+
+
+def _decision_values(decide, Z: np.ndarray, ref: np.ndarray | None) -> np.ndarray:
+    """Decision values (> 0: latched) of rows ``Z``; ``ref`` (line pressure, bar) goes to a
+    decision that follows it (:attr:`LocalEventDecision.uses_line`)."""
+    if getattr(decide, "uses_line", False):
+        return decide(Z, line=ref)
+    return decide(Z)
+
+
+def _path_classes(decide, X: np.ndarray, knots: np.ndarray, ref: np.ndarray | None):
+    """:func:`piecewise_classes` of ``decide(X, ref)`` with ``ref`` carried along the
+    rows, so the samples evaluated between knots get their own line pressure."""
+    if ref is None:
+        return piecewise_classes(X, knots, lambda Z: decide(Z, None))
+    Xr = np.column_stack([X, ref])
+    return piecewise_classes(Xr, knots, lambda Z: decide(Z[:, :-1], Z[:, -1]))

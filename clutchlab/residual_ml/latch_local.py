@@ -27,6 +27,22 @@ rate *without* its own event there, while the test asks for a trained setting at
 rate. Its default is calibrated on held-back training-side ramp rates
 (``studies/latch_event.py``). The decision is memoryless given the held direction of
 travel, as the latch-event law's: it runs per sample in the step predictor and in the FMU.
+
+**Line-pressure coupling.** On a circuit whose latch pilot is fed from, or balanced
+against, the supply, the switch current moves with line pressure ``p`` (on the
+``stribeck_supply`` zoo plant by 34–50 mA per bar of its ±0.3 bar wander, read off the data
+by ``studies/switch_rate_lines.py``). The two events of a setting are then a line through
+two currents that each carry a line-pressure offset, and the slope between them is wrong
+at every other rate. :func:`line_coupling` tests for it inside the training set: the
+leave-one-event-out residuals of the switch current and of the line pressure under the
+same law (the law is linear in the values it smooths) are regressed on each other, and
+the coupling ``β`` (mA/bar, one for both directions) is kept when, with ``β`` estimated
+without the held-out event, it lowers the held-out RMS to at most
+:data:`LINE_COUPLING_RATIO` of that without, and line pressures reassigned at random
+among the events do as well in at most :data:`LINE_COUPLING_P` of the tries (with few
+events a wander lines up with the law's misses by chance). The law then runs on the
+corrected currents
+``Iₖ − β (pₖ − p̄)``, and the decision is ``d(x) = I − β (p − p̄) − θ − τ İ``.
 """
 
 from __future__ import annotations
@@ -39,10 +55,15 @@ from ..errors import ModelError
 from .latch_event import law_columns
 
 __all__ = [
+    "LINE_COUPLING_P",
+    "LINE_COUPLING_RATIO",
+    "LINE_PERMUTATIONS",
     "SLOPE_BANDWIDTH",
     "SLOPE_PRIOR",
     "LocalEventDecision",
     "fit_local_event_decision",
+    "held_out_residuals",
+    "line_coupling",
     "local_law",
     "within_setting",
 ]
@@ -53,6 +74,16 @@ SLOPE_BANDWIDTH = 1.0
 #: Weight ``ρ`` of the prior ``τ ≈ τ₀`` relative to the mean square rate of the weighted
 #: events: about 2 % of a setting's own slope when it has its two trained rates.
 SLOPE_PRIOR = 0.01
+#: The line-pressure coupling is kept when it lowers the held-out RMS of the switch
+#: currents to at most this fraction of that without it (nested leave-one-event-out).
+#: Set from a prototype's ratios on held-back training-side ramps (no medium ramp in
+#: them): 0.26–0.45 on the supply-coupled plant, 0.93–1.03 on the stand and the three other
+#: zoo plants, seeds 0–2; measured again on this code by ``studies/latch_event.py --line``.
+LINE_COUPLING_RATIO = 0.8
+#: ... and when line pressures reassigned at random among the events do as well in at most
+#: this share of :data:`LINE_PERMUTATIONS` tries (a one-sided permutation test).
+LINE_COUPLING_P = 0.05
+LINE_PERMUTATIONS = 199
 
 
 def _moments(d2: np.ndarray, h: float, i_k: np.ndarray, r_k: np.ndarray):
@@ -143,6 +174,112 @@ def local_law(
     return mi - tau * mr, tau
 
 
+def held_out_residuals(
+    events: np.ndarray, scale: np.ndarray, h: float, values: np.ndarray
+) -> np.ndarray:
+    """Leave-one-event-out residual of ``values`` under the law of ``events``.
+
+    Each event's ``value`` is predicted by :func:`local_law` fitted to the other events
+    with their ``values`` in place of the switch current (``θ + τ İₖ``). The law is
+    linear in the values it smooths, so the residuals of the currents and of any signal
+    at the events (the line pressure) are those of one and the same predictor.
+
+    Parameters
+    ----------
+    events : numpy.ndarray
+        ``(n, 4)`` events of one direction (current mA, dI/dt mA/s, amplitude mA,
+        frequency Hz).
+    scale : numpy.ndarray
+        Amplitude (mA) and frequency (Hz) scales of the distances.
+    h : float
+        Bandwidth of the law.
+    values : numpy.ndarray
+        ``(n,)`` value per event (units of the value).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(n,)`` held-out residuals (value − prediction), units of ``values``.
+    """
+    ev = np.asarray(events, dtype=float)
+    vals = np.asarray(values, dtype=float)
+    out = np.empty(len(ev))
+    for k in range(len(ev)):
+        rest = np.delete(ev, k, axis=0)
+        rest[:, 0] = np.delete(vals, k)
+        theta, tau = local_law(rest, scale, h, ev[k : k + 1, 2], ev[k : k + 1, 3])
+        out[k] = vals[k] - (theta[0] + tau[0] * ev[k, 1])
+    return out
+
+
+def _held_out_operator(events: np.ndarray, scale: np.ndarray, h: float) -> np.ndarray:
+    """``H`` with :func:`held_out_residuals` ``= H @ values`` (the law is linear in them)."""
+    n = len(events)
+    return np.column_stack([held_out_residuals(events, scale, h, col) for col in np.eye(n)])
+
+
+def _nested_ratio(e: np.ndarray, g: np.ndarray) -> float:
+    """Held-out RMS of ``e − β₋ₖ gₖ`` over that of ``e``, ``β₋ₖ`` fitted without ``k``."""
+    gg, eg = float(g @ g), float(e @ g)
+    nested = e - (eg - e * g) / np.maximum(gg - g * g, 1e-300) * g
+    return float(np.sqrt(np.mean(nested**2) / np.mean(e**2)))
+
+
+def line_coupling(
+    sides: list[tuple[np.ndarray, np.ndarray]],
+    scale: np.ndarray,
+    h: float,
+    permutations: int = LINE_PERMUTATIONS,
+) -> tuple[float, float, float, float]:
+    """The switch currents' coupling to line pressure, tested by leave-one-event-out.
+
+    Parameters
+    ----------
+    sides : list of (numpy.ndarray, numpy.ndarray)
+        Per direction: its ``(n, 4)`` events and the line pressure at each (bar).
+    scale : numpy.ndarray
+        Amplitude (mA) and frequency (Hz) scales of the distances.
+    h : float
+        Bandwidth of the law.
+    permutations : int
+        Random reassignments of the line pressures to the events for the p-value.
+
+    Returns
+    -------
+    coef : float
+        ``β`` (mA/bar): the held-out current residuals regressed on the held-out line
+        pressure residuals, pooled over both directions.
+    reference : float
+        ``p̄`` (bar), the mean line pressure at the events.
+    ratio : float
+        Held-out RMS with ``β`` (estimated without each held-out event) over that without
+        (dimensionless; NaN when the line pressure or the held-out error is nil).
+    p_value : float
+        Share of reassignments of the line pressures among the events (seeded, so
+        repeatable) whose ratio is at most ``ratio``: the chance that line pressure
+        unrelated to the switches does as well. With few events a wander can line up
+        with the law's held-out misses by chance (two settings at two rates: a ratio of
+        0.45 on the default stand, whose latch does not see line pressure).
+    """
+    reference = float(np.mean(np.concatenate([p for _, p in sides])))
+    ops = [_held_out_operator(ev, scale, h) for ev, _ in sides]
+    e = np.concatenate([H @ ev[:, 0] for H, (ev, _) in zip(ops, sides, strict=True)])
+    p = np.concatenate([pk for _, pk in sides]) - reference
+    cuts = np.cumsum([len(pk) for _, pk in sides])[:-1]
+
+    def g_of(values: np.ndarray) -> np.ndarray:
+        parts = np.split(values, cuts)
+        return np.concatenate([H @ v for H, v in zip(ops, parts, strict=True)])
+
+    g = g_of(p)
+    if not (g @ g > 1e-12 * len(g) and e @ e > 0):
+        return 0.0, reference, float("nan"), float("nan")
+    ratio = _nested_ratio(e, g)
+    rng = np.random.default_rng(0)
+    hits = sum(_nested_ratio(e, g_of(rng.permutation(p))) <= ratio for _ in range(permutations))
+    return float(e @ g) / float(g @ g), reference, ratio, (1 + hits) / (1 + permutations)
+
+
 @dataclass(frozen=True)
 class LocalEventDecision:
     """``d(x)`` of the module docstring; > 0 means latched.
@@ -162,6 +299,14 @@ class LocalEventDecision:
         ``h`` of the weights, in those standard deviations.
     slope_bandwidth, slope_prior : float
         ``h_slope`` and ``ρ`` of :func:`local_law`.
+    line_coef : float
+        ``β`` (mA/bar) of the line-pressure coupling; 0 when not kept (the events are then
+        the measured ones, otherwise corrected to ``p̄``).
+    line_reference : float
+        ``p̄`` (bar).
+    line_ratio, line_p_value : float
+        Held-out RMS ratio and permutation p-value of :func:`line_coupling` (NaN: not
+        tested, e.g. no line pressure logged).
     """
 
     columns: np.ndarray
@@ -171,6 +316,10 @@ class LocalEventDecision:
     bandwidth: float
     slope_bandwidth: float = SLOPE_BANDWIDTH
     slope_prior: float = SLOPE_PRIOR
+    line_coef: float = 0.0
+    line_reference: float = 0.0
+    line_ratio: float = float("nan")
+    line_p_value: float = float("nan")
 
     kind = "local_event"
 
@@ -183,9 +332,26 @@ class LocalEventDecision:
             events, self.scale, self.bandwidth, amp, freq, self.slope_bandwidth, self.slope_prior
         )
 
-    def __call__(self, X: np.ndarray) -> np.ndarray:
-        """Decision value per row of ``X`` (mA); > 0 means latched."""
+    @property
+    def uses_line(self) -> bool:
+        """Whether the decision needs the line pressure (a kept coupling)."""
+        return self.line_coef != 0.0
+
+    def line_shift(self, line_bar) -> np.ndarray:
+        """``β (p − p̄)`` (mA) at line pressure ``line_bar`` (bar)."""
+        return self.line_coef * (np.asarray(line_bar, dtype=float) - self.line_reference)
+
+    def __call__(self, X: np.ndarray, line: np.ndarray | None = None) -> np.ndarray:
+        """Decision value per row of ``X`` (mA); > 0 means latched.
+
+        ``line`` (bar, per row) is required when :attr:`uses_line`.
+        """
         X = np.atleast_2d(np.asarray(X, dtype=float))
+        if self.uses_line and line is None:
+            raise ModelError(
+                "this latch decision follows line pressure (a coupling of "
+                f"{self.line_coef:+.1f} mA/bar was kept in training): give the line pressure"
+            )
         out = np.empty(X.shape[0])
         for a in range(0, X.shape[0], _CHUNK):
             i, di, direction, amp, freq = self._parts(X[a : a + _CHUNK])
@@ -196,7 +362,7 @@ class LocalEventDecision:
                     theta, tau = self._law(ev, amp[sel], freq[sel])
                     d[sel] = i[sel] - theta - tau * di[sel]
             out[a : a + _CHUNK] = d
-        return out
+        return out - self.line_shift(line) if self.uses_line else out
 
     def events_with_deviations(self, events: np.ndarray) -> np.ndarray:
         """``(n, 6)``: the events and their :func:`within_setting` deviations (mA, mA/s)."""
@@ -218,11 +384,22 @@ class LocalEventDecision:
             "scale": np.asarray(self.scale, dtype=float),
             "bandwidth": np.array([self.bandwidth], dtype=float),
             "slope": np.array([self.slope_bandwidth, self.slope_prior], dtype=float),
+            # −1: not tested (the file holds finite numbers only)
+            "line": np.array(
+                [
+                    self.line_coef,
+                    self.line_reference,
+                    np.nan_to_num(self.line_ratio, nan=-1.0),
+                    np.nan_to_num(self.line_p_value, nan=-1.0),
+                ]
+            ),
         }
 
     @classmethod
     def from_arrays(cls, a: dict[str, np.ndarray]) -> LocalEventDecision:
-        """Inverse of :meth:`arrays`."""
+        """Inverse of :meth:`arrays` (files written before the coupling: none)."""
+        line = np.asarray(a.get("line", [0.0, 0.0, -1.0, -1.0]), dtype=float).ravel()
+        ratio, p_value = (float(v) if v >= 0 else float("nan") for v in line[2:4])
         return cls(
             np.asarray(a["columns"], dtype=float).astype(int),
             np.asarray(a["on"], dtype=float).reshape(-1, 4),
@@ -230,6 +407,10 @@ class LocalEventDecision:
             np.asarray(a["scale"], dtype=float),
             float(np.asarray(a["bandwidth"], dtype=float).ravel()[0]),
             *(float(v) for v in np.asarray(a["slope"], dtype=float).ravel()[:2]),
+            float(line[0]),
+            float(line[1]),
+            ratio,
+            p_value,
         )
 
 
@@ -237,6 +418,7 @@ def fit_local_event_decision(
     events: list[tuple[np.ndarray, int]],
     feature_names: list[str],
     bandwidth: float,
+    line: np.ndarray | None = None,
 ) -> LocalEventDecision:
     """Collect the local latch-event law's training events.
 
@@ -250,6 +432,10 @@ def fit_local_event_decision(
         and a direction feature.
     bandwidth : float
         ``h`` (> 0), in standard deviations of the events' amplitude and frequency.
+    line : numpy.ndarray, optional
+        Line pressure (bar) at each event: the coupling is tested (:func:`line_coupling`)
+        and kept when its held-out ratio is at most :data:`LINE_COUPLING_RATIO` and its
+        permutation p-value at most :data:`LINE_COUPLING_P`.
 
     Returns
     -------
@@ -271,7 +457,7 @@ def fit_local_event_decision(
         picked = cols[[0, 1, 3, 4]]
         return np.column_stack([x[:, c] if c >= 0 else np.zeros(len(x)) for c in picked])
 
-    by_sign = {}
+    by_sign, picks = {}, {}
     for sign, what in ((1, "latch-on"), (-1, "latch-off")):
         pick = [k for k, (_, s) in enumerate(events) if s == sign]
         if len(pick) < 2:
@@ -279,8 +465,39 @@ def fit_local_event_decision(
                 f"the local latch-event law needs at least two {what} events in the training "
                 f"data, found {len(pick)}"
             )
-        by_sign[sign] = table([events[k][0] for k in pick])
+        by_sign[sign], picks[sign] = table([events[k][0] for k in pick]), pick
     both = np.vstack(list(by_sign.values()))
     scale = np.array([np.std(both[:, 2]), np.std(both[:, 3])])
     scale = np.where(scale > 1e-9 * np.maximum(np.abs(both[:, 2:]).max(axis=0), 1.0), scale, 1.0)
-    return LocalEventDecision(cols, by_sign[1], by_sign[-1], scale, float(bandwidth))
+    if line is None:
+        return LocalEventDecision(cols, by_sign[1], by_sign[-1], scale, float(bandwidth))
+    p = np.asarray(line, dtype=float)
+    if p.shape != (len(events),) or not np.all(np.isfinite(p)):
+        raise ModelError(
+            f"the line pressure at the latch events must be {len(events)} finite values"
+        )
+    sides = [(by_sign[s], p[picks[s]]) for s in (1, -1)]
+    coef, ref, ratio, p_value = line_coupling(sides, scale, float(bandwidth))
+    # NaN (no variation, nothing to explain) is not kept either.
+    if not (ratio <= LINE_COUPLING_RATIO and p_value <= LINE_COUPLING_P):
+        return LocalEventDecision(
+            cols,
+            by_sign[1],
+            by_sign[-1],
+            scale,
+            float(bandwidth),
+            line_ratio=ratio,
+            line_p_value=p_value,
+        )
+    on, off = (ev - np.outer(coef * (pk - ref), [1.0, 0.0, 0.0, 0.0]) for ev, pk in sides)
+    return LocalEventDecision(
+        cols,
+        on,
+        off,
+        scale,
+        float(bandwidth),
+        line_coef=coef,
+        line_reference=ref,
+        line_ratio=ratio,
+        line_p_value=p_value,
+    )

@@ -189,6 +189,7 @@ _PARAM_RULES: dict[str, Callable | None] = {
     "event_points": _one_of(("exclude", "assign")),
     "latch_model": _one_of(LATCH_MODELS),
     "latch_bandwidth": _number(0.0, strict=True),
+    "latch_line": _one_of(("auto", "off")),
     "latched_reference": _one_of(("line", "none")),
     **{name: _one_of(choices) for name, choices in STD_OPTIONS.items()},
     "latch_rate_scale": _optional(_number(0.0)),
@@ -585,6 +586,7 @@ class _Checker:
             a(prefix + "scale", (2,), positive=True)
             a(prefix + "bandwidth", (1,), positive=True)
             a(prefix + "slope", (2,), positive=True)
+            a(prefix + "line", (4,), required=False)  # files before the line coupling: none
             return
         a(prefix + "mean", (c,))
         a(prefix + "scale", (c,), positive=True, inf_ok=True)  # inf: a feature weighted 0

@@ -91,6 +91,8 @@ class _LocalEventStep:
         self.h2 = -0.5 / dec.bandwidth**2
         self.h2_slope = -0.5 / dec.slope_bandwidth**2
         self.rho = dec.slope_prior
+        self.uses_line = dec.uses_line
+        self.line = (dec.line_coef, dec.line_reference)
         self.branch = {}
         for side, ev in ((1, dec.on), (-1, dec.off)):
             di, dr = within_setting(ev, dec.scale, dec.bandwidth)
@@ -101,8 +103,12 @@ class _LocalEventStep:
             )
             self.branch[side] = (ev[:, 2] * self.s[0], ev[:, 3] * self.s[1], table)
 
-    def __call__(self, x: np.ndarray) -> float:
+    def __call__(self, x: np.ndarray, line_bar: float | None = None) -> float:
         i, di, direction, a, f = (x[k] if k >= 0 else 0.0 for k in self.cols)
+        if self.uses_line:
+            if line_bar is None:
+                raise ModelError("this model's latch decision follows line pressure: pass line_bar")
+            i = i - self.line[0] * (line_bar - self.line[1])
         a_k, f_k, table = self.branch[1 if direction >= 0 else -1]
         d2 = (a * self.s[0] - a_k) ** 2 + (f * self.s[1] - f_k) ** 2
         d2 -= d2.min()
@@ -153,7 +159,8 @@ class StepPredictor:
             One value per feature, in :attr:`feature_names` order and their units.
         line_bar : float, optional
             Line pressure (bar); required when :attr:`latched_line` (the model predicts
-            the latched plateau relative to line pressure).
+            the latched plateau relative to line pressure) and when the latch decision
+            follows line pressure (a kept ``latch_line`` coupling).
 
         Returns
         -------
@@ -164,7 +171,9 @@ class StepPredictor:
         if self._decide is None:
             g = self._single
         else:
-            g = 1 if self._decide(x) > 0 else 0
+            uses_line = getattr(self._decide, "uses_line", False)
+            d = self._decide(x, line_bar) if uses_line else self._decide(x)
+            g = 1 if d > 0 else 0
         out = self._gps[g](x)
         if self._phys is not None:
             out += x[self._phys]

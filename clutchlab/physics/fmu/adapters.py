@@ -124,6 +124,11 @@ def decision_spec(decision, columns=None) -> DecisionSpec:
             event_off=decision.events_with_deviations(decision.off),
             event_scale=np.asarray(decision.scale, dtype=float),
             event_slope=np.array([decision.slope_bandwidth, decision.slope_prior], dtype=float),
+            event_line=(
+                np.array([decision.line_coef, decision.line_reference], dtype=float)
+                if decision.uses_line
+                else None
+            ),
             **common,
         )
     raise FmuError(

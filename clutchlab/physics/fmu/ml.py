@@ -264,7 +264,8 @@ class DecisionSpec:
     dI/dt, dither amplitude and frequency, and the within-setting deviations of current
     and dI/dt, :func:`~clutchlab.residual_ml.latch_local.within_setting`), the amplitude
     and frequency scales in ``event_scale``, the bandwidth in ``gamma`` and the slope
-    prior's bandwidth and weight in ``event_slope``.
+    prior's bandwidth and weight in ``event_slope``; ``event_line`` ``(β, p̄)`` (mA/bar,
+    bar) when the law follows line pressure (the current is taken as ``I − β (p − p̄)``).
     """
 
     kind: str
@@ -281,6 +282,7 @@ class DecisionSpec:
     event_off: np.ndarray | None = None
     event_scale: np.ndarray | None = None
     event_slope: np.ndarray | None = None
+    event_line: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         ok = (
@@ -311,21 +313,31 @@ class DecisionSpec:
             )
         problems = _number_problems(
             self,
-            finite=("mean", "intercept", "support", "coef", "weights", "event_on", "event_off"),
+            finite=(
+                "mean",
+                "intercept",
+                "support",
+                "coef",
+                "weights",
+                "event_on",
+                "event_off",
+                "event_line",
+            ),
             positive=("gamma", "event_scale", "event_slope"),
             positive_or_inf=("scale",),  # inf: a feature the classifier weights 0
         )
         if problems:
             raise ModelError("invalid DecisionSpec: " + "; ".join(problems))
 
-    def __call__(self, x: ca.MX, const: _Constants = _INLINE) -> ca.MX:
-        """Decision value at the row vector ``x`` (1 × d)."""
+    def __call__(self, x: ca.MX, const: _Constants = _INLINE, line: ca.MX | None = None) -> ca.MX:
+        """Decision value at the row vector ``x`` (1 × d); ``line``: line pressure (bar),
+        needed with ``event_line``."""
         if self.columns is not None:
             x = ca.horzcat(*(x[:, c] for c in self.columns))
         if self.kind == "event":
             return self._event(x)
         if self.kind == "local_event":
-            return self._local_event(x)
+            return self._local_event(x, line)
         z = (x - const(self.mean).T) / const(self.scale).T
         if self.kind == "linear":
             return ca.dot(z.T, const(self.weights)) + self.intercept
@@ -350,9 +362,14 @@ class DecisionSpec:
 
         return ca.if_else(direction >= 0, branch(self.event_on), branch(self.event_off))
 
-    def _local_event(self, x: ca.MX) -> ca.MX:
+    def _local_event(self, x: ca.MX, line: ca.MX | None = None) -> ca.MX:
         """The local latch-event law (mA), as in :func:`~clutchlab.residual_ml.local_law`."""
         i, di, direction, a, f = self._event_inputs(x)
+        if self.event_line is not None:
+            if line is None:
+                raise ModelError("this latch law follows line pressure: give the line input")
+            coef, ref = (float(v) for v in np.asarray(self.event_line).ravel()[:2])
+            i = i - coef * (line - ref)
         s_a, s_f = (float(v) for v in self.event_scale)
         h_slope, rho = (float(v) for v in self.event_slope)
 
@@ -444,7 +461,9 @@ def _rows(x: ca.MX, a: int, b: int) -> ca.MX:
     return x[a:b] if b > a else ca.MX(0, 1)
 
 
-def _inputs(physics: FmuProgram | None, latched_line: bool = False) -> tuple[FmuVariable, ...]:
+def _inputs(
+    physics: FmuProgram | None, latched_line: bool = False, switch_line: bool = False
+) -> tuple[FmuVariable, ...]:
     if physics is not None:
         return physics.inputs
     line = (
@@ -452,6 +471,8 @@ def _inputs(physics: FmuProgram | None, latched_line: bool = False) -> tuple[Fmu
         if latched_line
         else "line pressure (not used by this model)"
     )
+    if switch_line:
+        line += "; the latch switch currents move with it"
     spec = FMU_INPUTS["command"] + (
         ("line_pressure_bar", "bar", line, 17.7),
         ("prime_pressure_bar", "bar", "prime pressure (not used by this model)", 0.5),
@@ -525,7 +546,9 @@ def ml_program(
     if problems:
         raise ModelError("cannot build the ML program:\n  - " + "\n  - ".join(problems))
 
-    inputs = _inputs(physics, latched_line)
+    inputs = _inputs(
+        physics, latched_line, decision is not None and decision.event_line is not None
+    )
     i_line = [u.name for u in inputs].index("line_pressure_bar")
     nv = len(inputs)
     use_didt = didt is not None and bool(slopes)
@@ -567,7 +590,7 @@ def ml_program(
             g = next(iter(gps.values()))
             mean, std = g.mean_std(feat, const, with_std)
             return mean, std, None
-        latched = decision(feat, const) > 0
+        latched = decision(feat, const, vv[i_line]) > 0
         g0, g1 = gps.get(0, gps.get(1)), gps.get(1, gps.get(0))
         m1, s1 = g1.mean_std(feat, const, with_std)
         if latched_line:
