@@ -52,19 +52,16 @@ def tiny_stand(seed: int):
     return run_stand(config, progress=False).dataset
 
 
-def tiny_supply_coupled(seed: int):
-    """Fifteen short experiments of the ``stribeck_supply`` zoo plant, whose latch switches
-    move with line pressure: fast / medium / slow (1 / 2 / 4 s ramps) × five dither
-    settings, two substeps (seed of the unit, noise and wander)."""
+def tiny_zoo(plant: str, seed: int, settings: tuple[tuple[float, str], ...]):
+    """Short experiments of a zoo plant: fast / medium / slow (1 / 2 / 4 s ramps) × the
+    dither ``settings`` ((frequency Hz, amplitude label), ...), two substeps (seed of the
+    unit, noise and wander)."""
     from clutchlab.physics.stand import DitherSetting, RampProfile
     from clutchlab.physics.stand.plants.run import PlantConfig, run_plant
 
     config = PlantConfig(
-        "stribeck_supply",
-        settings=tuple(
-            DitherSetting(f, a)
-            for f, a in ((30.0, "A"), (70.0, "B"), (50.0, "C"), (30.0, "C"), (70.0, "A"))
-        ),
+        plant,
+        settings=tuple(DitherSetting(f, a) for f, a in settings),
         ramps=(
             RampProfile("fast", 1.0, 0.3),
             RampProfile("medium", 2.0, 0.3),
@@ -74,6 +71,20 @@ def tiny_supply_coupled(seed: int):
         seed=seed,
     )
     return run_plant(config, progress=False).dataset
+
+
+def tiny_supply_coupled(seed: int):
+    """Fifteen short experiments of ``stribeck_supply``, whose latch switches move with
+    line pressure (five dither settings, :func:`tiny_zoo`)."""
+    settings = ((30.0, "A"), (70.0, "B"), (50.0, "C"), (30.0, "C"), (70.0, "A"))
+    return tiny_zoo("stribeck_supply", seed, settings)
+
+
+def tiny_never_latching(seed: int = 2):
+    """Fifteen short experiments of ``quadratic_play`` seed 2, whose 30 Hz B setting never
+    latches up to its 1100 mA peak (:func:`tiny_zoo`)."""
+    settings = ((30.0, "A"), (30.0, "B"), (70.0, "B"), (50.0, "C"), (70.0, "A"))
+    return tiny_zoo("quadratic_play", seed, settings)
 
 
 def check_latch_law_model(model, data, tmp_path, kind: str) -> None:

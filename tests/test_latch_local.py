@@ -6,7 +6,13 @@ import json
 
 import numpy as np
 import pytest
-from synthetic import check_latch_law_fmu, check_latch_law_model, tiny_stand, tiny_supply_coupled
+from synthetic import (
+    check_latch_law_fmu,
+    check_latch_law_model,
+    tiny_never_latching,
+    tiny_stand,
+    tiny_supply_coupled,
+)
 
 from clutchlab.errors import ModelError, ModelFileError
 from clutchlab.residual_ml import (
@@ -248,3 +254,34 @@ def test_train_names_the_coupling_it_kept(coupled_model, local_model):
     text = _latch_decision(coupled_model)
     assert "follow line pressure by +" in text and "permutation p" in text
     assert "no line-pressure coupling" in _latch_decision(local_model)
+
+
+def test_a_setting_that_never_latched_is_not_predicted_to_latch(tmp_path):
+    from clutchlab.physics.fmu import FmuPhysics, build_fmu, ml_program_from
+    from clutchlab.residual_ml.features import causal_features
+
+    data = tiny_never_latching()
+    train = data.select(ramps=["fast", "slow"])
+    model = SVCPartitionedGP(**SMALL).fit(train)
+    dec = model.decision_
+    # 30 Hz B reaches its 1100 mA peak without latching on both training ramps
+    assert len(dec.censored) == 2 and np.all(dec.censored[:, 0] > 1090.0)
+    np.testing.assert_array_equal(dec.censored[:, 2], [30.0, 30.0])
+    assert not model.predict_latch(data["medium_30Hz_B"]).any()
+    assert model.predict_latch(data["medium_30Hz_A"]).any()
+    check_latch_law_model(model, data, tmp_path, "local_event")
+    without = LocalEventDecision.from_arrays(
+        {k: v for k, v in dec.arrays().items() if k != "censored"}
+    )
+    F = model._trace_matrix(data["medium_30Hz_B"])[:, model.classifier_columns_]
+    line = data["medium_30Hz_B"].get("line_pressure_bar")
+    assert (without(F, line=line) > 0).any()  # the neighbours' law alone would latch
+    # The FMU holds the same rows and the same decision.
+    features = causal_features(SVCPartitionedGP()._builder().names)
+    causal = SVCPartitionedGP(features=features, **SMALL).fit(train)
+    assert len(causal.decision_.censored) == 2
+    fmu = build_fmu(ml_program_from(causal, with_std=False), tmp_path / "never.fmu")
+    causal.set_params(knot_tol=0.0)
+    for name in ("medium_30Hz_B", "medium_30Hz_A"):
+        sim = FmuPhysics(fmu).simulate(data[name])
+        np.testing.assert_array_equal(sim.outputs["latch_state"], causal.predict_latch(data[name]))

@@ -54,7 +54,7 @@ from .hybrid import HYBRID_FEATURES, HybridModel
 from .kernels import KERNELS, KernelSpec, kernel_spec
 from .labels import EVENT, LATCHED, UNLATCHED, LatchLabelRule, latch_labels
 from .lag import LAG_GRID_S, LagSelection, select_lag
-from .latch_local import LocalEventDecision, local_law
+from .latch_local import LocalEventDecision, censored_share, line_coupling, local_law
 from .latch_timing import LatchTiming
 from .local_gp import LocalGPRegressor, log_marginal_likelihood
 from .model_check import check_model, check_model_document
@@ -105,6 +105,7 @@ __all__ = [
     "StepPredictor",
     "TraceEstimator",
     "as_traces",
+    "censored_share",
     "check_model",
     "check_model_document",
     "compare_classifiers",
@@ -114,6 +115,7 @@ __all__ = [
     "kernel_spec",
     "latch_labels",
     "leave_one_experiment_out",
+    "line_coupling",
     "load_model",
     "local_law",
     "loeo_residuals",

@@ -719,7 +719,15 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
             # training experiment, a latch that never releases) the classifier decides.
             if min(sum(s == d for _, s in events) for d in (1, -1)) >= 2:
                 line = self._event_line(blocks)
-                return None, fit_local_event_decision(events, names, self.latch_bandwidth, line)
+                cur = decision_current_columns(names)[0]
+                never = [
+                    blk.X[:, cols][int(np.argmax(blk.X[:, cols[cur]]))]
+                    for blk in blocks
+                    if not np.any(blk.state == 1)
+                ]
+                return None, fit_local_event_decision(
+                    events, names, self.latch_bandwidth, line, censored=never
+                )
         clean = b.labels >= 0
         clf = self._make_classifier().fit(b.X[clean][:, cols], b.labels[clean])
         return clf, lean_decision(clf)

@@ -41,13 +41,22 @@ without the held-out event, it lowers the held-out RMS to at most
 :data:`LINE_COUPLING_RATIO` of that without, and line pressures reassigned at random
 among the events do as well in at most :data:`LINE_COUPLING_P` of the tries (with few
 events a wander lines up with the law's misses by chance). The law then runs on the
-corrected currents
-``Iₖ − β (pₖ − p̄)``, and the decision is ``d(x) = I − β (p − p̄) − θ − τ İ``.
+corrected currents ``Iₖ − β (pₖ − p̄)``, and the decision is
+``d(x) = I − β (p − p̄) − θ − τ İ``.
+
+**Settings that never latched.** A training experiment whose current reached its peak
+``I_c`` without a latch-on leaves no event, so its dither setting would borrow the law of
+its latching neighbours and be predicted to latch (on ``quadratic_play`` seed 2 the 30 Hz
+B setting never latches up to 1100 mA at any ramp rate). Such experiments are kept as
+censored rows ``(I_c, A, f)``: where their share of the kernel weights, against the
+latch-on events', exceeds one half, the decision is at most ``I − Ī_c`` (``Ī_c`` the
+highest peak of the nearest of them) on either branch: not latched below the currents at
+which that setting was seen not to latch.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -61,6 +70,7 @@ __all__ = [
     "SLOPE_BANDWIDTH",
     "SLOPE_PRIOR",
     "LocalEventDecision",
+    "censored_share",
     "fit_local_event_decision",
     "held_out_residuals",
     "line_coupling",
@@ -229,7 +239,7 @@ def line_coupling(
     sides: list[tuple[np.ndarray, np.ndarray]],
     scale: np.ndarray,
     h: float,
-    permutations: int = LINE_PERMUTATIONS,
+    permutations: int | None = None,
 ) -> tuple[float, float, float, float]:
     """The switch currents' coupling to line pressure, tested by leave-one-event-out.
 
@@ -241,8 +251,9 @@ def line_coupling(
         Amplitude (mA) and frequency (Hz) scales of the distances.
     h : float
         Bandwidth of the law.
-    permutations : int
-        Random reassignments of the line pressures to the events for the p-value.
+    permutations : int, optional
+        Random reassignments of the line pressures to the events for the p-value
+        (default :data:`LINE_PERMUTATIONS`).
 
     Returns
     -------
@@ -276,6 +287,7 @@ def line_coupling(
         return 0.0, reference, float("nan"), float("nan")
     ratio = _nested_ratio(e, g)
     rng = np.random.default_rng(0)
+    permutations = LINE_PERMUTATIONS if permutations is None else int(permutations)
     hits = sum(_nested_ratio(e, g_of(rng.permutation(p))) <= ratio for _ in range(permutations))
     return float(e @ g) / float(g @ g), reference, ratio, (1 + hits) / (1 + permutations)
 
@@ -307,6 +319,9 @@ class LocalEventDecision:
     line_ratio, line_p_value : float
         Held-out RMS ratio and permutation p-value of :func:`line_coupling` (NaN: not
         tested, e.g. no line pressure logged).
+    censored : numpy.ndarray
+        ``(m, 3)``: peak current (mA), dither amplitude (mA) and frequency (Hz) of the
+        training experiments that never latched (empty: none).
     """
 
     columns: np.ndarray
@@ -320,6 +335,7 @@ class LocalEventDecision:
     line_reference: float = 0.0
     line_ratio: float = float("nan")
     line_p_value: float = float("nan")
+    censored: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))
 
     kind = "local_event"
 
@@ -361,8 +377,17 @@ class LocalEventDecision:
                 if np.any(sel):
                     theta, tau = self._law(ev, amp[sel], freq[sel])
                     d[sel] = i[sel] - theta - tau * di[sel]
-            out[a : a + _CHUNK] = d
-        return out - self.line_shift(line) if self.uses_line else out
+            if self.uses_line:
+                d -= self.line_shift(np.asarray(line, dtype=float)[a : a + _CHUNK])
+            out[a : a + _CHUNK] = self._censor(d, i, amp, freq)
+        return out
+
+    def _censor(self, d: np.ndarray, i: np.ndarray, amp: np.ndarray, freq: np.ndarray):
+        """``d``, at most ``I − Ī_c`` where censored rows hold most of the weight."""
+        if len(self.censored) == 0:
+            return d
+        share, peak = censored_share(self.on, self.censored, self.scale, self.bandwidth, amp, freq)
+        return np.where(share > 0.5, np.minimum(d, i - peak), d)
 
     def events_with_deviations(self, events: np.ndarray) -> np.ndarray:
         """``(n, 6)``: the events and their :func:`within_setting` deviations (mA, mA/s)."""
@@ -376,8 +401,9 @@ class LocalEventDecision:
         return float(on[0]), float(off[0])
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """Arrays for an NPZ file."""
-        return {
+        """Arrays for an NPZ file (``censored`` only when there are such rows)."""
+        extra = {"censored": np.asarray(self.censored, dtype=float)} if len(self.censored) else {}
+        return extra | {
             "columns": np.asarray(self.columns, dtype=float),
             "on": np.asarray(self.on, dtype=float),
             "off": np.asarray(self.off, dtype=float),
@@ -411,7 +437,55 @@ class LocalEventDecision:
             float(line[1]),
             ratio,
             p_value,
+            np.asarray(a.get("censored", np.empty((0, 3))), dtype=float).reshape(-1, 3),
         )
+
+
+def censored_share(
+    on: np.ndarray,
+    censored: np.ndarray,
+    scale: np.ndarray,
+    h: float,
+    amp: np.ndarray,
+    freq: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Share of the censored rows in the kernel weights and their weighted peak current.
+
+    Parameters
+    ----------
+    on : numpy.ndarray
+        ``(n, 4)`` latch-on events (current mA, dI/dt mA/s, amplitude mA, frequency Hz).
+    censored : numpy.ndarray
+        ``(m, 3)`` never-latched experiments: peak current (mA), amplitude (mA),
+        frequency (Hz); ``m ≥ 1``.
+    scale : numpy.ndarray
+        Amplitude (mA) and frequency (Hz) scales of the distances.
+    h : float
+        Bandwidth of the law.
+    amp, freq : numpy.ndarray
+        Query dither amplitude (mA) and frequency (Hz).
+
+    Returns
+    -------
+    share : numpy.ndarray
+        Censored weight over censored plus latch-on weight (dimensionless) per query.
+    peak : numpy.ndarray
+        Highest peak current (mA) of the censored rows with at least half the largest
+        censored weight, per query (the setting's own experiments at every ramp rate).
+    """
+    amp = np.asarray(amp, dtype=float)[:, None]
+    freq = np.asarray(freq, dtype=float)[:, None]
+
+    def q(a_k, f_k):
+        return (((amp - a_k[None]) / scale[0]) ** 2 + ((freq - f_k[None]) / scale[1]) ** 2) / h**2
+
+    q_on, q_c = q(on[:, 2], on[:, 3]), q(censored[:, 1], censored[:, 2])
+    low = np.minimum(q_on.min(axis=1), q_c.min(axis=1))[:, None]
+    w_on, w_c = np.exp(-0.5 * (q_on - low)), np.exp(-0.5 * (q_c - low))
+    sw_c = w_c.sum(axis=1)
+    near = w_c >= 0.5 * w_c.max(axis=1, keepdims=True)
+    peak = np.where(near, censored[None, :, 0], -np.inf).max(axis=1)
+    return sw_c / (sw_c + w_on.sum(axis=1)), peak
 
 
 def fit_local_event_decision(
@@ -419,6 +493,7 @@ def fit_local_event_decision(
     feature_names: list[str],
     bandwidth: float,
     line: np.ndarray | None = None,
+    censored: list[np.ndarray] | None = None,
 ) -> LocalEventDecision:
     """Collect the local latch-event law's training events.
 
@@ -436,6 +511,9 @@ def fit_local_event_decision(
         Line pressure (bar) at each event: the coupling is tested (:func:`line_coupling`)
         and kept when its held-out ratio is at most :data:`LINE_COUPLING_RATIO` and its
         permutation p-value at most :data:`LINE_COUPLING_P`.
+    censored : list of numpy.ndarray, optional
+        One feature row (``feature_names`` order) per training experiment that never
+        latched, at its peak current.
 
     Returns
     -------
@@ -469,8 +547,11 @@ def fit_local_event_decision(
     both = np.vstack(list(by_sign.values()))
     scale = np.array([np.std(both[:, 2]), np.std(both[:, 3])])
     scale = np.where(scale > 1e-9 * np.maximum(np.abs(both[:, 2:]).max(axis=0), 1.0), scale, 1.0)
+    cens = table(list(censored))[:, [0, 2, 3]] if censored else np.empty((0, 3))
     if line is None:
-        return LocalEventDecision(cols, by_sign[1], by_sign[-1], scale, float(bandwidth))
+        return LocalEventDecision(
+            cols, by_sign[1], by_sign[-1], scale, float(bandwidth), censored=cens
+        )
     p = np.asarray(line, dtype=float)
     if p.shape != (len(events),) or not np.all(np.isfinite(p)):
         raise ModelError(
@@ -488,6 +569,7 @@ def fit_local_event_decision(
             float(bandwidth),
             line_ratio=ratio,
             line_p_value=p_value,
+            censored=cens,
         )
     on, off = (ev - np.outer(coef * (pk - ref), [1.0, 0.0, 0.0, 0.0]) for ev, pk in sides)
     return LocalEventDecision(
@@ -500,4 +582,5 @@ def fit_local_event_decision(
         line_reference=ref,
         line_ratio=ratio,
         line_p_value=p_value,
+        censored=cens,
     )

@@ -587,6 +587,7 @@ class _Checker:
             a(prefix + "bandwidth", (1,), positive=True)
             a(prefix + "slope", (2,), positive=True)
             a(prefix + "line", (4,), required=False)  # files before the line coupling: none
+            a(prefix + "censored", (None, 3), required=False)  # files before it: none
             return
         a(prefix + "mean", (c,))
         a(prefix + "scale", (c,), positive=True, inf_ok=True)  # inf: a feature weighted 0

@@ -93,6 +93,13 @@ class _LocalEventStep:
         self.rho = dec.slope_prior
         self.uses_line = dec.uses_line
         self.line = (dec.line_coef, dec.line_reference)
+        cens = np.asarray(dec.censored, dtype=float).reshape(-1, 3)
+        # censored_share for one query: scaled coordinates of the latch-on events and of
+        # the never-latched rows, and the rows' peak currents
+        self.censored = (
+            (dec.on[:, 2] * self.s[0], dec.on[:, 3] * self.s[1]),
+            (cens[:, 1] * self.s[0], cens[:, 2] * self.s[1], cens[:, 0]),
+        )
         self.branch = {}
         for side, ev in ((1, dec.on), (-1, dec.off)):
             di, dr = within_setting(ev, dec.scale, dec.bandwidth)
@@ -104,7 +111,8 @@ class _LocalEventStep:
             self.branch[side] = (ev[:, 2] * self.s[0], ev[:, 3] * self.s[1], table)
 
     def __call__(self, x: np.ndarray, line_bar: float | None = None) -> float:
-        i, di, direction, a, f = (x[k] if k >= 0 else 0.0 for k in self.cols)
+        i_raw, di, direction, a, f = (x[k] if k >= 0 else 0.0 for k in self.cols)
+        i = i_raw
         if self.uses_line:
             if line_bar is None:
                 raise ModelError("this model's latch decision follows line pressure: pass line_bar")
@@ -120,7 +128,17 @@ class _LocalEventStep:
         var_r = mrr - mr * mr
         lam = self.rho * mrr
         tau = ((mri - mr * mi) + lam * tau0) / (var_r + lam) if var_r + lam > 0 else 0.0
-        return float(i - (mi - tau * mr) - tau * di)
+        d = float(i - (mi - tau * mr) - tau * di)
+        (a_on, f_on), (a_c, f_c, peak) = self.censored
+        if len(peak):
+            q_on = (a * self.s[0] - a_on) ** 2 + (f * self.s[1] - f_on) ** 2
+            q_c = (a * self.s[0] - a_c) ** 2 + (f * self.s[1] - f_c) ** 2
+            low = min(q_on.min(), q_c.min())
+            w_c = np.exp(self.h2 * (q_c - low))
+            sw_c = w_c.sum()
+            if sw_c > np.exp(self.h2 * (q_on - low)).sum():  # share > 1/2
+                d = min(d, float(i_raw - peak[w_c >= 0.5 * w_c.max()].max()))
+        return d
 
 
 class StepPredictor:

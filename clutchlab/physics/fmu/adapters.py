@@ -129,6 +129,9 @@ def decision_spec(decision, columns=None) -> DecisionSpec:
                 if decision.uses_line
                 else None
             ),
+            event_censored=(
+                np.asarray(decision.censored, dtype=float) if len(decision.censored) else None
+            ),
             **common,
         )
     raise FmuError(

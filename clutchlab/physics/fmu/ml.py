@@ -265,7 +265,9 @@ class DecisionSpec:
     and dI/dt, :func:`~clutchlab.residual_ml.latch_local.within_setting`), the amplitude
     and frequency scales in ``event_scale``, the bandwidth in ``gamma`` and the slope
     prior's bandwidth and weight in ``event_slope``; ``event_line`` ``(β, p̄)`` (mA/bar,
-    bar) when the law follows line pressure (the current is taken as ``I − β (p − p̄)``).
+    bar) when the law follows line pressure (the current is taken as ``I − β (p − p̄)``);
+    ``event_censored`` ``(m, 3)``, the never-latched training experiments (peak current mA,
+    amplitude mA, frequency Hz; :func:`~clutchlab.residual_ml.censored_share`).
     """
 
     kind: str
@@ -283,6 +285,7 @@ class DecisionSpec:
     event_scale: np.ndarray | None = None
     event_slope: np.ndarray | None = None
     event_line: np.ndarray | None = None
+    event_censored: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         ok = (
@@ -322,6 +325,7 @@ class DecisionSpec:
                 "event_on",
                 "event_off",
                 "event_line",
+                "event_censored",
             ),
             positive=("gamma", "event_scale", "event_slope"),
             positive_or_inf=("scale",),  # inf: a feature the classifier weights 0
@@ -365,6 +369,7 @@ class DecisionSpec:
     def _local_event(self, x: ca.MX, line: ca.MX | None = None) -> ca.MX:
         """The local latch-event law (mA), as in :func:`~clutchlab.residual_ml.local_law`."""
         i, di, direction, a, f = self._event_inputs(x)
+        i_raw = i
         if self.event_line is not None:
             if line is None:
                 raise ModelError("this latch law follows line pressure: give the line input")
@@ -395,7 +400,22 @@ class DecisionSpec:
             tau = ca.if_else(den > 0, (cov + lam * tau0) / ca.fmax(den, 1e-300), 0)
             return i - (mi - tau * mr) - tau * di
 
-        return ca.if_else(direction >= 0, branch(self.event_on), branch(self.event_off))
+        d = ca.if_else(direction >= 0, branch(self.event_on), branch(self.event_off))
+        cens = np.asarray(self.event_censored if self.event_censored is not None else [])
+        if cens.size == 0:
+            return d
+        on = np.asarray(self.event_on, dtype=float)
+        cens = cens.reshape(-1, 3)
+        h = float(self.gamma)
+        q_on = ((a - ca.DM(on[:, 2])) ** 2 / s_a**2 + (f - ca.DM(on[:, 3])) ** 2 / s_f**2) / h**2
+        q_c = ((a - ca.DM(cens[:, 1])) ** 2 / s_a**2 + (f - ca.DM(cens[:, 2])) ** 2 / s_f**2) / h**2
+        low = ca.fmin(ca.mmin(q_on), ca.mmin(q_c))
+        w_on, w_c = ca.exp(-0.5 * (q_on - low)), ca.exp(-0.5 * (q_c - low))
+        sw_c = ca.sum1(w_c)
+        share = sw_c / (sw_c + ca.sum1(w_on))
+        near = w_c >= 0.5 * ca.mmax(w_c)
+        peak = ca.mmax(ca.if_else(near, ca.DM(cens[:, 0]), -1e30))
+        return ca.if_else(share > 0.5, ca.fmin(d, i_raw - peak), d)
 
 
 @dataclass(frozen=True)
