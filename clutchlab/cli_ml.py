@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 from pathlib import Path
@@ -215,36 +214,8 @@ def register(sub) -> None:
     p.set_defaults(func=_cmd_train)
 
 
-#: How ``clutchlab train`` names each latch decision.
-_LATCH_NAMES = {
-    "local_event": "local latch-event law (a line in dI/dt per dither setting)",
-    "event": "latch-event law (one plane over the dither settings)",
-    "classifier": "classifier",
-    "none": "none (one latch state in the training data)",
-}
-
-
 def _latch_decision(model) -> str | None:
-    """What decides the latch state of ``model`` (or of a hybrid's residual model)."""
-    est = getattr(model, "residual_", None) or model
-    kind = getattr(est, "latch_model_", None)
-    if kind is None:
-        return None
-    text = _LATCH_NAMES.get(kind, kind)
-    if kind == "local_event":
-        dec = est.decision_
-        text += f", bandwidth {dec.bandwidth:g}"
-        if dec.uses_line:
-            text += (
-                f", switch currents follow line pressure by {dec.line_coef:+.1f} mA/bar "
-                f"(held-out error x{dec.line_ratio:.2f}, permutation p {dec.line_p_value:.3f})"
-            )
-        elif math.isfinite(dec.line_ratio):
-            text += (
-                f", no line-pressure coupling (held-out error x{dec.line_ratio:.2f}, "
-                f"permutation p {dec.line_p_value:.3f})"
-            )
-    elif kind == "classifier" and getattr(est, "classifier", None):
-        text += f" {est.classifier}"
-    acc = getattr(est, "classifier_train_accuracy_", None)
-    return text + (f"; training latch-state accuracy {100 * acc:.2f} %" if acc is not None else "")
+    """What decides the latch state of ``model`` (the report's words too)."""
+    from .residual_ml import latch_decision_text
+
+    return latch_decision_text(model)

@@ -276,4 +276,8 @@ def test_ml_variants_go_through_the_protocol(tiny):
         assert all(p.std_bar is None for p in score.predictions.values())  # featured only
     acc = ev.scores["paper_svc_gp"].details["classifier_accuracy"]
     assert 0.5 < acc <= 1.0
+    # The report names what decides the latch state, in clutchlab train's words.
+    said = ev.scores["paper_svc_gp"].details["latch_decision"]
+    assert said.startswith("local latch-event law") and "line-pressure coupling" in said
+    assert "latch_decision" not in ev.scores["gp_base"].details
     assert ev.classifier_comparison is None

@@ -55,6 +55,7 @@ from .kernels import KERNELS, KernelSpec, kernel_spec
 from .labels import EVENT, LATCHED, UNLATCHED, LatchLabelRule, latch_labels
 from .lag import LAG_GRID_S, LagSelection, select_lag
 from .latch_local import LocalEventDecision, censored_share, line_coupling, local_law
+from .latch_summary import LATCH_NAMES, latch_decision_text
 from .latch_timing import LatchTiming
 from .local_gp import LocalGPRegressor, log_marginal_likelihood
 from .model_check import check_model, check_model_document
@@ -78,6 +79,7 @@ __all__ = [
     "LATCHED",
     "LATCH_BANDWIDTH",
     "LATCH_MODELS",
+    "LATCH_NAMES",
     "LATCH_RATE_SCALE",
     "LATCH_RATE_SCALES",
     "PHYSICS_FEATURES",
@@ -113,6 +115,7 @@ __all__ = [
     "fit_variance_floor",
     "grid_bins",
     "kernel_spec",
+    "latch_decision_text",
     "latch_labels",
     "leave_one_experiment_out",
     "line_coupling",

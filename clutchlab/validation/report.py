@@ -384,6 +384,8 @@ def _describe(name: str, d: dict[str, Any], html_: bool) -> str:
     text = d["description"]
     if d.get("classifier_accuracy") is not None:
         text += f"; latch-classifier accuracy on the test ramp {fmt(d['classifier_accuracy'])}"
+    if d.get("latch_decision"):
+        text += f"; latch decision: {d['latch_decision']}"
     if d.get("residual_form"):
         scores = d.get("residual_form_loeo_rmse_bar") or {}
         why = ", ".join(f"{k} {fmt(v)} bar" for k, v in scores.items())
