@@ -51,7 +51,11 @@ B setting never latches up to 1100 mA at any ramp rate). Such experiments are ke
 censored rows ``(I_c, A, f)``: where their share of the kernel weights, against the
 latch-on events', exceeds one half, the decision is at most ``I − Ī_c`` (``Ī_c`` the
 highest peak of the nearest of them) on either branch: not latched below the currents at
-which that setting was seen not to latch.
+which that setting was seen not to latch. Known limit: the rule does not ask whether a
+censored experiment contradicts the law (reached the law's latch-on current at its own
+rate). Where a setting's non-latching experiments outnumber its latching ones only because
+they stopped short of the latch-on current (partial ramps), a full ramp at that setting
+would be released at their peak on the way down instead of at the latch-off current.
 """
 
 from __future__ import annotations
