@@ -239,8 +239,9 @@ def test_the_partitioned_gp_keeps_a_line_coupling_where_the_latch_has_one(
     # On the stand (no coupling) the test runs and keeps none.
     stand = SVCPartitionedGP(**SMALL).fit(data.select(ramps=["fast", "slow"]))
     assert not stand.decision_.uses_line and np.isfinite(stand.decision_.line_ratio)
-    with pytest.raises(ModelError, match="latch_line"):
-        SVCPartitionedGP(latch_line="on", **SMALL).fit(train)
+    for latch_model in ("local_event", "classifier"):
+        with pytest.raises(ModelError, match="latch_line"):
+            SVCPartitionedGP(latch_line="on", latch_model=latch_model, **SMALL).fit(train)
 
 
 def test_a_line_coupled_latch_law_exports_to_an_exact_fmu(coupled, tmp_path):
@@ -285,3 +286,18 @@ def test_a_setting_that_never_latched_is_not_predicted_to_latch(tmp_path):
     for name in ("medium_30Hz_B", "medium_30Hz_A"):
         sim = FmuPhysics(fmu).simulate(data[name])
         np.testing.assert_array_equal(sim.outputs["latch_state"], causal.predict_latch(data[name]))
+
+
+def test_only_never_latched_experiments_that_contradict_the_law_are_kept():
+    """A partial ramp that stopped short of its setting's latch-on current is consistent
+    with the law and dropped; a ramp past it without latching is kept."""
+    short = np.array([850.0, 40.0, 30.0, 27.5, 1.0])  # law: 905 + 0.15 * 27.5 mA
+    past = np.array([1100.0, 70.0, 50.0, 27.5, 1.0])  # a new setting; neighbours latch < 1000
+    dec = fit_local_event_decision(
+        _events(SHARED_SLOPES), NAMES, bandwidth=0.2, censored=[short, past]
+    )
+    np.testing.assert_array_equal(dec.censored, [[1100.0, 70.0, 50.0]])
+    fall = np.array([[880.0, 40.0, 30.0, -27.5, -1.0]])  # above 790 - 0.25 * 27.5: latched
+    assert dec(fall)[0] > 0
+    rise = np.array([[1050.0, 70.0, 50.0, 27.5, 1.0]])
+    assert dec(rise)[0] < 0 and LocalEventDecision.from_arrays(dec.arrays())(rise)[0] < 0

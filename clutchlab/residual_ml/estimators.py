@@ -615,6 +615,8 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
             raise ModelError(
                 f"latched_reference must be 'line' or 'none', got {self.latched_reference!r}"
             )
+        if self.latch_line not in ("auto", "off"):
+            raise ModelError(f"latch_line must be 'auto' or 'off', got {self.latch_line!r}")
         b = self._stack(blocks)
         use_ref = self.latched_reference == "line" and b.ref is not None
         self.latched_reference_ = "line" if use_ref else "none"
@@ -719,12 +721,7 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
             # training experiment, a latch that never releases) the classifier decides.
             if min(sum(s == d for _, s in events) for d in (1, -1)) >= 2:
                 line = self._event_line(blocks)
-                cur = decision_current_columns(names)[0]
-                never = [
-                    blk.X[:, cols][int(np.argmax(blk.X[:, cols[cur]]))]
-                    for blk in blocks
-                    if not np.any(blk.state == 1)
-                ]
+                never = [_peak_row(blk.X[:, cols], names) for blk in blocks if not blk.state.any()]
                 return None, fit_local_event_decision(
                     events, names, self.latch_bandwidth, line, censored=never
                 )
@@ -735,8 +732,6 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
     def _event_line(self, blocks: list[Block]) -> np.ndarray | None:
         """Line pressure (bar) at each latch event of ``blocks`` (the order of
         :func:`latch_events`), or None without a line reference."""
-        if self.latch_line not in ("auto", "off"):
-            raise ModelError(f"latch_line must be 'auto' or 'off', got {self.latch_line!r}")
         off = self.latch_line == "off" or self.latched_reference != "line"
         if off or any(blk.ref is None for blk in blocks):
             return None
@@ -971,3 +966,14 @@ def _path_classes(decide, X: np.ndarray, knots: np.ndarray, ref: np.ndarray | No
         return piecewise_classes(X, knots, lambda Z: decide(Z, None))
     Xr = np.column_stack([X, ref])
     return piecewise_classes(Xr, knots, lambda Z: decide(Z[:, :-1], Z[:, -1]))
+
+
+def _peak_row(X: np.ndarray, names: list[str]) -> np.ndarray:
+    """Decision row of a never-latched experiment: the row at its peak current with the
+    fastest rise before it (mA/s) in the dI/dt column (the rate its peak was reached at)."""
+    cur, didt = decision_current_columns(names)
+    k = int(np.argmax(X[:, cur]))
+    row = X[k].copy()
+    if didt >= 0:
+        row[didt] = float(np.max(X[: k + 1, didt]))
+    return row

@@ -51,11 +51,10 @@ B setting never latches up to 1100 mA at any ramp rate). Such experiments are ke
 censored rows ``(I_c, A, f)``: where their share of the kernel weights, against the
 latch-on events', exceeds one half, the decision is at most ``I − Ī_c`` (``Ī_c`` the
 highest peak of the nearest of them) on either branch: not latched below the currents at
-which that setting was seen not to latch. Known limit: the rule does not ask whether a
-censored experiment contradicts the law (reached the law's latch-on current at its own
-rate). Where a setting's non-latching experiments outnumber its latching ones only because
-they stopped short of the latch-on current (partial ramps), a full ramp at that setting
-would be released at their peak on the way down instead of at the latch-off current.
+which that setting was seen not to latch. Only experiments that contradict the law are kept:
+those whose peak reached the law's latch-on current at their own rise rate (a partial ramp
+that stopped short of it says nothing the law does not; kept, it would release a full ramp
+at its peak on the way down instead of at the latch-off current).
 """
 
 from __future__ import annotations
@@ -517,7 +516,9 @@ def fit_local_event_decision(
         permutation p-value at most :data:`LINE_COUPLING_P`.
     censored : list of numpy.ndarray, optional
         One feature row (``feature_names`` order) per training experiment that never
-        latched, at its peak current.
+        latched, at its peak current, with the rise's dI/dt (mA/s) in its dI/dt column.
+        Kept (as ``censored``) only where the peak reached the law's latch-on current
+        at that rate.
 
     Returns
     -------
@@ -551,7 +552,13 @@ def fit_local_event_decision(
     both = np.vstack(list(by_sign.values()))
     scale = np.array([np.std(both[:, 2]), np.std(both[:, 3])])
     scale = np.where(scale > 1e-9 * np.maximum(np.abs(both[:, 2:]).max(axis=0), 1.0), scale, 1.0)
-    cens = table(list(censored))[:, [0, 2, 3]] if censored else np.empty((0, 3))
+    cens = np.empty((0, 3))
+    if censored:
+        rows = table(list(censored))  # current at the peak, rise rate, amplitude, frequency
+        theta, tau = local_law(by_sign[1], scale, float(bandwidth), rows[:, 2], rows[:, 3])
+        # only experiments that reached the law's latch-on current (at their own rise rate)
+        # without latching contradict it; one that stopped short tells nothing new
+        cens = rows[rows[:, 0] >= theta + tau * rows[:, 1]][:, [0, 2, 3]]
     if line is None:
         return LocalEventDecision(
             cols, by_sign[1], by_sign[-1], scale, float(bandwidth), censored=cens
