@@ -34,18 +34,21 @@ def make_trace(
     return Trace(name, signals, meta={"ramp": ramp})
 
 
+def _tiny_ramps():
+    """The tiny datasets' ramps: fast / medium / slow, 1 / 2 / 4 s, 0.3 s holds."""
+    from clutchlab.physics.stand import RampProfile
+
+    return tuple(RampProfile(n, d, 0.3) for n, d in (("fast", 1.0), ("medium", 2.0), ("slow", 4.0)))
+
+
 def tiny_stand(seed: int):
     """Six short stand experiments: fast / medium / slow (1 / 2 / 4 s ramps) × (30 Hz A,
     70 Hz B), two substeps; the dataset of the ML tests (seed of noise and wander)."""
-    from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
+    from clutchlab.physics.stand import DitherSetting, StandConfig, run_stand
 
     config = StandConfig(
         settings=(DitherSetting(30.0, "A"), DitherSetting(70.0, "B")),
-        ramps=(
-            RampProfile("fast", 1.0, 0.3),
-            RampProfile("medium", 2.0, 0.3),
-            RampProfile("slow", 4.0, 0.3),
-        ),
+        ramps=_tiny_ramps(),
         substeps=2,
         seed=seed,
     )
@@ -56,17 +59,13 @@ def tiny_zoo(plant: str, seed: int, settings: tuple[tuple[float, str], ...]):
     """Short experiments of a zoo plant: fast / medium / slow (1 / 2 / 4 s ramps) × the
     dither ``settings`` ((frequency Hz, amplitude label), ...), two substeps (seed of the
     unit, noise and wander)."""
-    from clutchlab.physics.stand import DitherSetting, RampProfile
+    from clutchlab.physics.stand import DitherSetting
     from clutchlab.physics.stand.plants.run import PlantConfig, run_plant
 
     config = PlantConfig(
         plant,
         settings=tuple(DitherSetting(f, a) for f, a in settings),
-        ramps=(
-            RampProfile("fast", 1.0, 0.3),
-            RampProfile("medium", 2.0, 0.3),
-            RampProfile("slow", 4.0, 0.3),
-        ),
+        ramps=_tiny_ramps(),
         substeps=2,
         seed=seed,
     )
