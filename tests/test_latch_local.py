@@ -182,6 +182,16 @@ def test_held_out_residuals_are_those_of_one_linear_predictor():
     u, v = rng.standard_normal(len(dec.on)), rng.standard_normal(len(dec.on))
     r = lambda w: held_out_residuals(dec.on, dec.scale, 0.2, w)  # noqa: E731
     np.testing.assert_allclose(r(2.0 * u - 3.0 * v), 2.0 * r(u) - 3.0 * r(v), atol=1e-9)
+    # Several value columns at once are each held out on their own: the first column is
+    # the currents themselves (the law's own held-out misses, one event left out at a time).
+    cols = np.column_stack([dec.on[:, 0], u, v])
+    both = r(cols)
+    for j in range(3):
+        np.testing.assert_allclose(both[:, j], r(cols[:, j]), atol=1e-9)
+    k = 3
+    rest = np.delete(dec.on, k, axis=0)
+    theta, tau = local_law(rest, dec.scale, 0.2, dec.on[k : k + 1, 2], dec.on[k : k + 1, 3])
+    assert both[k, 0] == pytest.approx(dec.on[k, 0] - theta[0] - tau[0] * dec.on[k, 1], abs=1e-9)
 
 
 def test_a_latch_that_follows_line_pressure_is_found_and_its_law_corrected():

@@ -100,15 +100,19 @@ LINE_PERMUTATIONS = 199
 
 
 def _moments(d2: np.ndarray, h: float, i_k: np.ndarray, r_k: np.ndarray):
-    """Weighted means of I and İ, variance of İ, covariance, mean square of İ."""
+    """Weighted means of I and İ, variance of İ, covariance, mean square of İ.
+
+    ``i_k`` is ``(n, m)`` (``m`` value columns); the means of I and the covariances are
+    ``(queries, m)``, the rest ``(queries, 1)``.
+    """
     q = d2 / h**2
     # Relative weights: the nearest event has weight 1, so a query far from every event
     # still gets the law of its nearest ones instead of 0/0.
     w = np.exp(-0.5 * (q - q.min(axis=1, keepdims=True)))
-    sw = w.sum(axis=1)
-    mr, mi = (w @ r_k) / sw, (w @ i_k) / sw
-    mrr = (w @ (r_k * r_k)) / sw
-    return mr, mi, mrr - mr**2, (w @ (r_k * i_k)) / sw - mr * mi, mrr
+    sw = w.sum(axis=1, keepdims=True)
+    mr, mi = (w @ r_k)[:, None] / sw, (w @ i_k) / sw
+    mrr = (w @ (r_k * r_k))[:, None] / sw
+    return mr, mi, mrr - mr**2, (w @ (r_k[:, None] * i_k)) / sw - mr * mi, mrr
 
 
 def within_setting(events: np.ndarray, scale: np.ndarray, h: float) -> tuple[np.ndarray, ...]:
@@ -123,19 +127,29 @@ def within_setting(events: np.ndarray, scale: np.ndarray, h: float) -> tuple[np.
     di, dr : numpy.ndarray
         Deviations of the switch current (mA) and of the rate (mA/s).
     """
-    i_k, r_k, a_k, f_k = events.T
+    return _within_setting(events, events[:, 0], scale, h)
+
+
+def _within_setting(events, values, scale, h):
+    """:func:`within_setting` with ``values`` (``(n,)`` or ``(n, m)``) in place of I."""
+    _, r_k, a_k, f_k = events.T
     d2 = ((a_k[:, None] - a_k[None]) / scale[0]) ** 2 + ((f_k[:, None] - f_k[None]) / scale[1]) ** 2
     w = np.exp(-0.5 * d2 / h**2)
     sw = w.sum(axis=1)
-    return i_k - (w @ i_k) / sw, r_k - (w @ r_k) / sw
+    mean_v = (w @ values) / (sw[:, None] if values.ndim == 2 else sw)
+    return values - mean_v, r_k - (w @ r_k) / sw
 
 
 def _prior_slope(d2, h_slope, di, dr, r_k) -> np.ndarray:
-    """``τ₀``: the within-setting slope, weighted around each query (0 where undefined)."""
+    """``τ₀``: the within-setting slope, weighted around each query (0 where undefined).
+
+    ``di`` is ``(n, m)``; the slopes are ``(queries, m)``.
+    """
     q = d2 / h_slope**2
     w = np.exp(-0.5 * (q - q.min(axis=1, keepdims=True)))
-    num, den = w @ (di * dr), w @ (dr * dr)
-    return np.where(den > 1e-6 * (w @ (r_k * r_k)), num / np.where(den > 0, den, 1.0), 0.0)
+    num, den = w @ (di * dr[:, None]), (w @ (dr * dr))[:, None]
+    ok = den > 1e-6 * (w @ (r_k * r_k))[:, None]
+    return np.where(ok, num / np.where(den > 0, den, 1.0), 0.0)
 
 
 def local_law(
@@ -146,6 +160,7 @@ def local_law(
     freq: np.ndarray,
     h_slope: float = SLOPE_BANDWIDTH,
     rho: float = SLOPE_PRIOR,
+    values: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``θ`` (mA) and ``τ`` (s) of the weighted event law at each ``(amp, freq)``.
 
@@ -169,22 +184,32 @@ def local_law(
         Weight of the slope prior (dimensionless).
     amp, freq : numpy.ndarray
         Query dither amplitude (mA) and frequency (Hz).
+    values : numpy.ndarray, optional
+        ``(n,)`` or ``(n, m)``: values smoothed in place of the switch currents (units of
+        the values; default the currents). The law is linear in them, so ``m`` columns
+        cost one evaluation.
 
     Returns
     -------
     theta, tau : numpy.ndarray
-        Switch current at zero rate (mA) and its slope in dI/dt (s) per query.
+        Switch current at zero rate (mA) and its slope in dI/dt (s) per query; with
+        ``(n, m)`` values, ``(queries, m)`` (value units, and value units per mA/s).
     """
-    i_k, r_k, a_k, f_k = events.T
+    _, r_k, a_k, f_k = events.T
+    v = events[:, 0] if values is None else np.asarray(values, dtype=float)
+    v2 = v.reshape(len(r_k), -1)
     za = (np.asarray(amp, dtype=float)[:, None] - a_k[None]) / scale[0]
     zf = (np.asarray(freq, dtype=float)[:, None] - f_k[None]) / scale[1]
     d2 = za**2 + zf**2
-    tau0 = _prior_slope(d2, h_slope, *within_setting(events, scale, h), r_k)
-    mr, mi, var_r, cov, mrr = _moments(d2, h, i_k, r_k)
+    tau0 = _prior_slope(d2, h_slope, *_within_setting(events, v2, scale, h), r_k)
+    mr, mi, var_r, cov, mrr = _moments(d2, h, v2, r_k)
     lam = rho * mrr
     den = var_r + lam
     tau = np.where(den > 0, (cov + lam * tau0) / np.where(den > 0, den, 1.0), 0.0)
-    return mi - tau * mr, tau
+    theta = mi - tau * mr
+    if v.ndim == 1:
+        return theta[:, 0], tau[:, 0]
+    return theta, tau
 
 
 def held_out_residuals(
@@ -207,28 +232,33 @@ def held_out_residuals(
     h : float
         Bandwidth of the law.
     values : numpy.ndarray
-        ``(n,)`` value per event (units of the value).
+        ``(n,)`` value per event, or ``(n, m)``: ``m`` values per event, each column held
+        out on its own (units of the values).
 
     Returns
     -------
     numpy.ndarray
-        ``(n,)`` held-out residuals (value − prediction), units of ``values``.
+        Held-out residuals (value − prediction), the shape and units of ``values``.
     """
     ev = np.asarray(events, dtype=float)
     vals = np.asarray(values, dtype=float)
-    out = np.empty(len(ev))
+    out = np.empty_like(vals)
     for k in range(len(ev)):
         rest = np.delete(ev, k, axis=0)
-        rest[:, 0] = np.delete(vals, k)
-        theta, tau = local_law(rest, scale, h, ev[k : k + 1, 2], ev[k : k + 1, 3])
+        theta, tau = local_law(
+            rest, scale, h, ev[k : k + 1, 2], ev[k : k + 1, 3], values=np.delete(vals, k, axis=0)
+        )
         out[k] = vals[k] - (theta[0] + tau[0] * ev[k, 1])
     return out
 
 
 def _held_out_operator(events: np.ndarray, scale: np.ndarray, h: float) -> np.ndarray:
-    """``H`` with :func:`held_out_residuals` ``= H @ values`` (the law is linear in them)."""
-    n = len(events)
-    return np.column_stack([held_out_residuals(events, scale, h, col) for col in np.eye(n)])
+    """``H`` with :func:`held_out_residuals` ``= H @ values`` (the law is linear in them).
+
+    Column ``j`` is the residuals of the ``j``-th unit vector: one law evaluation per
+    held-out event for all ``n`` columns.
+    """
+    return held_out_residuals(events, scale, h, np.eye(len(events)))
 
 
 def _nested_ratio(e: np.ndarray, g: np.ndarray) -> float:
