@@ -487,10 +487,10 @@ class Protocol:
             )
         if callable(getattr(model, "predict_latch", None)):
             details["classifier_accuracy"] = self._latch_accuracy(model)
-        if getattr(getattr(model, "residual_", None) or model, "latch_model_", None):
-            from ..residual_ml import latch_decision_text
+        from ..residual_ml import latch_decision_text
 
-            details["latch_decision"] = latch_decision_text(model)
+        if said := latch_decision_text(model):  # None for a model without a latch decision
+            details["latch_decision"] = said
         if callable(getattr(model, "gp_hyperparameters", None)):
             details["gp_hyperparameters"] = model.gp_hyperparameters()
             details["gp_at_bounds"] = model.hyperparameters_at_bounds()
