@@ -34,13 +34,14 @@ def swap(model, full):
 class Shared(HybridModel):
     """The library's folds, with every fold model's latch decision fitted on all traces."""
 
-    def _fold_models(self, traces, outputs, train):
-        if not hasattr(self, "_full"):
-            self._full = super()._fold_models(traces, outputs, list(range(len(traces))))
-        models = super()._fold_models(traces, outputs, train)
-        for model, full in zip(models, self._full, strict=True):
-            swap(model, full)
-        return models
+    def _fold_model(self, form, traces, outputs, train):
+        full = getattr(self, "_full", {})
+        if form not in full:
+            full[form] = super()._fold_model(form, traces, outputs, list(range(len(traces))))
+            self._full = full
+        model = super()._fold_model(form, traces, outputs, train)
+        swap(model, full[form])
+        return model
 
 
 def main(argv=None) -> int:

@@ -70,6 +70,17 @@ def test_exact_physics_gives_the_physics_form(split, truth_physics):
     assert model.form_scores_["physics"] < 0.05 < model.form_scores_["standalone"]
 
 
+def test_the_form_scores_are_the_same_on_worker_processes(split, truth_physics, monkeypatch):
+    """The folds' fits run on forked workers; in this process they give the same numbers."""
+    import clutchlab.residual_ml.hybrid as hybrid_module
+
+    train, _ = split
+    forked = HybridModel(physics=truth_physics).fit(train).form_scores_
+    monkeypatch.setattr(hybrid_module, "default_workers", lambda: 1)
+    here = HybridModel(physics=truth_physics).fit(train).form_scores_
+    assert forked == here
+
+
 def test_datasheet_physics_gives_the_residual_form(split):
     """Right structure, wrong parameters (0.3 bar off): the residual model corrects it."""
     train, test = split

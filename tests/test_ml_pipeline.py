@@ -284,6 +284,20 @@ def test_classifier_comparison_table_and_figure(train, tmp_path):
         compare_classifiers([train[0]])
 
 
+def test_classifier_comparison_is_the_same_on_worker_processes(train):
+    names = ["discretized_linear_svc", "gradient_boosting"]
+    here = compare_classifiers(list(train), names=names, workers=1)
+    forked = compare_classifiers(list(train), names=names, workers=2)
+    drop = ("fit_s",)
+    assert [{k: v for k, v in r.items() if k not in drop} for r in here.rows] == [
+        {k: v for k, v in r.items() if k not in drop} for r in forked.rows
+    ]
+    assert here.per_experiment == forked.per_experiment
+    X = here._data[0]
+    for name in names:  # the final classifiers came back from the workers whole
+        np.testing.assert_array_equal(here._final[name].predict(X), forked._final[name].predict(X))
+
+
 def test_gp_hyperparameters_by_part(fitted, train):
     assert set(fitted["gp_base"].gp_hyperparameters()) == {"gp", "variance_floor"}
     plain = GPBaseline(residual_variance="none", n_hyper=200, max_points=200)

@@ -21,6 +21,7 @@ from tqdm.auto import tqdm
 
 from ..data import Trace, write_file_atomic
 from ..errors import DataError
+from ..forkmap import default_workers, fork_imap
 from .classifiers import CLASSIFIERS, make_classifier
 from .features import DIDT_FEATURES, FeatureBuilder
 from .labels import LatchLabelRule, latch_labels
@@ -165,6 +166,7 @@ def compare_classifiers(
     rule: LatchLabelRule | None = None,
     random_state: int = 0,
     progress: bool = False,
+    workers: int | None = None,
 ) -> ClassifierComparison:
     """Leave-one-experiment-out accuracy of the latch classifiers on training experiments.
 
@@ -182,6 +184,9 @@ def compare_classifiers(
         Seed of subsets and boosting.
     progress : bool
         Show a progress bar.
+    workers : int, optional
+        Worker processes of the fits (:func:`clutchlab.forkmap.default_workers` by default;
+        1 fits in this process). The result does not depend on it.
 
     Returns
     -------
@@ -207,31 +212,39 @@ def compare_classifiers(
     X, y = np.concatenate(Xs), np.concatenate(ys)
     if np.unique(y).size < 2:
         raise DataError("the training experiments hold only one latch state; nothing to classify")
-    rows, per, final = [], {}, {}
-    jobs = [(n, k) for n in names for k in range(len(traces))]
-    bar = tqdm(total=len(jobs) + len(names), desc="classifiers", disable=not progress)
-    for name in names:
-        correct = total = 0
-        times, accs = [], {}
-        for k in range(len(traces)):
-            Xtr = np.concatenate([Xs[i] for i in range(len(traces)) if i != k])
-            ytr = np.concatenate([ys[i] for i in range(len(traces)) if i != k])
-            clf = make_classifier(name, random_state=random_state, feature_names=builder.names)
-            t0 = time.perf_counter()
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")  # discretizer bins collapsing on constant inputs
-                clf.fit(Xtr, ytr)
-            times.append(time.perf_counter() - t0)
-            c = int((clf.predict(Xs[k]) == ys[k]).sum()) if ys[k].size else 0
-            accs[traces[k].name] = c / ys[k].size if ys[k].size else float("nan")
-            correct += c
-            total += ys[k].size
-            bar.update()
+    n = len(traces)
+    jobs = [(name, k) for name in names for k in [*range(n), None]]  # None: the final fit
+
+    def run(j: int) -> tuple[int, float, object]:
+        """Job ``j``: held-out correct count and fit time, or the final classifier."""
+        name, k = jobs[j]
         clf = make_classifier(name, random_state=random_state, feature_names=builder.names)
+        Xtr = X if k is None else np.concatenate([Xs[i] for i in range(n) if i != k])
+        ytr = y if k is None else np.concatenate([ys[i] for i in range(n) if i != k])
+        t0 = time.perf_counter()
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            final[name] = clf.fit(X, y)
-        bar.update()
+            warnings.simplefilter("ignore")  # discretizer bins collapsing on constant inputs
+            clf.fit(Xtr, ytr)
+        fit_s = time.perf_counter() - t0
+        if k is None:
+            return 0, fit_s, clf
+        return (int((clf.predict(Xs[k]) == ys[k]).sum()) if ys[k].size else 0), fit_s, None
+
+    # The fits are independent: they run on worker processes (same results in any order).
+    done = {}
+    with tqdm(total=len(jobs), desc="classifiers", disable=not progress) as bar:
+        for j, r in fork_imap(run, len(jobs), workers or default_workers()):
+            done[jobs[j]] = r
+            bar.update()
+    rows, per, final = [], {}, {}
+    for name in names:
+        final[name] = clf = done[(name, None)][2]
+        correct = sum(done[(name, k)][0] for k in range(n))
+        total = sum(ys[k].size for k in range(n))
+        accs = {
+            traces[k].name: done[(name, k)][0] / ys[k].size if ys[k].size else float("nan")
+            for k in range(n)
+        }
         per[name] = accs
         rows.append(
             {
@@ -239,11 +252,10 @@ def compare_classifiers(
                 "label": CLASSIFIERS[name].label,
                 "accuracy": correct / total,
                 "min_accuracy": float(np.nanmin(list(accs.values()))),
-                "fit_s": float(np.median(times)),
+                "fit_s": float(np.median([done[(name, k)][1] for k in range(n)])),
                 "n_train_points": int(clf.n_train_points_),
             }
         )
-    bar.close()
     return ClassifierComparison(
         rows, per, list(builder.names), [t.name for t in traces], final, (X, y)
     )

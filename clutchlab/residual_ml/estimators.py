@@ -16,7 +16,6 @@ by marginal likelihood); see :mod:`~clutchlab.residual_ml.base` for the accepted
 
 from __future__ import annotations
 
-import os
 from concurrent.futures import ThreadPoolExecutor
 from types import MappingProxyType
 
@@ -24,6 +23,7 @@ import numpy as np
 
 from ..data import Trace
 from ..errors import DataError, ModelError
+from ..forkmap import default_workers
 from .base import Block, TraceEstimator
 from .classifiers import lean_decision, make_classifier
 from .features import BASE_FEATURES, LAG_DIDT_FEATURES, target_pressure
@@ -774,7 +774,7 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         # The folds are independent and their binning, sorting and libsvm calls release the
         # GIL: two threads take ~0.6x the wall time of one on 2 cores; results keep the
         # fold order, so they do not depend on the scheduling.
-        with ThreadPoolExecutor(max_workers=min(2, os.cpu_count() or 1)) as pool:
+        with ThreadPoolExecutor(max_workers=default_workers()) as pool:
             predicted = list(pool.map(held_out, range(len(blocks))))
         for held, pred in zip(blocks, predicted, strict=True):
             if pred is None:

@@ -23,6 +23,7 @@ from sklearn.utils.validation import validate_data
 
 from ..data import Trace, dither_period_mean, dither_period_samples
 from ..errors import DataError, ModelError
+from ..forkmap import default_workers, fork_map
 from .base import TraceEstimator
 from .estimators import DEFAULT_LATCH_MODEL, SVCPartitionedGP, mean_only
 from .features import DIDT_FEATURES, PHYSICS_FEATURES
@@ -246,33 +247,58 @@ class HybridModel(TraceEstimator):
         return {f: float(np.sqrt(np.mean(np.concatenate(e) ** 2))) for f, e in errors.items() if e}
 
     def _loeo_errors(self, traces, outputs) -> dict[str, list[np.ndarray]]:
-        """Held-out dither-period-mean errors (bar) of each form, one array per experiment."""
-        errors = {f: [] for f in RESIDUAL_FORMS}
+        """Held-out dither-period-mean errors (bar) of each form, one array per experiment.
+
+        The folds' model fits (residual and standalone per fold) are independent: they run
+        on worker processes (:func:`clutchlab.forkmap.fork_map`; the same numbers in any
+        order or in this process).
+        """
+        folds = []
         for held in self._form_folds(traces):
             train = [i for i in range(len(traces)) if i not in held]
-            if not train:
-                continue
-            res, alone = self._fold_models(traces, outputs, train)
+            if train:
+                folds.append((held, train))
+        means = {}
+        for held, _ in folds:
             for i in held:
-                t = traces[i]
-                n = dither_period_samples(t)
-                y = dither_period_mean(t.get("clutch_pressure_bar"), n)
+                n = dither_period_samples(traces[i])
+                means[i] = (n, dither_period_mean(traces[i].get("clutch_pressure_bar"), n))
+        jobs = [(f, form) for f in range(len(folds)) for form in ("residual", "standalone")]
+
+        def run(j: int) -> list[np.ndarray]:
+            f, form = jobs[j]
+            held, train = folds[f]
+            model = self._fold_model(form, traces, outputs, train)
+            out = []
+            for i in held:
                 raw, smooth = outputs[i]
-                F = res._builder().build(t, smooth)
-                r = res._predict_matrix(F, path=True, return_std=False)
-                errors["residual"].append(dither_period_mean(raw + r, n) - y)
-                errors["standalone"].append(dither_period_mean(alone.predict(t), n) - y)
-                errors["physics"].append(dither_period_mean(raw, n) - y)
+                if form == "residual":
+                    F = model._builder().build(traces[i], smooth)
+                    pred = raw + model._predict_matrix(F, path=True, return_std=False)
+                else:
+                    pred = model.predict(traces[i])
+                out.append(dither_period_mean(pred, means[i][0]) - means[i][1])
+            return out
+
+        done = fork_map(run, len(jobs), default_workers())
+        errors = {f: [] for f in RESIDUAL_FORMS}
+        for f, (held, _) in enumerate(folds):
+            errors["residual"] += done[jobs.index((f, "residual"))]
+            errors["standalone"] += done[jobs.index((f, "standalone"))]
+            errors["physics"] += [
+                dither_period_mean(outputs[i][0], means[i][0]) - means[i][1] for i in held
+            ]
         return errors
 
-    def _fold_models(self, traces, outputs, train: list[int]):
-        """Residual and standalone models (mean only) fitted on the experiments ``train``."""
-        res = self._fit_residual(
-            mean_only(self._residual()),
-            [traces[i] for i in train],
-            [outputs[i] for i in train],
-        )
-        return res, mean_only(self._standalone()).fit([traces[i] for i in train])
+    def _fold_model(self, form: str, traces, outputs, train: list[int]):
+        """The ``residual`` or ``standalone`` form's model (mean only) fitted on ``train``."""
+        if form == "residual":
+            return self._fit_residual(
+                mean_only(self._residual()),
+                [traces[i] for i in train],
+                [outputs[i] for i in train],
+            )
+        return mean_only(self._standalone()).fit([traces[i] for i in train])
 
     def _outputs(
         self, phys, trace: Trace, needed: tuple[str, ...] = ()

@@ -27,12 +27,12 @@ The predictive variance is then ``max(GP variance, floor)``: the floor never nar
 
 from __future__ import annotations
 
-import os
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from sklearn.base import clone
 
+from ..forkmap import default_workers
 from ._threads import single_thread
 from .local_gp import LocalGPRegressor
 
@@ -79,7 +79,7 @@ def loeo_residuals(gp: LocalGPRegressor, blocks, stride: int = 10) -> tuple[np.n
 
     # The folds are independent and their factorizations release the GIL: one BLAS thread
     # per fold, two folds at a time; results keep the fold order.
-    with ThreadPoolExecutor(max_workers=min(2, os.cpu_count() or 1)) as pool:
+    with ThreadPoolExecutor(max_workers=default_workers()) as pool:
         out = list(pool.map(held_out, range(len(blocks))))
     return np.vstack([x for x, _ in out]), np.concatenate([r for _, r in out])
 

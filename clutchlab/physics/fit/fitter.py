@@ -13,6 +13,7 @@ from tqdm.auto import tqdm
 
 from ...data import Dataset, Trace, dither_period_mean, dither_period_samples, pressure_metrics
 from ...errors import FitError, FitWarning, ModelError
+from ...forkmap import fork_map
 from ..effects import EFFECTS
 from ..model import CircuitModel
 from ..parameters import ParameterSet
@@ -72,47 +73,25 @@ def _stopped_by_time(best: dict) -> bool:
     return stats is not None and stats["return_status"] == "Maximum_WallTime_Exceeded"
 
 
-#: The training experiments of :func:`_per_experiment_metrics`, inherited by its forked
-#: workers (model, parameter sets, traces).
-_METRICS_JOB: tuple | None = None
-
-
-def _experiment_metrics(e: int) -> dict[str, float]:
-    """RMSE (bar) and fit (%) of experiment ``e`` of :data:`_METRICS_JOB`, dither-period means."""
-    model, params, traces = _METRICS_JOB
-    tr = traces[e]
-    pred = simulate(model, params[e], tr, SimulationSettings()).pressure_bar
-    n = dither_period_samples(tr)
-    m = pressure_metrics(
-        dither_period_mean(tr.get("clutch_pressure_bar"), n), dither_period_mean(pred, n)
-    )
-    return {"rmse_bar": m["rmse_bar"], "fit_pct": m["fit_pct"]}
-
-
 def _per_experiment_metrics(
     model: CircuitModel, params: list[ParameterSet], traces: list[Trace], workers: int
 ) -> dict[str, dict[str, float]]:
-    """Each training experiment's RMSE (bar) and fit (%) of the fitted model, simulated on
-    ``workers`` forked processes where the platform has fork (the fit's last seconds:
-    ~5 s for the default training set on one core), else in this process."""
-    import multiprocessing as mp
+    """Each training experiment's RMSE (bar) and fit (%) of the fitted model, dither-period
+    means, simulated on ``workers`` forked processes where the platform has fork (the fit's
+    last seconds: ~5 s for the default training set on one core), else in this process."""
 
-    global _METRICS_JOB
-    _METRICS_JOB = (model, params, traces)
-    try:
-        n = min(int(workers), len(traces))
-        if n <= 1 or "fork" not in mp.get_all_start_methods():
-            rows = [_experiment_metrics(e) for e in range(len(traces))]
-        else:
-            from concurrent.futures import ProcessPoolExecutor
+    def metrics(e: int) -> dict[str, float]:
+        tr = traces[e]
+        pred = simulate(model, params[e], tr, SimulationSettings()).pressure_bar
+        n = dither_period_samples(tr)
+        m = pressure_metrics(
+            dither_period_mean(tr.get("clutch_pressure_bar"), n), dither_period_mean(pred, n)
+        )
+        return {"rmse_bar": m["rmse_bar"], "fit_pct": m["fit_pct"]}
 
-            # longest first, so that the two processes end together
-            order = sorted(range(len(traces)), key=lambda e: -len(traces[e]))
-            with ProcessPoolExecutor(n, mp_context=mp.get_context("fork")) as pool:
-                done = dict(zip(order, pool.map(_experiment_metrics, order), strict=True))
-            rows = [done[e] for e in range(len(traces))]
-    finally:
-        _METRICS_JOB = None
+    # longest first, so that the processes end together
+    order = sorted(range(len(traces)), key=lambda e: -len(traces[e]))
+    rows = fork_map(metrics, len(traces), workers, order)
     return {tr.name: row for tr, row in zip(traces, rows, strict=True)}
 
 
