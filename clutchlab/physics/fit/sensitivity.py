@@ -17,7 +17,7 @@ import numpy as np
 
 from ...errors import SimulationError
 from ..inputs import interval_inputs
-from ..integrator import compile_function, compile_in_background, sample_step_function
+from ..integrator import CSE, compile_function, compile_in_background, sample_step_function
 from ..model import CircuitModel
 
 __all__ = [
@@ -46,6 +46,7 @@ def _mapped(model: CircuitModel, drive: str, substeps: int, nd: int, chunk: int)
         [x1, s1, y1[0], dy1.T],
         ["x0", "S0", "u0", "u1", "dt", "p", "E"],
         ["x1", "S1", "y1", "dy1"],
+        CSE,
     )
     mapped = fn.mapaccum(f"sens_chunk_{chunk}", chunk, ["x0", "S0"], ["x1", "S1"])
     return mapped, f"clutchlab_sens_{model.key}_{drive}_{substeps}_{nd}"
