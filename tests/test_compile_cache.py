@@ -47,3 +47,44 @@ def test_a_failed_background_build_leaves_nothing_and_the_call_reports_it(cache,
     with pytest.warns(RuntimeWarning, match="C compilation failed"):
         assert compile_function(fn, "bg_fail") is None
     assert list(cache.iterdir()) == []
+
+
+def test_the_fit_compiles_its_jacobian_code_before_its_workers_fork(cache, monkeypatch):
+    """The staged start runs while the main stages' code compiles in the background, and
+    each stage's code is in the cache before its worker processes fork (so they do not
+    each compile it on first use)."""
+    from clutchlab.errors import FitWarning
+    from clutchlab.physics.fit import FitProblem, FitSettings, PhysicsFitter
+    from clutchlab.physics.fit import fitter as fitter_module
+    from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
+
+    data = run_stand(
+        StandConfig(
+            builtin_effects=False,
+            settings=(DitherSetting(50.0, "A"), DitherSetting(70.0, "B")),
+            ramps=(RampProfile("fast", 1.5, 0.3),),
+            seed=3,
+        ),
+        progress=False,
+    ).dataset
+    started, at_fork = [], []
+    ahead = fitter_module.compile_sensitivities_in_background
+
+    def spy_ahead(model, drive, substeps, nd, chunk):
+        started.append((drive, substeps, nd))
+        ahead(model, drive, substeps, nd, chunk)
+
+    fork = FitProblem.start_workers
+
+    def spy_fork(self, traces, workers):
+        at_fork.append(sorted(p.name for p in cache.glob("clutchlab_sens_*.so")))
+        fork(self, traces, workers)
+
+    monkeypatch.setattr(fitter_module, "compile_sensitivities_in_background", spy_ahead)
+    monkeypatch.setattr(FitProblem, "start_workers", spy_fork)
+    settings = FitSettings(progress=False, train_ramps=("fast",), substeps=3, max_iter=2, workers=2)
+    with pytest.warns(FitWarning, match="before converging"):  # max_iter=2: a short fit
+        fitter = PhysicsFitter(settings=settings).fit(data)
+    nd = len(fitter.result_.free)
+    assert started and all(s[1:] == (3, nd) for s in started)
+    assert at_fork and all(any(f"_3_{nd}_" in n for n in names) for names in at_fork)

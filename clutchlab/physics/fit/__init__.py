@@ -4,6 +4,7 @@ from .fitter import PhysicsFitter, resolve_free
 from .problem import FitProblem
 from .result import FitResult, identifiability
 from .sensitivity import (
+    SENSITIVITY_CHUNK,
     SensitivityRun,
     compile_sensitivities_in_background,
     sensitivity_chunk,
@@ -22,6 +23,7 @@ from .structure import (
 __all__ = [
     "DEFAULT_FREE",
     "FIT_BUDGET_S",
+    "SENSITIVITY_CHUNK",
     "STRUCTURES",
     "CandidateScore",
     "FitProblem",

@@ -15,6 +15,7 @@ from ...data import Dataset, Trace, dither_period_mean, dither_period_samples, p
 from ...errors import FitError, FitWarning, ModelError
 from ...forkmap import fork_map
 from ..effects import EFFECTS
+from ..inputs import choose_drive
 from ..model import CircuitModel
 from ..parameters import ParameterSet
 from ..settings import SimulationSettings
@@ -22,6 +23,7 @@ from ..simulate import simulate
 from .nlp import solve_ipopt
 from .problem import FitProblem
 from .result import FitResult, identifiability
+from .sensitivity import SENSITIVITY_CHUNK, compile_sensitivities_in_background
 from .settings import DEFAULT_FREE, FitSettings
 from .staged import (
     free_latch_structure,
@@ -212,6 +214,8 @@ class PhysicsFitter:
         self._check_bounds(model, free, settings, start)
         self.staged_ = None
         if settings.staged_start and self.start is None and not settings.per_experiment:
+            # the main stages' Jacobian code compiles on the other core meanwhile
+            self._compile_ahead(model, traces, free, settings)
             start, self.staged_ = staged_start(
                 model,
                 traces,
@@ -283,6 +287,11 @@ class PhysicsFitter:
                 starts = [np.zeros(problem.n_par) if z_par is None else z_par]
                 if stage == 0:
                     starts += self._multistarts(problem, settings)
+                # compiled once, here, before the workers fork (a one-off: not part of
+                # the per-sample iteration time that plans the next stage)
+                t_compile = time.perf_counter()
+                problem.compile_jacobian_code()
+                t_stage += time.perf_counter() - t_compile
                 problem.start_workers(stage_traces, settings.workers)
                 try:
                     best = self._solve_starts(problem, starts, stage_settings, t_start)
@@ -357,6 +366,20 @@ class PhysicsFitter:
         self.model_ = result.model()
         self.params_ = result.params()
         return self
+
+    @staticmethod
+    def _compile_ahead(model, traces, free, settings) -> None:
+        """Start compiling the Jacobian code of the fit's stages in the background (the
+        staged start runs in this process meanwhile). Single shooting only (its code has
+        one direction per free parameter); a model the staged start changes needs other
+        code, compiled when its stage starts."""
+        if settings.method != "single_shooting":
+            return
+        sim = SimulationSettings(substeps=settings.substeps, drive=settings.drive)
+        for drive in sorted({choose_drive(t, sim) for t in traces}):
+            compile_sensitivities_in_background(
+                model, drive, settings.substeps, len(free), SENSITIVITY_CHUNK
+            )
 
     @staticmethod
     def _stages(traces: list[Trace], settings: FitSettings):

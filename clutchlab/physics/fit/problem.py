@@ -23,7 +23,7 @@ from ..model import CircuitModel
 from ..parameters import Parameter, ParameterSet
 from ..settings import SimulationSettings
 from ..simulate import initial_state, simulate_inputs
-from .sensitivity import simulate_sensitivities
+from .sensitivity import SENSITIVITY_CHUNK, sensitivity_chunk, simulate_sensitivities
 from .settings import FitSettings
 
 __all__ = ["FitProblem"]
@@ -408,6 +408,20 @@ class FitProblem:
                 return None
             parts.update(res)
         return parts
+
+    def _jacobian_code(self) -> list[tuple[str, int]]:
+        """(drive, directions) of every sensitivity code the Jacobian evaluations call."""
+        return sorted({(self.experiments[s.exp].drive, len(s.cols)) for s in self.segments})
+
+    def compile_jacobian_code(self) -> None:
+        """Compile (or load from the cache) the Jacobian's sensitivity code in this process.
+
+        Called before :meth:`start_workers` forks: the workers then load one cached library
+        instead of each compiling the same code at once on first use (a build started in
+        the background is waited for).
+        """
+        for drive, nd in self._jacobian_code():
+            sensitivity_chunk(self.model, drive, self.settings.substeps, nd, SENSITIVITY_CHUNK)
 
     def start_workers(self, traces: list[Trace], workers: int) -> None:
         """Evaluate segments in ``workers`` processes (experiments balanced by length)."""

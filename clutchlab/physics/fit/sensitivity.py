@@ -21,6 +21,7 @@ from ..integrator import CSE, compile_function, compile_in_background, sample_st
 from ..model import CircuitModel
 
 __all__ = [
+    "SENSITIVITY_CHUNK",
     "SensitivityRun",
     "compile_sensitivities_in_background",
     "sensitivity_chunk",
@@ -51,6 +52,9 @@ def _mapped(model: CircuitModel, drive: str, substeps: int, nd: int, chunk: int)
     mapped = fn.mapaccum(f"sens_chunk_{chunk}", chunk, ["x0", "S0"], ["x1", "S1"])
     return mapped, f"clutchlab_sens_{model.key}_{drive}_{substeps}_{nd}"
 
+
+#: Samples per call of the compiled sensitivity loop (what the fit problem uses).
+SENSITIVITY_CHUNK = 500
 
 #: -O1: the derivative code is large; -O3 compiles ~10x longer for no speed-up here.
 _OPT = "-O1"
@@ -105,7 +109,7 @@ def simulate_sensitivities(
     x0: np.ndarray,
     s0: np.ndarray,
     e: np.ndarray,
-    chunk: int = 500,
+    chunk: int = SENSITIVITY_CHUNK,
     compile_mode: str = "auto",
 ) -> SensitivityRun:
     """Simulate from ``x0`` and propagate the sensitivity seeds ``s0`` (nx × nd), ``e`` (np × nd).

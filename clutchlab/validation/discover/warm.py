@@ -10,14 +10,16 @@ from __future__ import annotations
 
 from ...data import Trace
 from ...physics import CircuitModel
-from ...physics.fit import FitSettings, compile_sensitivities_in_background, sensitivity_chunk
+from ...physics.fit import (
+    SENSITIVITY_CHUNK,
+    FitSettings,
+    compile_sensitivities_in_background,
+    sensitivity_chunk,
+)
 from ...physics.inputs import choose_drive
 from ...physics.settings import SimulationSettings
 
 __all__ = ["warm_sensitivities"]
-
-#: Samples per call of the compiled sensitivity loop (the fit problem's default).
-CHUNK = 500
 
 
 def warm_sensitivities(
@@ -46,6 +48,6 @@ def warm_sensitivities(
     sim = SimulationSettings(substeps=fit.substeps, drive=fit.drive)
     for drive in sorted({choose_drive(t, sim) for t in traces}):
         if background:
-            compile_sensitivities_in_background(model, drive, fit.substeps, nd, CHUNK)
+            compile_sensitivities_in_background(model, drive, fit.substeps, nd, SENSITIVITY_CHUNK)
         else:
-            sensitivity_chunk(model, drive, fit.substeps, nd, CHUNK)
+            sensitivity_chunk(model, drive, fit.substeps, nd, SENSITIVITY_CHUNK)
