@@ -29,8 +29,10 @@ __all__ = [
 ]
 
 
+@lru_cache(maxsize=32)
 def _mapped(model: CircuitModel, drive: str, substeps: int, nd: int, chunk: int):
-    """The uncompiled sensitivity loop over ``chunk`` samples, and its cache tag."""
+    """The uncompiled sensitivity loop over ``chunk`` samples, and its cache tag (built once
+    per process: a background build and the later load share it)."""
     fns = model.functions(drive)
     step = sample_step_function(fns, substeps)
     nx, nu, npar = fns.nx, fns.u_sym.shape[0], fns.p_sym.shape[0]
