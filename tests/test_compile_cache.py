@@ -68,11 +68,11 @@ def test_the_fit_compiles_its_jacobian_code_before_its_workers_fork(cache, monke
         progress=False,
     ).dataset
     started, at_fork = [], []
-    ahead = fitter_module.compile_sensitivities_in_background
+    ahead = fitter_module.compile_sensitivities_for
 
-    def spy_ahead(model, drive, substeps, nd, chunk):
-        started.append((drive, substeps, nd))
-        ahead(model, drive, substeps, nd, chunk)
+    def spy_ahead(model, traces, substeps, drive, nd, background=False):
+        started.append((background, substeps, nd))
+        ahead(model, traces, substeps, drive, nd, background)
 
     fork = FitProblem.start_workers
 
@@ -80,11 +80,11 @@ def test_the_fit_compiles_its_jacobian_code_before_its_workers_fork(cache, monke
         at_fork.append(sorted(p.name for p in cache.glob("clutchlab_sens_*.so")))
         fork(self, traces, workers)
 
-    monkeypatch.setattr(fitter_module, "compile_sensitivities_in_background", spy_ahead)
+    monkeypatch.setattr(fitter_module, "compile_sensitivities_for", spy_ahead)
     monkeypatch.setattr(FitProblem, "start_workers", spy_fork)
     settings = FitSettings(progress=False, train_ramps=("fast",), substeps=3, max_iter=2, workers=2)
     with pytest.warns(FitWarning, match="before converging"):  # max_iter=2: a short fit
         fitter = PhysicsFitter(settings=settings).fit(data)
     nd = len(fitter.result_.free)
-    assert started and all(s[1:] == (3, nd) for s in started)
+    assert started and all(s == (True, 3, nd) for s in started)
     assert at_fork and all(any(f"_3_{nd}_" in n for n in names) for names in at_fork)

@@ -6,6 +6,7 @@ from .result import FitResult, identifiability
 from .sensitivity import (
     SENSITIVITY_CHUNK,
     SensitivityRun,
+    compile_sensitivities_for,
     compile_sensitivities_in_background,
     sensitivity_chunk,
     simulate_sensitivities,
@@ -33,6 +34,7 @@ __all__ = [
     "SensitivityRun",
     "StructureSelection",
     "StructureSelector",
+    "compile_sensitivities_for",
     "compile_sensitivities_in_background",
     "identifiability",
     "prefit_settings",

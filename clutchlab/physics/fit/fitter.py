@@ -15,7 +15,6 @@ from ...data import Dataset, Trace, dither_period_mean, dither_period_samples, p
 from ...errors import FitError, FitWarning, ModelError
 from ...forkmap import fork_map
 from ..effects import EFFECTS
-from ..inputs import choose_drive
 from ..model import CircuitModel
 from ..parameters import ParameterSet
 from ..settings import SimulationSettings
@@ -23,7 +22,7 @@ from ..simulate import simulate
 from .nlp import solve_ipopt
 from .problem import FitProblem
 from .result import FitResult, identifiability
-from .sensitivity import SENSITIVITY_CHUNK, compile_sensitivities_in_background
+from .sensitivity import compile_sensitivities_for
 from .settings import DEFAULT_FREE, FitSettings
 from .staged import (
     free_latch_structure,
@@ -373,12 +372,9 @@ class PhysicsFitter:
         staged start runs in this process meanwhile). Single shooting only (its code has
         one direction per free parameter); a model the staged start changes needs other
         code, compiled when its stage starts."""
-        if settings.method != "single_shooting":
-            return
-        sim = SimulationSettings(substeps=settings.substeps, drive=settings.drive)
-        for drive in sorted({choose_drive(t, sim) for t in traces}):
-            compile_sensitivities_in_background(
-                model, drive, settings.substeps, len(free), SENSITIVITY_CHUNK
+        if settings.method == "single_shooting":
+            compile_sensitivities_for(
+                model, traces, settings.substeps, settings.drive, len(free), background=True
             )
 
     @staticmethod

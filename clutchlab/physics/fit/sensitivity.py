@@ -16,13 +16,15 @@ import casadi as ca
 import numpy as np
 
 from ...errors import SimulationError
-from ..inputs import interval_inputs
+from ..inputs import choose_drive, interval_inputs
 from ..integrator import CSE, compile_function, compile_in_background, sample_step_function
 from ..model import CircuitModel
+from ..settings import SimulationSettings
 
 __all__ = [
     "SENSITIVITY_CHUNK",
     "SensitivityRun",
+    "compile_sensitivities_for",
     "compile_sensitivities_in_background",
     "sensitivity_chunk",
     "simulate_sensitivities",
@@ -89,6 +91,41 @@ def compile_sensitivities_in_background(
     :func:`sensitivity_chunk` waits for that build instead of starting its own.
     """
     compile_in_background(*_mapped(model, drive, substeps, nd, chunk), _OPT)
+
+
+def compile_sensitivities_for(
+    model: CircuitModel,
+    traces,
+    substeps: int,
+    drive: str,
+    nd: int,
+    background: bool = False,
+) -> None:
+    """Compile (or load from the cache) ``model``'s sensitivity code for ``nd`` directions,
+    for every drive mode that ``traces`` are simulated with.
+
+    Parameters
+    ----------
+    model : CircuitModel
+        Model structure.
+    traces : sequence of Trace
+        Experiments (their drive mode decides which code is needed).
+    substeps : int
+        ROS2 substeps per sample.
+    drive : str
+        The fit's drive setting (``auto``, ``measured`` or ``command``).
+    nd : int
+        Number of sensitivity directions (free parameters, single shooting).
+    background : bool
+        Only start compiling what is not cached (on another core, while this process
+        works on) and return at once; the later foreground call waits for it.
+    """
+    sim = SimulationSettings(substeps=substeps, drive=drive)
+    for mode in sorted({choose_drive(t, sim) for t in traces}):
+        if background:
+            compile_sensitivities_in_background(model, mode, substeps, nd, SENSITIVITY_CHUNK)
+        else:
+            sensitivity_chunk(model, mode, substeps, nd, SENSITIVITY_CHUNK)
 
 
 @dataclass(frozen=True)

@@ -10,14 +10,7 @@ from __future__ import annotations
 
 from ...data import Trace
 from ...physics import CircuitModel
-from ...physics.fit import (
-    SENSITIVITY_CHUNK,
-    FitSettings,
-    compile_sensitivities_in_background,
-    sensitivity_chunk,
-)
-from ...physics.inputs import choose_drive
-from ...physics.settings import SimulationSettings
+from ...physics.fit import FitSettings, compile_sensitivities_for
 
 __all__ = ["warm_sensitivities"]
 
@@ -29,25 +22,6 @@ def warm_sensitivities(
     nd: int,
     background: bool = False,
 ) -> None:
-    """Compile (or load from the cache) ``model``'s sensitivity code for ``nd`` directions.
-
-    Parameters
-    ----------
-    model : CircuitModel
-        Model structure.
-    traces : list of Trace
-        Experiments (their drive mode decides which code is needed).
-    fit : FitSettings
-        Substeps and drive of the fit.
-    nd : int
-        Number of sensitivity directions (free parameters, single shooting).
-    background : bool
-        Only start compiling what is not cached (on another core, while this process
-        works on) and return at once; the later foreground call waits for it.
-    """
-    sim = SimulationSettings(substeps=fit.substeps, drive=fit.drive)
-    for drive in sorted({choose_drive(t, sim) for t in traces}):
-        if background:
-            compile_sensitivities_in_background(model, drive, fit.substeps, nd, SENSITIVITY_CHUNK)
-        else:
-            sensitivity_chunk(model, drive, fit.substeps, nd, SENSITIVITY_CHUNK)
+    """:func:`clutchlab.physics.fit.compile_sensitivities_for` with the substeps and drive
+    of the fit settings ``fit`` (same parameters otherwise)."""
+    compile_sensitivities_for(model, traces, fit.substeps, fit.drive, nd, background)
