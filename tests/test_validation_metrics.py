@@ -21,6 +21,7 @@ from clutchlab.validation import (
     branch_direction,
     compare_experiment,
     current_bins,
+    error_by_region,
     hysteresis_curve,
     hysteresis_width_error,
     latch_currents,
@@ -140,3 +141,42 @@ def test_pooled_metrics_of_a_known_offset():
     assert pooled["hysteresis_width_err_bar"] == pytest.approx(0.0, abs=1e-9)
     assert pooled["latch_on_err_mA"] < 0.5 and pooled["latch_off_err_mA"] < 0.5
     assert pooled["hysteresis_bins"] == 2 * c.width_err_bar.size
+
+
+def test_error_by_region_puts_a_latch_timing_error_in_the_latch_window():
+    """A prediction that is exact but for a 50 ms late snap and release: all of its squared
+    error lies in the latch window; a regulated offset's lies in the regulated region."""
+    t, i, p, line = loop(noise=0.0)
+    d = direction_of(i)
+    late = np.interp(t - 0.05, t, p)  # the whole signal 50 ms late: the snaps too
+    latched = p >= line - 1.0
+    pred_timing = np.where(latched != (late >= line - 1.0), late, p)
+    pred_offset = np.where(p < 16.0, p + 0.05, p)
+    pooled = {}
+    for name, pred in (("timing", pred_timing), ("offset", pred_offset)):
+        c = compare_experiment(name, i, d, line, p, pred, time_s=t)
+        pooled[name] = pool_comparisons([c])
+        for key in ("sq_error_share", "samples_share"):
+            total = sum(
+                pooled[name][f"{key}_{r}"] for r in ("regulated", "latched", "latch_window")
+            )
+            assert total == pytest.approx(1.0)
+        e = pred - p
+        window = c.regions["latch_window"]
+        assert pooled[name]["rmse_latch_window_bar"] == pytest.approx(
+            np.sqrt(np.mean(e[window] ** 2))
+        )
+        assert 0.0 < pooled[name]["samples_share_latch_window"] < 0.2
+    assert pooled["timing"]["sq_error_share_latch_window"] == pytest.approx(1.0)
+    assert pooled["timing"]["rmse_regulated_bar"] == 0.0
+    assert pooled["offset"]["rmse_regulated_bar"] == pytest.approx(0.05)
+    assert pooled["offset"]["rmse_latched_bar"] == 0.0
+    assert pooled["offset"]["sq_error_share_regulated"] > 0.8
+    # without sample times there are no regions, and no region keys
+    c = compare_experiment("x", i, d, line, p, pred_offset)
+    assert c.regions is None and "rmse_regulated_bar" not in pool_comparisons([c])
+    assert set(error_by_region([compare_experiment("x", i, d, line, p, p, time_s=t)])) == {
+        f"{k}_{r}{u}"
+        for r in ("regulated", "latched", "latch_window")
+        for k, u in (("rmse", "_bar"), ("sq_error_share", ""), ("samples_share", ""))
+    }

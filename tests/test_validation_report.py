@@ -363,3 +363,27 @@ def test_markdown_tables_escape_pipes_and_render_as_tables(report):
     assert "max \\|e\\| (bar)" in header
     assert header.count("|") - header.count("\\|") == len(METRIC_KEYS) + 2
     assert io.StringIO(md).read().count("![") == len(report.doc["figures"]["drawn"])
+
+
+def test_the_report_says_where_each_variants_error_lies(report):
+    """The region table (Markdown and HTML) shows each variant's RMSE and share of the
+    squared error per region, equal to metrics.json; the shares add up to one."""
+    doc = json.loads((report.folder / "metrics.json").read_text(encoding="utf-8"))
+    md = (report.folder / "report.md").read_text(encoding="utf-8")
+    rows = _md_table(md, "## Where the error lies")
+    assert list(rows) == list(doc["variants"])
+    regions = ("regulated", "latched", "latch_window")
+    for name, cells in rows.items():
+        pm = doc["details"][name]["period_mean"]
+        expected = []
+        for r in regions:
+            expected += [fmt(pm[f"rmse_{r}_bar"]), f"{100 * pm[f'sq_error_share_{r}']:.0f} %"]
+        assert cells == expected, name
+        assert sum(pm[f"sq_error_share_{r}"] for r in regions) == pytest.approx(1.0)
+        assert sum(pm[f"samples_share_{r}"] for r in regions) == pytest.approx(1.0)
+        # the pooled RMSE is the regions' RMSEs weighted by their samples
+        ms = sum(pm[f"samples_share_{r}"] * pm[f"rmse_{r}_bar"] ** 2 for r in regions)
+        assert math.sqrt(ms) == pytest.approx(doc["variants"][name]["rmse_bar"], rel=1e-9)
+    html = (report.folder / "report.html").read_text(encoding="utf-8")
+    assert "<h3>Where the error lies</h3>" in html
+    assert "% of the samples" in md and "latch window: within 0.15 s" in md

@@ -33,6 +33,14 @@ key                             unit  definition
                                       the test experiments listed in
                                       ``coverage_experiments`` (``evaluate``: the featured
                                       one, whose band the report draws)
+``rmse_<region>_bar``           bar   (in ``details``) √mean(e²) over the samples of one region
+                                      of :func:`coverage_regions` (``regulated``, ``latched``,
+                                      ``latch_window``: the measured state, the window around a
+                                      measured snap or release); with
+                                      ``sq_error_share_<region>`` (share of the summed e²) and
+                                      ``samples_share_<region>`` (share of the samples): where
+                                      the error lies, e.g. most of it in a few per cent of the
+                                      samples around the latch switches (latch timing)
 ``fit_s``                       s     wall time of ``fit`` on the training experiments (for a
                                       model built on another variant, including that one's)
 ``predict_s``                   s     wall time of ``predict`` on all test experiments
@@ -62,6 +70,7 @@ __all__ = [
     "ExperimentComparison",
     "compare_experiment",
     "coverage_regions",
+    "error_by_region",
     "interval_coverage",
     "pool_comparisons",
     "pressure_metrics",
@@ -102,6 +111,9 @@ class ExperimentComparison:
     plateau : numpy.ndarray or None
         Samples where both signals are on the latched plateau (within the latch margin of
         line pressure).
+    regions : dict of str to numpy.ndarray or None
+        Sample masks of the :data:`COVERAGE_REGIONS` by the measured pressure (None
+        without sample times).
     """
 
     name: str
@@ -111,6 +123,7 @@ class ExperimentComparison:
     latch_measured: LatchCurrents
     latch_predicted: LatchCurrents
     plateau: np.ndarray | None = None
+    regions: dict[str, np.ndarray] | None = None
 
     def latch_errors(self) -> dict[str, tuple[float, bool]]:
         """``{"on": (error_mA, censored), "off": (...)}``, see :func:`latch_error`."""
@@ -164,7 +177,8 @@ def compare_experiment(
     settings : AnalysisSettings, optional
         Bins and latch margin.
     time_s : numpy.ndarray, optional
-        Sample time (s), for the latched plateau's guard around snaps (no guard without).
+        Sample time (s), for the latched plateau's guard around snaps (no guard without)
+        and the error's regions (none without).
 
     Returns
     -------
@@ -184,6 +198,7 @@ def compare_experiment(
         latch_measured=latch_currents(current_mA, measured_bar, direction, line_bar, s),
         latch_predicted=latch_currents(current_mA, predicted_bar, direction, line_bar, s),
         plateau=plateau,
+        regions=None if time_s is None else coverage_regions(time_s, line_bar, measured_bar, s),
     )
 
 
@@ -233,8 +248,9 @@ def pool_comparisons(comparisons: list[ExperimentComparison]) -> dict[str, float
         latches in either signal), plus ``hysteresis_bins`` (bins counted),
         ``latched_plateau_rmse_bar`` / ``latched_plateau_samples`` (where both signals
         are on the latched plateau),
-        ``latch_on_bias_mA`` / ``latch_off_bias_mA`` (mean signed error) and
-        ``latch_censored`` (experiments where one signal never snapped).
+        ``latch_on_bias_mA`` / ``latch_off_bias_mA`` (mean signed error),
+        ``latch_censored`` (experiments where one signal never snapped) and, when every
+        comparison has its regions, the error per region (:func:`error_by_region`).
     """
     if not comparisons:
         raise ValueError("no experiments to pool")
@@ -255,7 +271,37 @@ def pool_comparisons(comparisons: list[ExperimentComparison]) -> dict[str, float
         out[f"latch_{which}_err_mA"] = float(np.mean(np.abs(vals))) if vals.size else np.nan
         extra[f"latch_{which}_bias_mA"] = float(np.mean(vals)) if vals.size else np.nan
         extra["latch_censored"] += sum(c for _, c in errs)
+    if all(c.regions is not None for c in comparisons):
+        extra |= error_by_region(comparisons)
     return {k: out[k] for k in ACCURACY_KEYS} | extra
+
+
+def error_by_region(comparisons: list[ExperimentComparison]) -> dict[str, float]:
+    """Where the squared error lies, pooled over experiments, per :data:`COVERAGE_REGIONS`.
+
+    Parameters
+    ----------
+    comparisons : list of ExperimentComparison
+        With their ``regions`` (compared with sample times).
+
+    Returns
+    -------
+    dict
+        Per region ``r``: ``rmse_{r}_bar`` (bar; NaN without samples),
+        ``sq_error_share_{r}`` (its share of the summed squared error, 0–1; NaN when the
+        error is zero everywhere) and ``samples_share_{r}`` (its share of the samples, 0–1).
+    """
+    e2 = np.concatenate([(c.predicted_bar - c.measured_bar) ** 2 for c in comparisons])
+    total = float(np.sum(e2))
+    out: dict[str, float] = {}
+    for r in COVERAGE_REGIONS:
+        mask = np.concatenate([c.regions[r] for c in comparisons])
+        n = int(np.sum(mask))
+        part = float(np.sum(e2[mask]))
+        out[f"rmse_{r}_bar"] = float(np.sqrt(part / n)) if n else np.nan
+        out[f"sq_error_share_{r}"] = part / total if total > 0 else np.nan
+        out[f"samples_share_{r}"] = n / e2.size if e2.size else np.nan
+    return out
 
 
 #: Regions of :func:`interval_coverage`.

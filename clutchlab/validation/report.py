@@ -169,6 +169,58 @@ def _md_metrics(rows: dict[str, dict[str, Any]], keys: tuple[str, ...]) -> str:
     return _md_table(["variant", *(_head(k) for k in keys)], body)
 
 
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and math.isfinite(v)
+
+
+#: Regions of the error table, as the report names them.
+_REGION_NAMES = {
+    "regulated": "regulated",
+    "latched": "latched plateau",
+    "latch_window": "latch window",
+}
+
+
+def _region_table(doc: dict[str, Any]) -> tuple[str, list[str], list[list[str]]] | None:
+    """Where each variant's test error lies: a caption, a header and one row per variant
+    (RMSE and share of the squared error per region of the measured pressure); None when no
+    variant has the regions (a document written before them)."""
+    rows, samples = [], None
+    for name, d in doc["details"].items():
+        pm = d.get("period_mean") or {}
+        if f"rmse_{next(iter(_REGION_NAMES))}_bar" not in pm:
+            continue
+        samples = samples or {r: pm.get(f"samples_share_{r}") for r in _REGION_NAMES}
+        cells = []
+        for r in _REGION_NAMES:
+            share = pm.get(f"sq_error_share_{r}")
+            pct = f"{100 * share:.0f} %" if _is_number(share) else "–"
+            cells += [fmt(pm.get(f"rmse_{r}_bar")), pct]
+        rows.append([name, *cells])
+    if not rows:
+        return None
+    window = (doc.get("analysis") or {}).get("latch_window_s")
+    caption = (
+        "Dither-period-mean error on the test ramp per region of the measured pressure: "
+        + ", ".join(
+            f"{_REGION_NAMES[r]} {100 * v:.0f} % of the samples"
+            for r, v in samples.items()
+            if _is_number(v)
+        )
+        + (
+            f" (latch window: within {fmt(window)} s of a measured snap or release)"
+            if window is not None
+            else ""
+        )
+        + ". A large share of the squared error in the few latch-window samples is latch "
+        "timing; in the regulated region it is the characteristic and its hysteresis."
+    )
+    head = ["variant"]
+    for r in _REGION_NAMES.values():
+        head += [f"{r} RMSE (bar)", f"{r} share of e²"]
+    return caption, head, rows
+
+
 #: Columns of the closing-the-loop evidence table.
 _DISCOVERY_HEAD = [
     "effect",
@@ -222,6 +274,15 @@ def _discovery_title(it: dict[str, Any]) -> str:
     )
 
 
+def _md_regions(doc: dict[str, Any]) -> list[str]:
+    table = _region_table(doc)
+    if table is None:
+        return []
+    caption, head, rows = table
+    body = [[f"`{r[0]}`", *r[1:]] for r in rows]
+    return ["## Where the error lies", "", caption, "", _md_table(head, body), ""]
+
+
 def render_markdown(doc: dict[str, Any], figure_files: list[tuple[str, str, str]]) -> str:
     """The Markdown summary of a report document.
 
@@ -261,6 +322,7 @@ def render_markdown(doc: dict[str, Any], figure_files: list[tuple[str, str, str]
         "",
         _md_metrics(doc["variants"], METRIC_KEYS),
         "",
+        *_md_regions(doc),
         "## Raw signal (secondary)",
         "",
         _md_metrics(doc["raw"], ACCURACY_KEYS),
@@ -424,6 +486,14 @@ def _html_rows(header: list[str], rows: list[list[Any]]) -> str:
     return f"<table><tr>{head}</tr>{body}</table>"
 
 
+def _html_regions(doc: dict[str, Any]) -> str:
+    table = _region_table(doc)
+    if table is None:
+        return ""
+    caption, head, rows = table
+    return f"<h3>Where the error lies</h3><p>{_e(caption)}</p>" + _html_rows(head, rows)
+
+
 def _per_experiment_html(doc: dict[str, Any]) -> str:
     keys = (
         "rmse_bar",
@@ -510,6 +580,7 @@ def render_html(
     s += [
         "<h2>Variants on the test ramp — dither-period mean (primary)</h2>",
         _html_metrics(doc["variants"], METRIC_KEYS, "variants"),
+        _html_regions(doc),
         "<h3>Raw signal (secondary)</h3>",
         _html_metrics(doc["raw"], ACCURACY_KEYS, "raw"),
         "<p>" + "".join(_describe(n, d, html_=True) for n, d in doc["details"].items()) + "</p>",
