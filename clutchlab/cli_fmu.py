@@ -23,11 +23,16 @@ def _export(args: argparse.Namespace) -> Path:
     from .physics.fmu import build_fmu, export_physics_fmu
 
     if _is_ml_model(args.model):
-        from .physics.fmu.adapters import ml_program_from
+        from .physics.fmu.adapters import ml_program_from, std_terms_not_exported
         from .residual_ml import check_model, load_model
 
         model = load_model(args.model)  # checked as it is read
         check_model(model, args.model)  # the in-memory model the FMU is built from
+        if not args.no_std and (omitted := std_terms_not_exported(model)):
+            print(
+                "note: the FMU's std output is the GP's own (its std and observation noise); "
+                "the model's predict(return_std=True) also has: " + "; ".join(omitted)
+            )
         program = ml_program_from(
             model,
             with_std=not args.no_std,

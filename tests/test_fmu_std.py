@@ -68,3 +68,44 @@ def test_std_arrays_are_checked():
         GPSpec(**{**fields, "std_points": np.zeros((10, 2))})
     with pytest.raises(ModelError, match="with_std needs l_inv"):
         ml_program(GPSpec(**{**fields, "l_inv": None}), BASE)
+
+
+def test_std_terms_the_fmu_omits_are_named_and_the_rest_is_exact(tmp_path, capsys):
+    """Trained on two experiments, a GP's std has a leave-one-experiment-out variance floor
+    the FMU does not compute: it is named (by the export CLI too) and the FMU's std is the
+    smaller one; with the GP's own std (``mean_only``) nothing is omitted and the FMU's std
+    is the in-process one."""
+    from clutchlab.cli import main
+    from clutchlab.physics.fmu.adapters import std_terms_not_exported
+    from clutchlab.physics.stand import DitherSetting, StandConfig, run_stand
+    from clutchlab.physics.stand.scenarios import RampProfile
+    from clutchlab.residual_ml import mean_only, save_model
+
+    config = StandConfig(
+        settings=(DitherSetting(50.0, "B"),),
+        ramps=(RampProfile("fast", 2.5), RampProfile("slow", 8.0)),
+        seed=5,
+    )
+    train = list(run_stand(config, progress=False).dataset)
+    trace = medium_trace()
+    full = GPBaseline(max_points=300, n_hyper=300).fit(train)
+    own = mean_only(GPBaseline(max_points=300, n_hyper=300)).fit(train)
+    assert std_terms_not_exported(full) == [
+        "leave-one-experiment-out residual-variance floor (residual_variance)"
+    ]
+    assert std_terms_not_exported(own) == []
+    for est, name in ((full, "gp_full"), (own, "gp_own")):
+        fmu = build_fmu(ml_program_from(est, name=name), TMP / f"{name}.fmu")
+        sim = FmuPhysics(fmu).simulate(trace)
+        est.set_params(knot_tol=0.0)
+        mean, std = est.predict(trace, return_std=True)
+        gap = std - sim.outputs["clutch_pressure_std_bar"]
+        assert np.abs(sim.pressure_bar - mean).max() < 1e-6
+        if est is own:
+            assert np.abs(gap).max() < 1e-8
+        else:
+            assert gap.min() > -1e-8 and gap.max() > 1e-4  # the floor only ever adds
+    path = tmp_path / "gp_full.json"
+    save_model(full, path)
+    assert main(["export-fmu", str(path), "--out", str(tmp_path / "gp_full.fmu")]) == 0
+    assert "residual-variance floor" in capsys.readouterr().out

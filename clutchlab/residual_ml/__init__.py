@@ -39,6 +39,7 @@ from .estimators import (
     GPBaseline,
     GPWithDerivative,
     SVCPartitionedGP,
+    mean_only,
 )
 from .evaluate import leave_one_experiment_out, score_traces
 from .features import (
@@ -125,6 +126,7 @@ __all__ = [
     "log_marginal_likelihood",
     "make_classifier",
     "make_variant",
+    "mean_only",
     "save_model",
     "score_traces",
     "select_lag",

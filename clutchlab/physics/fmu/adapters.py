@@ -37,6 +37,7 @@ __all__ = [
     "decision_spec",
     "gp_spec",
     "ml_program_from",
+    "std_terms_not_exported",
 ]
 
 #: Features an FMU reads from its inputs exactly as the offline estimators do.
@@ -199,6 +200,37 @@ def _physics_program(hybrid, kind: str):
     )
 
 
+def std_terms_not_exported(model) -> list[str]:
+    """The terms of a fitted ML model's predictive std that its FMU's std does not have.
+
+    Parameters
+    ----------
+    model : estimator
+        A fitted ``GPBaseline`` / ``GPWithDerivative`` / ``SVCPartitionedGP`` /
+        ``HybridModel`` (a hybrid: its residual model's, or its standalone model's).
+
+    Returns
+    -------
+    list of str
+        One phrase per term the fitted model uses (empty: the FMU's std is the model's).
+    """
+    est = getattr(model, "residual_", model)
+    out = []
+    if getattr(est, "latch_uncertainty", "none") != "none" and (
+        getattr(est, "latch_timing_", None) is not None
+    ):
+        out.append("latch-timing mixture (latch_uncertainty)")
+    if getattr(est, "rate_uncertainty", "none") != "none" and (
+        len(getattr(est, "train_log_rates_", [])) >= 2
+    ):
+        out.append("rate bridge between the trained ramp rates (rate_uncertainty)")
+    if getattr(est, "variance_floor_", None) is not None:
+        out.append("leave-one-experiment-out residual-variance floor (residual_variance)")
+    if getattr(est, "noise_by_freq_", None):
+        out.append("per-dither-frequency noise floor (noise_model)")
+    return out
+
+
 def ml_program_from(
     model,
     with_std: bool = True,
@@ -214,11 +246,15 @@ def ml_program_from(
         Fitted. Its features (a hybrid's: its residual model's) must be among
         :data:`EXACT_FEATURES` and :data:`CAUSAL_FEATURES`.
     with_std : bool
-        Output the predictive standard deviation (bar): the GP's std given its coarse std
-        bins, as the estimator computes it (see :class:`~.ml.GPSpec`). A partitioned
-        model's latch-timing mixture (``latch_uncertainty="mixture"``) is not exported:
-        it widens the band *before* a predicted switch too, which a causal FMU cannot
-        know; the FMU's std is the regime GP's.
+        Output the predictive standard deviation (bar): the regime GP's std given its
+        coarse std bins, with the GP's constant observation noise (see
+        :class:`~.ml.GPSpec`). That is the estimator's std only without the terms
+        :func:`std_terms_not_exported` lists for it: a partitioned model's latch-timing
+        mixture (it widens the band *before* a predicted switch too, which a causal FMU
+        cannot know), the rate bridge between trained ramp rates (two more GP means per
+        step), the leave-one-experiment-out residual-variance floor and the per-frequency
+        noise floor. Where the model has them, the FMU's std is smaller than
+        ``predict(return_std=True)``'s.
     approximate_didt : bool
         Accept the centred ``didt_mA_s`` / ``direction`` and compute causal stand-ins: the
         FMU then differs from the model at ramp reversals (approximate export).
