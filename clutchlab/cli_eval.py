@@ -23,11 +23,14 @@ def command_line() -> str:
 
 def _finish(files, failed: dict[str, str], json_path: str | None) -> int:
     from .validation import write_json
+    from .validation.report import summary_lines
 
     if json_path:
         write_json(files.doc, json_path)
     for name, why in failed.items():
         print(f"variant {name} failed: {why}", file=sys.stderr)
+    for line in summary_lines(files.doc):
+        print(line)
     print(f"report: {files.html}")
     return 1 if failed else 0
 

@@ -313,6 +313,15 @@ def test_evaluate_cli_on_parquet_with_renamed_channels(tiny, tmp_path):
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip().endswith(f"report: {out / 'report.html'}")
     doc = check_report(out)
+    # the terminal summary: each variant's RMSE and where its error lies, as in metrics.json
+    pm = doc["details"]["physics_default"]["period_mean"]
+    line = next(ln for ln in res.stdout.splitlines() if ln.startswith("physics_default"))
+    assert line.split()[1:] == [
+        f"{doc['variants']['physics_default']['rmse_bar']:.4f}",
+        f"{100 * pm['sq_error_share_latch_window']:.0f}",
+        "%",
+        f"{pm['rmse_regulated_bar']:.4f}",
+    ]
     assert json.loads(js.read_text()) == doc
     assert doc["command"].startswith("clutchlab evaluate ") and "--variants" in doc["command"]
     # Same numbers as the in-process evaluation of the canonical CSV dataset.

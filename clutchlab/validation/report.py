@@ -44,6 +44,7 @@ __all__ = [
     "metrics_csv",
     "render_html",
     "render_markdown",
+    "summary_lines",
     "write_json",
     "write_report",
 ]
@@ -219,6 +220,37 @@ def _region_table(doc: dict[str, Any]) -> tuple[str, list[str], list[list[str]]]
     for r in _REGION_NAMES.values():
         head += [f"{r} RMSE (bar)", f"{r} share of e²"]
     return caption, head, rows
+
+
+def summary_lines(doc: dict[str, Any]) -> list[str]:
+    """A terminal summary of a report document: per variant its test RMSE (bar, dither-period
+    mean), the share of its squared error within the latch window, and its RMSE in the
+    regulated region (bar) — the numbers of the report's first two tables.
+
+    Parameters
+    ----------
+    doc : dict
+        The ``metrics.json`` document.
+
+    Returns
+    -------
+    list of str
+        A heading line and one line per scored variant.
+    """
+    rows = doc.get("variants") or {}
+    if not rows:
+        return []
+    width = max(len(n) for n in rows)
+    out = [f"{'variant':{width}s}  RMSE (bar)  e² in latch window  regulated RMSE (bar)"]
+    for name, m in rows.items():
+        pm = (doc.get("details", {}).get(name) or {}).get("period_mean") or {}
+        share, reg = pm.get("sq_error_share_latch_window"), pm.get("rmse_regulated_bar")
+        share_txt = f"{100 * share:.0f} %" if _is_number(share) else "–"
+        reg_txt = f"{reg:.4f}" if _is_number(reg) else "–"
+        rmse = m.get("rmse_bar")
+        rmse_txt = f"{rmse:.4f}" if _is_number(rmse) else "–"
+        out.append(f"{name:{width}s}  {rmse_txt:>10s}  {share_txt:>18s}  {reg_txt:>20s}")
+    return out
 
 
 #: Columns of the closing-the-loop evidence table.
