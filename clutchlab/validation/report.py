@@ -31,7 +31,7 @@ from .._plotly import MARKER_SCRIPT as _MARKER
 from ..data.output import write_file_atomic, write_folder_atomic
 from .figures import FigureSpec, report_figures
 from .interactive import interactive_figures
-from .metrics import ACCURACY_KEYS, METRIC_KEYS
+from .metrics import ACCURACY_KEYS, COVERAGE_REGIONS, METRIC_KEYS
 
 if TYPE_CHECKING:
     from .evaluate import Evaluation
@@ -174,11 +174,15 @@ def _is_number(v: Any) -> bool:
     return isinstance(v, (int, float)) and math.isfinite(v)
 
 
-#: Regions of the error table, as the report names them.
+def _pct(share: Any) -> str:
+    """A share (0–1) as a whole per cent, ``–`` when it is not a number."""
+    return f"{100 * share:.0f} %" if _is_number(share) else "–"
+
+
+#: The error regions (:data:`~.metrics.COVERAGE_REGIONS`) as the report names them.
 _REGION_NAMES = {
-    "regulated": "regulated",
-    "latched": "latched plateau",
-    "latch_window": "latch window",
+    r: {"latched": "latched plateau", "latch_window": "latch window"}.get(r, r)
+    for r in COVERAGE_REGIONS
 }
 
 
@@ -194,9 +198,7 @@ def _region_table(doc: dict[str, Any]) -> tuple[str, list[str], list[list[str]]]
         samples = samples or {r: pm.get(f"samples_share_{r}") for r in _REGION_NAMES}
         cells = []
         for r in _REGION_NAMES:
-            share = pm.get(f"sq_error_share_{r}")
-            pct = f"{100 * share:.0f} %" if _is_number(share) else "–"
-            cells += [fmt(pm.get(f"rmse_{r}_bar")), pct]
+            cells += [fmt(pm.get(f"rmse_{r}_bar")), _pct(pm.get(f"sq_error_share_{r}"))]
         rows.append([name, *cells])
     if not rows:
         return None
@@ -244,11 +246,9 @@ def summary_lines(doc: dict[str, Any]) -> list[str]:
     out = [f"{'variant':{width}s}  RMSE (bar)  e² in latch window  regulated RMSE (bar)"]
     for name, m in rows.items():
         pm = (doc.get("details", {}).get(name) or {}).get("period_mean") or {}
-        share, reg = pm.get("sq_error_share_latch_window"), pm.get("rmse_regulated_bar")
-        share_txt = f"{100 * share:.0f} %" if _is_number(share) else "–"
-        reg_txt = f"{reg:.4f}" if _is_number(reg) else "–"
-        rmse = m.get("rmse_bar")
-        rmse_txt = f"{rmse:.4f}" if _is_number(rmse) else "–"
+        rmse, reg = (m.get("rmse_bar"), pm.get("rmse_regulated_bar"))
+        rmse_txt, reg_txt = (f"{v:.4f}" if _is_number(v) else "–" for v in (rmse, reg))
+        share_txt = _pct(pm.get("sq_error_share_latch_window"))
         out.append(f"{name:{width}s}  {rmse_txt:>10s}  {share_txt:>18s}  {reg_txt:>20s}")
     return out
 
