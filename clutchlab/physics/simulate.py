@@ -9,6 +9,7 @@ import numpy as np
 from ..data import Trace
 from ..errors import SimulationError
 from .assembly import MODEL_INPUTS
+from .dense_call import DenseCall
 from .inputs import choose_drive, input_matrix, interval_inputs
 from .integrator import chunk_function
 from .model import CircuitModel, ModelFunctions
@@ -133,7 +134,10 @@ def _settle(model, fns, p, t, u, drive, settings, x0):
 
 def _run_ros2(model, p, t, u, drive, settings, x0):
     n = len(t)
-    fn = chunk_function(model, drive, settings.substeps, settings.chunk, settings.compile)
+    fn = DenseCall(
+        chunk_function(model, drive, settings.substeps, settings.chunk, settings.compile)
+    )
+    fn.fix(p=p)
     u0, u1 = interval_inputs(u)
     dt = np.diff(t)
     nx = len(x0)
@@ -156,11 +160,10 @@ def _run_ros2(model, p, t, u, drive, settings, x0):
         if cnt < m:  # pad with the last inputs, zero-length intervals
             a0[:, cnt:], a1[:, cnt:] = a1[:, cnt - 1 : cnt], a1[:, cnt - 1 : cnt]
             dts[0, cnt:] = 0.0
-        xs, ys = fn(xk, a0, a1, dts, p)
-        xs = np.asarray(xs)
+        xs, ys = fn(x0=xk, u0=a0, u1=a1, dt=dts)
         x[k + 1 : k + 1 + cnt] = xs[:, :cnt].T
-        y[k + 1 : k + 1 + cnt] = np.asarray(ys)[:, :cnt].T
-        xk = xs[:, cnt - 1]
+        y[k + 1 : k + 1 + cnt] = ys[:, :cnt].T
+        xk = xs[:, cnt - 1].copy()
         if not np.all(np.isfinite(xk)):
             break
         k += cnt

@@ -16,6 +16,7 @@ import casadi as ca
 import numpy as np
 
 from ...errors import SimulationError
+from ..dense_call import DenseCall
 from ..inputs import choose_drive, interval_inputs
 from ..integrator import CSE, compile_function, compile_in_background, sample_step_function
 from ..model import CircuitModel
@@ -158,7 +159,7 @@ def simulate_sensitivities(
     one zero-length step).
     """
     nd = s0.shape[1]
-    fn = sensitivity_chunk(model, drive, substeps, nd, chunk, compile_mode)
+    fn = DenseCall(sensitivity_chunk(model, drive, substeps, nd, chunk, compile_mode))
     u0, u1 = interval_inputs(u)
     dts = np.diff(t)
     n = len(t)
@@ -168,7 +169,8 @@ def simulate_sensitivities(
     dys = np.empty((n, nd))
     # Sample 0: a zero-length step returns the output and its derivative at x0.
     a0 = np.repeat(u[:1].T, chunk, axis=1)
-    r = fn(x0, s0, a0, a0, np.zeros((1, chunk)), p, e)
+    fn.fix(p=p, E=e)
+    r = fn(x0=x0, S0=s0, u0=a0, u1=a0, dt=np.zeros((1, chunk)))
     xs[0], ys[0], dys[0] = x0, float(r[2][0, 0]), np.asarray(r[3])[:, 0]
     xk, sk, k = np.asarray(x0, float), np.asarray(s0, float), 0
     while k < n - 1:
@@ -184,12 +186,12 @@ def simulate_sensitivities(
         if cnt < chunk:
             b0[:, cnt:] = b1[:, cnt - 1 : cnt]
             b1[:, cnt:] = b1[:, cnt - 1 : cnt]
-        xc, sc, yc, dyc = (np.asarray(v) for v in fn(xk, sk, b0, b1, d, p, e))
+        xc, sc, yc, dyc = fn(x0=xk, S0=sk, u0=b0, u1=b1, dt=d)
         xs[k + 1 : k + 1 + cnt] = xc[:, :cnt].T
         ys[k + 1 : k + 1 + cnt] = yc[0, :cnt]
         dys[k + 1 : k + 1 + cnt] = dyc[:, :cnt].T
-        xk = xc[:, cnt - 1]
-        sk = sc[:, (cnt - 1) * nd : cnt * nd]
+        xk = xc[:, cnt - 1].copy()
+        sk = sc[:, (cnt - 1) * nd : cnt * nd].copy()
         if not (np.all(np.isfinite(xk)) and np.all(np.isfinite(sk))):
             raise SimulationError(f"state or sensitivity not finite at t = {t[k + cnt]:.6g} s")
         k += cnt
