@@ -3,7 +3,8 @@
 A plain ``fn(a, b, …)`` from Python converts every NumPy argument to a ``DM`` and every
 result back (through a Python list of floats), and builds a sparsity pattern for each. For
 the simulation and sensitivity chunks (a result of ``nx × nd·500`` numbers per call) that
-conversion cost as much as a sixth of a fit's Jacobian. :class:`DenseCall` uses CasADi's
+conversion took about half of a fit's Jacobian evaluation and more than half of its residual
+evaluation (``benchmarks/bench_jacobian.py``). :class:`DenseCall` uses CasADi's
 buffer interface instead: the arguments are handed over as memory, the results are
 written into arrays allocated once.
 """
