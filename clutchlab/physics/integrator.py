@@ -25,16 +25,19 @@ import casadi as ca
 from ..errors import SimulationError
 from .model import CircuitModel, ModelFunctions
 from .smooth import smooth_max0
+from .source_key import code_source_key
 
 __all__ = [
     "CSE",
     "GAMMA_ROS2",
     "cache_dir",
+    "cached_by_source",
     "chunk_function",
     "compile_function",
     "compile_in_background",
     "lu_factor",
     "lu_solve",
+    "recorded_library",
     "sample_step_function",
     "stabilized_jacobian",
 ]
@@ -152,9 +155,61 @@ def sample_step_function(fns: ModelFunctions, substeps: int) -> ca.Function:
     )
 
 
-def compile_function(fn: ca.Function, tag: str, opt: str = "-O2") -> ca.Function | None:
+def compile_function(
+    fn: ca.Function, tag: str, opt: str = "-O2", key: str | None = None
+) -> ca.Function | None:
     """Public alias of the code-generation cache (see :func:`_compile`)."""
-    return _compile(fn, tag, opt)
+    return _compile(fn, tag, opt, key)
+
+
+def _alias(tag: str, key: str) -> Path:
+    return cache_dir() / f"{tag}_{key}.src"
+
+
+def recorded_library(tag: str, key: str) -> Path | None:
+    """The library recorded under source key ``key`` (:mod:`~clutchlab.physics.source_key`)
+    for cache tag ``tag``; None when nothing is recorded or the library is gone."""
+    try:
+        lib = cache_dir() / _alias(tag, key).read_text(encoding="utf-8").strip()
+    except OSError:
+        return None
+    return lib if lib.suffix == ".so" and lib.is_file() else None
+
+
+def cached_by_source(name: str, tag: str, key: str) -> ca.Function | None:
+    """Function ``name`` from the library recorded under source key ``key``, loaded without
+    building or generating its code.
+
+    Parameters
+    ----------
+    name : str
+        Name of the compiled function.
+    tag : str
+        The cache tag the library was compiled under.
+    key : str
+        Its source key (:func:`~clutchlab.physics.source_key.code_source_key`).
+
+    Returns
+    -------
+    casadi.Function or None
+        None when nothing is recorded under the key, the library is gone or does not load:
+        the caller then builds the code and finds (or compiles) it by code hash as before.
+    """
+    lib = recorded_library(tag, key)
+    if lib is None:
+        return None
+    try:
+        return ca.external(name, str(lib))
+    except RuntimeError:
+        return None
+
+
+def _record_alias(tag: str, key: str, lib: Path) -> None:
+    """Record ``lib`` under ``key``; atomic (a reader sees the old record or the new one)."""
+    alias = _alias(tag, key)
+    part = alias.with_suffix(f".{os.getpid()}.tmp")
+    part.write_text(lib.name + "\n", encoding="utf-8")
+    part.replace(alias)
 
 
 def _compiler() -> str | None:
@@ -227,8 +282,14 @@ def _reap_builds() -> None:  # pragma: no cover - interpreter exit
             build.kill()
 
 
-def _compile(fn: ca.Function, tag: str, opt: str = "-O2") -> ca.Function | None:
-    """Generate C for ``fn``, compile it (cached by code hash) and load it; None if impossible."""
+def _compile(
+    fn: ca.Function, tag: str, opt: str = "-O2", key: str | None = None
+) -> ca.Function | None:
+    """Generate C for ``fn``, compile it (cached by code hash) and load it; None if impossible.
+
+    With a source ``key`` the library is also recorded under it, for
+    :func:`cached_by_source`.
+    """
     cc = _compiler()
     if cc is None:
         return None
@@ -249,7 +310,10 @@ def _compile(fn: ca.Function, tag: str, opt: str = "-O2") -> ca.Function | None:
                 )
                 return None
             part.replace(lib)
-    return ca.external(fn.name(), str(lib))
+    loaded = ca.external(fn.name(), str(lib))
+    if key is not None:
+        _record_alias(tag, key, lib)
+    return loaded
 
 
 @lru_cache(maxsize=32)
@@ -262,12 +326,17 @@ def chunk_function(
     ``DT`` (1 × chunk) the intervals; ``X`` (nx × chunk) and ``Y`` (ny × chunk)
     the states and outputs at the interval ends.
     """
+    name, tag, opt = f"chunk_{chunk}", f"clutchlab_{model.key}_{drive}_{substeps}", "-O3"
+    if compile_mode != "never":
+        key = code_source_key(model, name, tag, opt)
+        cached = cached_by_source(name, tag, key)
+        if cached is not None:
+            return cached
     step = sample_step_function(model.functions(drive), substeps)
-    fn = step.mapaccum(f"chunk_{chunk}", chunk, ["x0"], ["x1"])
+    fn = step.mapaccum(name, chunk, ["x0"], ["x1"])
     if compile_mode == "never":
         return fn
-    tag = f"clutchlab_{model.key}_{drive}_{substeps}"
-    compiled = _compile(fn, tag, "-O3")
+    compiled = _compile(fn, tag, opt, key)
     if compiled is None:
         if compile_mode == "always":
             raise SimulationError("compile='always' but no working C compiler was found")

@@ -18,9 +18,17 @@ import numpy as np
 from ...errors import SimulationError
 from ..dense_call import DenseCall
 from ..inputs import choose_drive, interval_inputs
-from ..integrator import CSE, compile_function, compile_in_background, sample_step_function
+from ..integrator import (
+    CSE,
+    cached_by_source,
+    compile_function,
+    compile_in_background,
+    recorded_library,
+    sample_step_function,
+)
 from ..model import CircuitModel
 from ..settings import SimulationSettings
+from ..source_key import code_source_key
 
 __all__ = [
     "SENSITIVITY_CHUNK",
@@ -54,8 +62,19 @@ def _mapped(model: CircuitModel, drive: str, substeps: int, nd: int, chunk: int)
         ["x1", "S1", "y1", "dy1"],
         CSE,
     )
-    mapped = fn.mapaccum(f"sens_chunk_{chunk}", chunk, ["x0", "S0"], ["x1", "S1"])
-    return mapped, f"clutchlab_sens_{model.key}_{drive}_{substeps}_{nd}"
+    name, tag = _names(model, drive, substeps, nd, chunk)
+    return fn.mapaccum(name, chunk, ["x0", "S0"], ["x1", "S1"]), tag
+
+
+def _names(model: CircuitModel, drive: str, substeps: int, nd: int, chunk: int):
+    """Name of the compiled sensitivity loop and its cache tag."""
+    return f"sens_chunk_{chunk}", f"clutchlab_sens_{model.key}_{drive}_{substeps}_{nd}"
+
+
+def _source_key(model: CircuitModel, drive: str, substeps: int, nd: int, chunk: int):
+    """Name, tag and source key of the sensitivity loop's code."""
+    name, tag = _names(model, drive, substeps, nd, chunk)
+    return name, tag, code_source_key(model, name, tag, _OPT)
 
 
 #: Samples per call of the compiled sensitivity loop (what the fit problem uses).
@@ -75,10 +94,14 @@ def sensitivity_chunk(
     (1 × chunk) the sensor pressure (bar), ``DY`` (nd × chunk) its sensitivities,
     all at the interval ends.
     """
-    mapped, tag = _mapped(model, drive, substeps, nd, chunk)
     if compile_mode == "never":
-        return mapped
-    compiled = compile_function(mapped, tag, _OPT)
+        return _mapped(model, drive, substeps, nd, chunk)[0]
+    name, tag, key = _source_key(model, drive, substeps, nd, chunk)
+    cached = cached_by_source(name, tag, key)
+    if cached is not None:
+        return cached
+    mapped = _mapped(model, drive, substeps, nd, chunk)[0]
+    compiled = compile_function(mapped, tag, _OPT, key)
     return compiled if compiled is not None else mapped
 
 
@@ -91,7 +114,9 @@ def compile_sensitivities_in_background(
     compiles on the other core while this process works on, and the later
     :func:`sensitivity_chunk` waits for that build instead of starting its own.
     """
-    compile_in_background(*_mapped(model, drive, substeps, nd, chunk), _OPT)
+    _, tag, key = _source_key(model, drive, substeps, nd, chunk)
+    if recorded_library(tag, key) is None:
+        compile_in_background(*_mapped(model, drive, substeps, nd, chunk), _OPT)
 
 
 def compile_sensitivities_for(
