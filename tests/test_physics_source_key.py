@@ -14,7 +14,6 @@ from clutchlab.physics.fit import sensitivity
 from clutchlab.physics.model import CircuitModel
 from clutchlab.physics.source_key import code_source_key
 
-
 #: The per-process caches of generated functions (taken before any test patches them).
 _REMEMBERED = (integrator.chunk_function, sensitivity.sensitivity_chunk, sensitivity._mapped)
 
