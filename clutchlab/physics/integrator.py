@@ -17,6 +17,7 @@ import shutil
 import subprocess
 import tempfile
 import warnings
+from collections.abc import Callable
 from functools import lru_cache
 from pathlib import Path
 
@@ -35,6 +36,7 @@ __all__ = [
     "chunk_function",
     "compile_function",
     "compile_in_background",
+    "load_or_compile",
     "lu_factor",
     "lu_solve",
     "recorded_library",
@@ -204,6 +206,27 @@ def cached_by_source(name: str, tag: str, key: str) -> ca.Function | None:
         return None
 
 
+def load_or_compile(
+    model: CircuitModel, name: str, tag: str, opt: str, build: Callable[[], ca.Function]
+) -> tuple[ca.Function, bool]:
+    """Function ``name`` of ``model``: loaded by its source key when its library is recorded,
+    else built by ``build()`` and compiled (then recorded under the key).
+
+    Returns
+    -------
+    (casadi.Function, bool)
+        The function and whether it is compiled (False: no working compiler, so the built,
+        interpreted function).
+    """
+    key = code_source_key(model, name, tag, opt)
+    cached = cached_by_source(name, tag, key)
+    if cached is not None:
+        return cached, True
+    fn = build()
+    compiled = _compile(fn, tag, opt, key)
+    return (fn, False) if compiled is None else (compiled, True)
+
+
 def _record_alias(tag: str, key: str, lib: Path) -> None:
     """Record ``lib`` under ``key``; atomic (a reader sees the old record or the new one)."""
     alias = _alias(tag, key)
@@ -326,19 +349,15 @@ def chunk_function(
     ``DT`` (1 × chunk) the intervals; ``X`` (nx × chunk) and ``Y`` (ny × chunk)
     the states and outputs at the interval ends.
     """
-    name, tag, opt = f"chunk_{chunk}", f"clutchlab_{model.key}_{drive}_{substeps}", "-O3"
-    if compile_mode != "never":
-        key = code_source_key(model, name, tag, opt)
-        cached = cached_by_source(name, tag, key)
-        if cached is not None:
-            return cached
-    step = sample_step_function(model.functions(drive), substeps)
-    fn = step.mapaccum(name, chunk, ["x0"], ["x1"])
+    name, tag = f"chunk_{chunk}", f"clutchlab_{model.key}_{drive}_{substeps}"
+
+    def build() -> ca.Function:
+        step = sample_step_function(model.functions(drive), substeps)
+        return step.mapaccum(name, chunk, ["x0"], ["x1"])
+
     if compile_mode == "never":
-        return fn
-    compiled = _compile(fn, tag, opt, key)
-    if compiled is None:
-        if compile_mode == "always":
-            raise SimulationError("compile='always' but no working C compiler was found")
-        return fn
-    return compiled
+        return build()
+    fn, compiled = load_or_compile(model, name, tag, "-O3", build)
+    if not compiled and compile_mode == "always":
+        raise SimulationError("compile='always' but no working C compiler was found")
+    return fn

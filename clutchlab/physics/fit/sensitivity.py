@@ -20,9 +20,8 @@ from ..dense_call import DenseCall
 from ..inputs import choose_drive, interval_inputs
 from ..integrator import (
     CSE,
-    cached_by_source,
-    compile_function,
     compile_in_background,
+    load_or_compile,
     recorded_library,
     sample_step_function,
 )
@@ -71,12 +70,6 @@ def _names(model: CircuitModel, drive: str, substeps: int, nd: int, chunk: int):
     return f"sens_chunk_{chunk}", f"clutchlab_sens_{model.key}_{drive}_{substeps}_{nd}"
 
 
-def _source_key(model: CircuitModel, drive: str, substeps: int, nd: int, chunk: int):
-    """Name, tag and source key of the sensitivity loop's code."""
-    name, tag = _names(model, drive, substeps, nd, chunk)
-    return name, tag, code_source_key(model, name, tag, _OPT)
-
-
 #: Samples per call of the compiled sensitivity loop (what the fit problem uses).
 SENSITIVITY_CHUNK = 500
 
@@ -96,13 +89,10 @@ def sensitivity_chunk(
     """
     if compile_mode == "never":
         return _mapped(model, drive, substeps, nd, chunk)[0]
-    name, tag, key = _source_key(model, drive, substeps, nd, chunk)
-    cached = cached_by_source(name, tag, key)
-    if cached is not None:
-        return cached
-    mapped = _mapped(model, drive, substeps, nd, chunk)[0]
-    compiled = compile_function(mapped, tag, _OPT, key)
-    return compiled if compiled is not None else mapped
+    name, tag = _names(model, drive, substeps, nd, chunk)
+    return load_or_compile(
+        model, name, tag, _OPT, lambda: _mapped(model, drive, substeps, nd, chunk)[0]
+    )[0]
 
 
 def compile_sensitivities_in_background(
@@ -114,8 +104,8 @@ def compile_sensitivities_in_background(
     compiles on the other core while this process works on, and the later
     :func:`sensitivity_chunk` waits for that build instead of starting its own.
     """
-    _, tag, key = _source_key(model, drive, substeps, nd, chunk)
-    if recorded_library(tag, key) is None:
+    name, tag = _names(model, drive, substeps, nd, chunk)
+    if recorded_library(tag, code_source_key(model, name, tag, _OPT)) is None:
         compile_in_background(*_mapped(model, drive, substeps, nd, chunk), _OPT)
 
 
