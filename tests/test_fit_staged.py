@@ -10,8 +10,9 @@ import pytest
 
 from clutchlab.data import Trace, dither_period_mean, dither_period_samples
 from clutchlab.errors import FitWarning
-from clutchlab.physics import CircuitModel, simulate
+from clutchlab.physics import CircuitModel, integrator, simulate
 from clutchlab.physics.fit import FitSettings, PhysicsFitter
+from clutchlab.physics.fit import sensitivity as sensitivity_mod
 from clutchlab.physics.fit.fitter import resolve_free
 from clutchlab.physics.fit.staged import (
     StagedStart,
@@ -133,6 +134,39 @@ def test_fit_with_staged_start_stays_within_its_time_limit(zoo_small):
     assert fitter.staged_ is not None and fitter.staged_.wall_s < limit
     cost = fitter.result_.cost_history
     assert min(cost) <= cost[0]
+
+
+def test_staged_start_does_not_depend_on_the_compile_cache(zoo_small, monkeypatch):
+    """On an empty compile cache the model's code compiles inside the staged start (beside
+    the main stages' code, compiling in the background). Its result must be a warm cache's:
+    compiling does not count against its stages' time limits."""
+    model = CircuitModel()
+    settings = FitSettings(progress=False)
+    free = resolve_free(model, settings)
+    start = model.default_params()
+    t0 = time.perf_counter()
+    warm, _ = staged_start(model, zoo_small, settings, start, free, 120.0)
+    limit = 2.0 * (time.perf_counter() - t0) + 2.0  # the static stage's limit below
+    original, slow_calls = integrator.load_or_compile, []
+
+    def slow_first_compile(*args, **kwargs):  # the first compile outlasts the whole limit
+        if not slow_calls:
+            slow_calls.append(args[1])
+            time.sleep(limit)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(integrator, "load_or_compile", slow_first_compile)
+    monkeypatch.setattr(sensitivity_mod, "load_or_compile", slow_first_compile)
+    integrator.chunk_function.cache_clear()
+    sensitivity_mod.sensitivity_chunk.cache_clear()
+    try:
+        cold, info = staged_start(model, zoo_small, settings, start, free, limit)
+    finally:
+        integrator.chunk_function.cache_clear()
+        sensitivity_mod.sensitivity_chunk.cache_clear()
+    assert slow_calls, "no code was compiled: the test did not exercise a cold cache"
+    assert {n: cold[n] for n in free} == {n: warm[n] for n in free}
+    assert not any("time limit" in note for note in info.notes), info.notes
 
 
 def test_no_staged_start_with_a_user_start(zoo_small):

@@ -6,6 +6,7 @@ from .result import FitResult, identifiability
 from .sensitivity import (
     SENSITIVITY_CHUNK,
     SensitivityRun,
+    compile_fit_code,
     compile_sensitivities_for,
     compile_sensitivities_in_background,
     sensitivity_chunk,
@@ -34,6 +35,7 @@ __all__ = [
     "SensitivityRun",
     "StructureSelection",
     "StructureSelector",
+    "compile_fit_code",
     "compile_sensitivities_for",
     "compile_sensitivities_in_background",
     "identifiability",

@@ -20,6 +20,7 @@ from ..dense_call import DenseCall
 from ..inputs import choose_drive, interval_inputs
 from ..integrator import (
     CSE,
+    chunk_function,
     compile_in_background,
     load_or_compile,
     recorded_library,
@@ -136,12 +137,33 @@ def compile_sensitivities_for(
         Only start compiling what is not cached (on another core, while this process
         works on) and return at once; the later foreground call waits for it.
     """
-    sim = SimulationSettings(substeps=substeps, drive=drive)
-    for mode in sorted({choose_drive(t, sim) for t in traces}):
+    for mode in _drive_modes(traces, substeps, drive):
         if background:
             compile_sensitivities_in_background(model, mode, substeps, nd, SENSITIVITY_CHUNK)
         else:
             sensitivity_chunk(model, mode, substeps, nd, SENSITIVITY_CHUNK)
+
+
+def compile_fit_code(model: CircuitModel, traces, substeps: int, drive: str, nd: int) -> None:
+    """Compile (or load from the cache) all the code a fit of ``model`` on ``traces`` runs:
+    the simulation chunk and the sensitivity code for ``nd`` directions, for every drive
+    mode of ``traces``, in this process.
+
+    A stage limited by wall time calls this before its clock starts, so that what it
+    computes does not depend on whether the compile cache was warm (see
+    :func:`~clutchlab.physics.fit.staged.staged_start`). Parameters as
+    :func:`compile_sensitivities_for`.
+    """
+    sim = SimulationSettings(substeps=substeps, drive=drive)
+    for mode in _drive_modes(traces, substeps, drive):
+        chunk_function(model, mode, substeps, sim.chunk, sim.compile)
+    compile_sensitivities_for(model, traces, substeps, drive, nd)
+
+
+def _drive_modes(traces, substeps: int, drive: str) -> list[str]:
+    """The drive modes ``traces`` are simulated with under the fit's ``drive`` setting."""
+    sim = SimulationSettings(substeps=substeps, drive=drive)
+    return sorted({choose_drive(t, sim) for t in traces})
 
 
 @dataclass(frozen=True)

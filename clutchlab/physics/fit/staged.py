@@ -51,6 +51,7 @@ from ..model import CircuitModel
 from ..parameters import ParameterSet
 from ..settings import SimulationSettings
 from ..simulate import simulate
+from .sensitivity import compile_fit_code
 from .settings import FitSettings
 
 __all__ = [
@@ -292,6 +293,11 @@ def _static_stage(model, start, traces, latch, settings, free, budget_s, info):
         return start
     from .fitter import PhysicsFitter  # the stage is itself a (small) fit
 
+    # Its code is compiled (or loaded) before its clock starts. On an empty compile cache,
+    # with the main stages' code compiling beside it, the time limit would otherwise stop
+    # it earlier than on a warm cache, and the fit would start from another point (single
+    # shooting, the default; multiple-shooting segments compile their code on first use).
+    compile_fit_code(model, pieces, settings.substeps, settings.drive, len(static_free))
     stage = replace(
         settings,
         free=static_free,
@@ -310,10 +316,16 @@ def _static_stage(model, start, traces, latch, settings, free, budget_s, info):
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", FitWarning)
-            fitted = PhysicsFitter(model, stage, start).fit(pieces).params_
+            result = PhysicsFitter(model, stage, start).fit(pieces).result_
     except FitError as exc:
         info.notes.append(f"static stage kept the start ({exc})")
         return start
+    if "WallTime" in result.status:
+        info.notes.append(
+            f"static stage stopped at its time limit ({budget_s:.0f} s) after "
+            f"{result.iterations} iterations: on a faster or idler machine it would go further"
+        )
+    fitted = result.params()
     info.static_experiments = [p.name for p in pieces]
     return fitted
 
@@ -482,7 +494,8 @@ def match_latch_snaps(
     The best point is kept; the start when nothing improves it or when the model does not
     snap on both branches. Nothing is matched without a static stage (``info``) — the
     pilot pressure is then not known well enough — and a step that would put a latch
-    parameter on its bound ends the matching. No new round starts after ``budget_s``.
+    parameter on its bound ends the matching. No new round starts after ``budget_s``
+    (compiling excluded).
 
     Parameters
     ----------
@@ -500,7 +513,8 @@ def match_latch_snaps(
         Record of the staged start; ``values``, ``latch_match_mA`` and ``notes`` are
         filled in.
     budget_s : float
-        Wall time (s) after which no further simulation round starts.
+        Wall time (s) after which no further simulation round starts, counted from the end
+        of the first simulation (which may compile the model's code).
 
     Returns
     -------
@@ -520,7 +534,7 @@ def match_latch_snaps(
     used = [tr for tr in qs if tr.name in latch][:2]
     if not used:
         return params
-    n_sim, t0 = 0, time.perf_counter()
+    n_sim = 0
 
     def offsets(p):
         nonlocal n_sim
@@ -533,6 +547,7 @@ def match_latch_snaps(
 
     x = _thresholds_of(law, params)
     f = offsets(params)
+    t0 = time.perf_counter()  # after the first simulation, which may compile the model's code
     if f is None:
         info.notes.append("the start model does not snap on both branches: latch not matched")
         return params
