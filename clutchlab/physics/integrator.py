@@ -157,11 +157,9 @@ def sample_step_function(fns: ModelFunctions, substeps: int) -> ca.Function:
     )
 
 
-def compile_function(
-    fn: ca.Function, tag: str, opt: str = "-O2", key: str | None = None
-) -> ca.Function | None:
+def compile_function(fn: ca.Function, tag: str, opt: str = "-O2") -> ca.Function | None:
     """Public alias of the code-generation cache (see :func:`_compile`)."""
-    return _compile(fn, tag, opt, key)
+    return _compile(fn, tag, opt)
 
 
 def _alias(tag: str, key: str) -> Path:

@@ -137,7 +137,7 @@ def compile_sensitivities_for(
         Only start compiling what is not cached (on another core, while this process
         works on) and return at once; the later foreground call waits for it.
     """
-    for mode in _drive_modes(traces, substeps, drive):
+    for mode in _drive_modes(traces, SimulationSettings(substeps=substeps, drive=drive)):
         if background:
             compile_sensitivities_in_background(model, mode, substeps, nd, SENSITIVITY_CHUNK)
         else:
@@ -155,14 +155,13 @@ def compile_fit_code(model: CircuitModel, traces, substeps: int, drive: str, nd:
     :func:`compile_sensitivities_for`.
     """
     sim = SimulationSettings(substeps=substeps, drive=drive)
-    for mode in _drive_modes(traces, substeps, drive):
+    for mode in _drive_modes(traces, sim):
         chunk_function(model, mode, substeps, sim.chunk, sim.compile)
-    compile_sensitivities_for(model, traces, substeps, drive, nd)
+        sensitivity_chunk(model, mode, substeps, nd, SENSITIVITY_CHUNK)
 
 
-def _drive_modes(traces, substeps: int, drive: str) -> list[str]:
-    """The drive modes ``traces`` are simulated with under the fit's ``drive`` setting."""
-    sim = SimulationSettings(substeps=substeps, drive=drive)
+def _drive_modes(traces, sim: SimulationSettings) -> list[str]:
+    """The drive modes ``traces`` are simulated with under ``sim``'s drive setting."""
     return sorted({choose_drive(t, sim) for t in traces})
 
 
