@@ -12,7 +12,10 @@ also measured on what a flexible map of the current and its direction leaves: th
 residual minus its mean per (current quantile bin × direction of travel), pooled over
 the experiments (:func:`current_map_residual`). A signal that moves independently of the
 ramp (line-pressure wander) keeps its share there; one the ramp fixes (an oil warming
-through every run) does not, and no statistic on these data can separate it.
+through every run) does not, and no statistic on these data can separate it. A signal also
+enters the signature by its partial correlation in the regulated region beyond each
+experiment's own map (:mod:`.partial`), which sees a coupling of a few hundredths of a bar
+under a misfit that differs from one ramp rate to the next.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ import numpy as np
 from scipy.signal import welch
 from scipy.stats import chi2
 
+from .partial import partial_hit, regulated_partial
 from .residuals import SIGNALS, ResidualSet, effective_size, integrated_time
 
 __all__ = ["Diagnostics", "current_map_residual", "diagnose", "signal_association"]
@@ -108,7 +112,9 @@ def signal_association(res: ResidualSet, n_eff: float | None = None) -> list[dic
 
     For a signal outside :data:`MAP_SIGNALS` also ``eta2_beyond_current``: its η² on
     :func:`current_map_residual` (bias-corrected with that residual's own effective size),
-    the share of what the current and its direction leave that the signal explains.
+    the share of what the current and its direction leave that the signal explains; and
+    ``partial_regulated``: :func:`~.partial.regulated_partial` (None where it cannot be
+    measured).
 
     Parameters
     ----------
@@ -121,8 +127,8 @@ def signal_association(res: ResidualSet, n_eff: float | None = None) -> list[dic
     -------
     list of dict
         ``signal``, ``unit``, ``description``, ``corr``, ``eta2``, ``bins``,
-        ``eta2_beyond_current`` (None for the map's own signals); largest η² of the two
-        first.
+        ``eta2_beyond_current`` and ``partial_regulated`` (None for the map's own
+        signals); largest η² of the two first.
     """
     r = res.r[res.keep]
     if n_eff is None:
@@ -133,6 +139,7 @@ def signal_association(res: ResidualSet, n_eff: float | None = None) -> list[dic
     for name, (unit, desc) in SIGNALS.items():
         x = res.signals[name][res.keep]
         beyond = None if name in MAP_SIGNALS else 0.0
+        partial = None
         if _constant(x):
             corr, eta2, bins = 0.0, 0.0, []
         else:
@@ -140,6 +147,7 @@ def signal_association(res: ResidualSet, n_eff: float | None = None) -> list[dic
             eta2, bins = _eta2(r, x, n_eff)
             if beyond is not None:
                 beyond, _ = _eta2(rest, x, n_rest)
+                partial = regulated_partial(res, name)
         out.append(
             {
                 "signal": name,
@@ -149,6 +157,7 @@ def signal_association(res: ResidualSet, n_eff: float | None = None) -> list[dic
                 "eta2": eta2,
                 "bins": bins,
                 "eta2_beyond_current": beyond,
+                "partial_regulated": partial,
             }
         )
     out.sort(key=lambda d: -_strength(d))
@@ -158,6 +167,12 @@ def signal_association(res: ResidualSet, n_eff: float | None = None) -> list[dic
 def _strength(assoc: dict) -> float:
     """The larger of a signal's η² on the residual and beyond the current map."""
     return max(assoc["eta2"], assoc.get("eta2_beyond_current") or 0.0)
+
+
+def _in_signature(assoc: dict) -> bool:
+    """η² of at least :data:`SIGNATURE_ETA2`, or a partial correlation in the regulated
+    region that :func:`~.partial.partial_hit` accepts."""
+    return _strength(assoc) >= SIGNATURE_ETA2 or partial_hit(assoc.get("partial_regulated"))
 
 
 def _lagged(res: ResidualSet, name: str, max_lag: int) -> tuple[np.ndarray, np.ndarray]:
@@ -227,8 +242,10 @@ class Diagnostics:
         Ljung–Box ``statistic``, ``dof``, ``p_value``, ``stride`` and ``white`` (p ≥ 0.01).
     signature : list of str
         Signals with η² ≥ :data:`SIGNATURE_ETA2` on the residual or beyond the current
-        map (``eta2_beyond_current``), strongest first; a signal that moves with one
-        already listed (|corr| > 0.98 on these data) is left out.
+        map (``eta2_beyond_current``), or with a partial correlation in the regulated
+        region beyond each experiment's map (``partial_regulated``, :mod:`.partial`),
+        strongest η² first; a signal that moves with one already listed (|corr| > 0.98
+        on these data) is left out.
     aliases : dict
         Signals indistinguishable on these data: name -> the signal standing for it.
     """
@@ -247,7 +264,10 @@ class Diagnostics:
     def summary(self) -> str:
         """One line: what the residual follows."""
         if not self.signature:
-            follows = f"no single signal (η² < {SIGNATURE_ETA2:.2f} for all)"
+            follows = (
+                f"no single signal (η² < {SIGNATURE_ETA2:.2f}, "
+                "no regulated-region partial correlation)"
+            )
         else:
             eta = {a["signal"]: a for a in self.associations}
             follows = ", ".join(_describe(eta[s]) for s in self.signature)
@@ -278,6 +298,12 @@ class Diagnostics:
 
 
 def _describe(assoc: dict) -> str:
+    partial = assoc.get("partial_regulated")
+    if _strength(assoc) < SIGNATURE_ETA2 and partial_hit(partial):
+        return (
+            f"{assoc['signal']} (partial r {partial['rho']:+.2f}, z {partial['z']:+.1f} in the "
+            "regulated region beyond each experiment's current map)"
+        )
     beyond = assoc.get("eta2_beyond_current")
     if beyond is not None and beyond > assoc["eta2"]:
         return f"{assoc['signal']} (η² {beyond:.2f} beyond the current and its direction)"
@@ -353,11 +379,7 @@ def diagnose(res: ResidualSet, max_lag_s: float = 0.1) -> Diagnostics:
                 integrated_time(res.r[res.keep][a:b]) for a, b in res.kept_slices
             ],
         },
-        signature=[
-            a["signal"]
-            for a in assoc
-            if _strength(a) >= SIGNATURE_ETA2 and a["signal"] not in aliases
-        ],
+        signature=[a["signal"] for a in assoc if _in_signature(a) and a["signal"] not in aliases],
         aliases=aliases,
     )
 

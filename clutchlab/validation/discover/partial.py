@@ -1,0 +1,147 @@
+"""A signal's association with the residual in the regulated region, beyond each experiment's
+own piecewise-linear map of the current and its direction.
+
+Issue 17, "signatures that see through a poor base fit". On a circuit whose equations are
+not clutchlab's, the fitted model leaves a residual of a few tenths of a bar that repeats
+with the ramp (a misplaced band, a misplaced latch window), and a missing effect that follows
+another signal — the regulated pressure moving with line-pressure wander — is a few
+hundredths of a bar under it. The pooled map of :func:`~.diagnostics.current_map_residual`
+cannot remove a misfit that differs from one ramp rate to the next, and the latch windows'
+residual, which no map of the current removes, drowns what is left. So here:
+
+* only the **regulated** samples count (the measured pressure more than
+  :data:`REGULATED_MARGIN_BAR` below line pressure): on the latched plateau the pressure is
+  line pressure itself, and the latch windows are what the map cannot hold;
+* the map is fitted **per experiment**: in each cell of (experiment × direction of travel ×
+  :data:`PARTIAL_CURRENT_BINS` quantile bins of the current) the residual and the signal are
+  both freed of their mean and of their linear trend in the current (Frisch–Waugh), so a
+  misfit that repeats with the ramp, and a signal that moves monotonically with it (an oil
+  that warms through every run), are removed with the map;
+* what is left is compared by the partial correlation ``ρ``, with an effective sample size
+  that allows for the autocorrelation of both series (``Σ_e n_e / max(τ_r, τ_x)``, per
+  experiment), and its ``z = ρ √n_eff``.
+
+A signal enters a residual's signature on this evidence when ``|z| ≥`` :data:`PARTIAL_Z` and
+``ρ² ≥`` :data:`PARTIAL_R2`. Measured on quadratic_play seed 0 (three dither settings, fast +
+slow training ramps, its own ``clutchlab fit-physics``): with the zoo's line-pressure coupling
+(0.43 bar/bar) ``ρ`` = −0.20 … −0.26 for 4–16 bins (β −0.28 … −0.30 bar/bar); the same plant
+without it −0.01 … +0.01.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .residuals import ResidualSet, integrated_time
+
+__all__ = [
+    "PARTIAL_CURRENT_BINS",
+    "PARTIAL_R2",
+    "PARTIAL_Z",
+    "REGULATED_MARGIN_BAR",
+    "partial_hit",
+    "regulated_partial",
+]
+
+#: A sample is regulated when the measured pressure is more than this below line pressure (bar).
+REGULATED_MARGIN_BAR = 1.0
+#: Quantile bins of the current per experiment and direction of travel.
+PARTIAL_CURRENT_BINS = 8
+#: |z| a partial correlation needs to enter the signature.
+PARTIAL_Z = 4.0
+#: ρ² a partial correlation needs to enter the signature (its share of what the map leaves).
+PARTIAL_R2 = 0.02
+#: Fewest regulated samples for the statistic.
+_MIN_SAMPLES = 50
+
+
+def _cells(exp: np.ndarray, direction: np.ndarray, current: np.ndarray) -> np.ndarray:
+    """Cell index of every sample: experiment × direction × current quantile bin."""
+    cell = np.zeros(current.size, dtype=int)
+    next_id = 0
+    for e in np.unique(exp):
+        for d in np.unique(direction[exp == e]):
+            sel = (exp == e) & (direction == d)
+            cur = current[sel]
+            edges = np.unique(np.quantile(cur, np.linspace(0, 1, PARTIAL_CURRENT_BINS + 1)))
+            k = np.clip(np.searchsorted(edges, cur, side="right") - 1, 0, max(len(edges) - 2, 0))
+            cell[sel] = next_id + k
+            next_id += max(len(edges) - 1, 1)
+    return cell
+
+
+def _detrend(v: np.ndarray, cell: np.ndarray, current: np.ndarray) -> np.ndarray:
+    """``v`` minus its mean and its linear trend in the current within each cell."""
+    n = np.maximum(np.bincount(cell), 1)
+    c_mean = (np.bincount(cell, weights=current) / n)[cell]
+    v_mean = (np.bincount(cell, weights=v) / n)[cell]
+    dc, dv = current - c_mean, v - v_mean
+    s_cc = np.bincount(cell, weights=dc * dc)
+    s_cv = np.bincount(cell, weights=dc * dv)
+    slope = np.divide(s_cv, s_cc, out=np.zeros_like(s_cv), where=s_cc > 1e-12)
+    return dv - slope[cell] * dc
+
+
+def regulated_partial(res: ResidualSet, signal: str) -> dict | None:
+    """Partial association of ``signal`` with the kept residual in the regulated region.
+
+    Parameters
+    ----------
+    res : ResidualSet
+        Residuals (bar) and signals; ``pressure_bar`` and ``line_pressure_bar`` decide the
+        regulated samples.
+    signal : str
+        A signal of the residual set (its own unit).
+
+    Returns
+    -------
+    dict or None
+        ``rho`` (partial correlation), ``z``, ``n_eff``, ``beta`` (bar per unit of the
+        signal), ``effect_bar`` (RMS of ``beta`` times what the map leaves of the signal,
+        bar) and ``n`` (regulated samples); None when there are too few regulated samples or
+        the signal does not move within the map's cells.
+    """
+    keep = res.keep
+    r = res.r[keep]
+    x = np.asarray(res.signals[signal][keep], dtype=float)
+    pressure = res.signals["pressure_bar"][keep]
+    line = res.signals["line_pressure_bar"][keep]
+    regulated = pressure < line - REGULATED_MARGIN_BAR
+    if int(regulated.sum()) < _MIN_SAMPLES:
+        return None
+    exp = np.zeros(r.size, dtype=int)
+    for k, (a, b) in enumerate(res.kept_slices):
+        exp[a:b] = k
+    exp, r, x = exp[regulated], r[regulated], x[regulated]
+    current = res.signals["current_mA"][keep][regulated]
+    direction = np.sign(res.signals["didt_sign"][keep][regulated]).astype(int)
+    cell = _cells(exp, direction, current)
+    rr, xx = _detrend(r, cell, current), _detrend(x, cell, current)
+    s_rr, s_xx, s_rx = float(rr @ rr), float(xx @ xx), float(rr @ xx)
+    scale = max(float(np.sum(x * x)), 1e-300)
+    if s_rr <= 0 or s_xx <= 1e-12 * scale:
+        return None
+    n_eff = 0.0
+    for e in np.unique(exp):
+        sel = exp == e
+        tau = max(integrated_time(rr[sel]), integrated_time(xx[sel]))
+        n_eff += max(int(sel.sum()) / tau, 1.0)
+    rho = s_rx / math.sqrt(s_rr * s_xx)
+    beta = s_rx / s_xx
+    return {
+        "rho": float(rho),
+        "z": float(rho * math.sqrt(n_eff)),
+        "n_eff": float(n_eff),
+        "beta": float(beta),
+        "effect_bar": float(abs(beta) * math.sqrt(s_xx / xx.size)),
+        "n": int(xx.size),
+    }
+
+
+def partial_hit(partial: dict | None) -> bool:
+    """Whether a :func:`regulated_partial` result puts its signal in the signature."""
+    if not partial:
+        return False
+    return abs(partial["z"]) >= PARTIAL_Z and partial["rho"] ** 2 >= PARTIAL_R2
