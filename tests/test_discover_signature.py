@@ -204,3 +204,20 @@ def test_no_partial_correlation_without_regulated_samples():
     res = _per_rate(coupling=0.4)
     res.signals["pressure_bar"] = res.signals["line_pressure_bar"].copy()  # all latched
     assert regulated_partial(res, "line_pressure_bar") is None
+
+
+def test_samples_where_the_model_has_latched_and_the_data_not_are_left_out():
+    """A base fit that latches early predicts line pressure where the data are still
+    regulated: those few samples' residual (several bar) is the latch window's, not the
+    coupling's, and would drown it."""
+    res = _per_rate(coupling=0.4)
+    clean = regulated_partial(res, "line_pressure_bar")
+    early = (res.signals["current_mA"] > 780.0) & (res.signals["current_mA"] <= 800.0)
+    # the model has latched 20 mA early: it predicts line pressure there
+    gap = res.signals["line_pressure_bar"] - res.signals["pressure_bar"]
+    res.r = np.where(early, res.r + gap, res.r)
+    assert early.any()
+    seen = regulated_partial(res, "line_pressure_bar")
+    assert seen["n"] == clean["n"] - int(early.sum())
+    assert seen["rho"] == pytest.approx(clean["rho"], abs=0.05)
+    assert partial_hit(seen)

@@ -9,9 +9,10 @@ hundredths of a bar under it. The pooled map of :func:`~.diagnostics.current_map
 cannot remove a misfit that differs from one ramp rate to the next, and the latch windows'
 residual, which no map of the current removes, drowns what is left. So here:
 
-* only the **regulated** samples count (the measured pressure more than
+* only the **regulated** samples count (the measured *and* the predicted pressure more than
   :data:`REGULATED_MARGIN_BAR` below line pressure): on the latched plateau the pressure is
-  line pressure itself, and the latch windows are what the map cannot hold;
+  line pressure itself, and the latch windows — where one of the two has latched and the
+  other not — are what the map cannot hold;
 * the map is fitted **per experiment**: in each cell of (experiment × direction of travel ×
   :data:`PARTIAL_CURRENT_BINS` quantile bins of the current) the residual and the signal are
   both freed of their mean and of their linear trend in the current (Frisch–Waugh), so a
@@ -25,7 +26,9 @@ A signal enters a residual's signature on this evidence when ``|z| ≥`` :data:`
 ``ρ² ≥`` :data:`PARTIAL_R2`. Measured on quadratic_play seed 0 (three dither settings, fast +
 slow training ramps, its own ``clutchlab fit-physics``): with the zoo's line-pressure coupling
 (0.43 bar/bar) ``ρ`` = −0.20 … −0.26 for 4–16 bins (β −0.28 … −0.30 bar/bar); the same plant
-without it −0.01 … +0.01.
+without it −0.01 … +0.01. The predicted pressure joined the region's definition after a
+discovery's base fit on that coupled dataset latched early at 81 of 23 735 samples, which
+alone pulled ``z`` from −9.6 to −4.0 (BENCHMARKS, issue 17, session 28).
 """
 
 from __future__ import annotations
@@ -90,7 +93,8 @@ def regulated_partial(res: ResidualSet, signal: str) -> dict | None:
     Parameters
     ----------
     res : ResidualSet
-        Residuals (bar) and signals; ``pressure_bar`` and ``line_pressure_bar`` decide the
+        Residuals (bar, model minus measured) and signals; ``pressure_bar`` (measured),
+        ``pressure_bar`` plus the residual (predicted) and ``line_pressure_bar`` decide the
         regulated samples.
     signal : str
         A signal of the residual set (its own unit).
@@ -107,8 +111,8 @@ def regulated_partial(res: ResidualSet, signal: str) -> dict | None:
     r = res.r[keep]
     x = np.asarray(res.signals[signal][keep], dtype=float)
     pressure = res.signals["pressure_bar"][keep]
-    line = res.signals["line_pressure_bar"][keep]
-    regulated = pressure < line - REGULATED_MARGIN_BAR
+    below = res.signals["line_pressure_bar"][keep] - REGULATED_MARGIN_BAR
+    regulated = (pressure < below) & (pressure + r < below)
     if int(regulated.sum()) < _MIN_SAMPLES:
         return None
     exp = np.zeros(r.size, dtype=int)
