@@ -14,6 +14,7 @@ flexible component law of at most its size (``alternatives``).
 from .alternatives import Alternative, alternative_note, alternatives_for, fit_alternative
 from .diagnostics import Diagnostics, diagnose
 from .loop import discover, period_mean_metrics
+from .partial import regulated_partial
 from .report import plot_diagnostics, plot_evidence, plot_residuals, write_report
 from .residuals import ResidualSet, residual_problem, residual_set
 from .result import DiscoveryResult, IterationRecord, ModelState
@@ -40,6 +41,7 @@ __all__ = [
     "plot_diagnostics",
     "plot_evidence",
     "plot_residuals",
+    "regulated_partial",
     "residual_problem",
     "residual_set",
     "score_candidates",
