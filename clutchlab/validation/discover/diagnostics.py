@@ -26,7 +26,7 @@ import numpy as np
 from scipy.signal import welch
 from scipy.stats import chi2
 
-from .partial import partial_hit, regulated_partial
+from .partial import partial_hit, quantile_bins, regulated_partial
 from .residuals import SIGNALS, ResidualSet, effective_size, integrated_time
 
 __all__ = ["Diagnostics", "current_map_residual", "diagnose", "signal_association"]
@@ -99,8 +99,7 @@ def current_map_residual(res: ResidualSet) -> np.ndarray:
     cur = res.signals["current_mA"][res.keep]
     if r.size == 0 or _constant(cur):
         return r - (r.mean() if r.size else 0.0)
-    edges = np.unique(np.quantile(cur, np.linspace(0, 1, MAP_CURRENT_BINS + 1)))
-    k = np.clip(np.searchsorted(edges, cur, side="right") - 1, 0, max(len(edges) - 2, 0))
+    k, _ = quantile_bins(cur, MAP_CURRENT_BINS)
     cell = k * 3 + (np.sign(res.signals["didt_sign"][res.keep]).astype(int) + 1)
     sums = np.bincount(cell, weights=r)
     counts = np.bincount(cell)

@@ -20,7 +20,9 @@ residual, which no map of the current removes, drowns what is left. So here:
   that warms through every run), are removed with the map;
 * what is left is compared by the partial correlation ``ρ``, with an effective sample size
   that allows for the autocorrelation of both series (``Σ_e n_e / max(τ_r, τ_x)``, per
-  experiment), and its ``z = ρ √n_eff``.
+  experiment), and its ``z = ρ √n_eff``. The integrated times are taken on each
+  experiment's regulated samples joined end to end, across the gap of the latched plateau:
+  an approximation.
 
 A signal enters a residual's signature on this evidence when ``|z| ≥`` :data:`PARTIAL_Z` and
 ``ρ² ≥`` :data:`PARTIAL_R2`. Measured on quadratic_play seed 0 (three dither settings, fast +
@@ -45,6 +47,7 @@ __all__ = [
     "PARTIAL_Z",
     "REGULATED_MARGIN_BAR",
     "partial_hit",
+    "quantile_bins",
     "regulated_partial",
 ]
 
@@ -67,12 +70,18 @@ def _cells(exp: np.ndarray, direction: np.ndarray, current: np.ndarray) -> np.nd
     for e in np.unique(exp):
         for d in np.unique(direction[exp == e]):
             sel = (exp == e) & (direction == d)
-            cur = current[sel]
-            edges = np.unique(np.quantile(cur, np.linspace(0, 1, PARTIAL_CURRENT_BINS + 1)))
-            k = np.clip(np.searchsorted(edges, cur, side="right") - 1, 0, max(len(edges) - 2, 0))
+            k, n_bins = quantile_bins(current[sel], PARTIAL_CURRENT_BINS)
             cell[sel] = next_id + k
-            next_id += max(len(edges) - 1, 1)
+            next_id += n_bins
     return cell
+
+
+def quantile_bins(x: np.ndarray, n: int) -> tuple[np.ndarray, int]:
+    """Label of every value of ``x`` among at most ``n`` quantile bins, and the bin count
+    (fewer where quantiles coincide; at least 1)."""
+    edges = np.unique(np.quantile(x, np.linspace(0, 1, n + 1)))
+    labels = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, max(len(edges) - 2, 0))
+    return labels, max(len(edges) - 1, 1)
 
 
 def _detrend(v: np.ndarray, cell: np.ndarray, current: np.ndarray) -> np.ndarray:
