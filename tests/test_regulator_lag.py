@@ -116,7 +116,7 @@ def test_unknown_law_parameter_is_refused():
 @pytest.mark.xfail(
     strict=True,
     reason="known defect: the law lags the pilot chamber's hydraulic spring too (negative "
-    "damping); the fix is on branch stable-reg-pilot-lag, not landed: it changes the "
+    "damping); the fix is tag stable-reg-pilot-lag (commit c5c700a), not landed: it changes the "
     "discovery's verdicts (the demo then claims transport_delay and takes 1062 s)",
 )
 def test_the_lagged_pilot_leaves_the_spool_stable(zoo_small):

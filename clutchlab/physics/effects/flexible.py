@@ -218,10 +218,11 @@ class RegulatorPilotLag(Effect):
     spool's own displacement makes in it, i.e. it lags the pilot chamber's hydraulic
     spring, which is negative damping. With thin oil, a low prime pressure or an
     unbalanced start some parameter sets are unstable (a ``--regulator-lag auto`` fit on a
-    zoo plant stopped with ``Error_In_Step_Computation``). The fix (branch
-    ``stable-reg-pilot-lag``) is not landed: as the discovery's flexible alternative the
-    stable law no longer matches sensor_lag and transport_delay on the default stand,
-    and the demo then claims transport_delay and takes 1062 s (BENCHMARKS, session 20).
+    zoo plant stopped with ``Error_In_Step_Computation``). The fix (tag
+    ``stable-reg-pilot-lag``, commit c5c700a) is not landed: as the discovery's flexible
+    alternative the stable law no longer matches sensor_lag and transport_delay on the
+    default stand, and the demo then claims transport_delay and takes 1062 s (BENCHMARKS,
+    session 20).
     """
 
     name = "reg_pilot_lag"

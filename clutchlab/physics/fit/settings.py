@@ -128,7 +128,7 @@ class FitSettings:
         20 s training-side ramps of the zoo plants ``saturating_lugre`` and
         ``quadratic_play`` (seed 0) the law, though asked for by the signature, raised
         the physics RMSE within the 120 s budget (0.277 vs 0.206, 0.406 vs 0.378 bar).
-        With the law made stable (branch ``stable-reg-pilot-lag``, not landed) it lowered
+        With the law made stable (tag ``stable-reg-pilot-lag``, not landed) it lowered
         the RMSE on 7 of 8 zoo rows (seeds 0 and 1) but raised it on
         ``preisach_accumulator`` seed 0 (0.199 → 0.325 bar), so it would stay off there
         too.
