@@ -13,7 +13,12 @@ from clutchlab.validation.discover.diagnostics import (
     diagnose,
     signal_association,
 )
-from clutchlab.validation.discover.partial import PARTIAL_Z, partial_hit, regulated_partial
+from clutchlab.validation.discover.partial import (
+    PARTIAL_Z,
+    current_determined_share,
+    partial_hit,
+    regulated_partial,
+)
 from clutchlab.validation.discover.residuals import SIGNALS, ResidualSet
 
 N_EXP, N = 6, 2000
@@ -221,3 +226,28 @@ def test_samples_where_the_model_has_latched_and_the_data_not_are_left_out():
     assert seen["n"] == clean["n"] - int(early.sum())
     assert seen["rho"] == pytest.approx(clean["rho"], abs=0.05)
     assert partial_hit(seen)
+
+
+def _dither_faded_in(res: ResidualSet) -> ResidualSet:
+    """The dither faded in with the current below 70 mA, inside the lowest current cell (the zoo
+    stands fade it in below 100 mA), and a misfit with the same kink: a function of the current
+    that a cell's linear trend leaves (without the test for it, z ≈ +5 here)."""
+    cur = res.signals["current_mA"]
+    res.signals["dither_amp_mA"] = np.minimum(cur, 70.0) * 100.0 / 70.0
+    res.r = res.r + 0.1 * np.minimum(cur, 70.0) / 70.0
+    return res
+
+
+def test_a_signal_the_current_determines_gets_no_partial_correlation():
+    """Session 29: saturating_lugre seed 0 named dither_amp_mA (z +7) on a null dataset only
+    because the stand fades the dither in with the current."""
+    res = _dither_faded_in(_per_rate(coupling=0.0))
+    assert regulated_partial(res, "dither_amp_mA") is None
+    assert "dither_amp_mA" not in diagnose(res).signature
+
+
+def test_a_wandering_signal_is_not_taken_for_a_function_of_the_current():
+    res = _dither_faded_in(_per_rate(coupling=0.4))
+    cur, sign = res.signals["current_mA"], np.sign(res.signals["didt_sign"]).astype(int)
+    assert current_determined_share(res.signals["line_pressure_bar"], cur, sign) < 0.5
+    assert partial_hit(regulated_partial(res, "line_pressure_bar"))
