@@ -104,13 +104,19 @@ def quantile_bins(x: np.ndarray, n: int) -> tuple[np.ndarray, int]:
     return labels, max(len(edges) - 1, 1)
 
 
+def _negligible(sum_sq: float, x: np.ndarray) -> bool:
+    """Whether a sum of squared deviations of ``x`` is negligible against ``x``'s own size
+    (the signal does not move)."""
+    return sum_sq <= 1e-12 * max(float(np.sum(x * x)), 1e-300)
+
+
 def current_determined_share(x: np.ndarray, current: np.ndarray, direction: np.ndarray) -> float:
     """Share of the variance of ``x`` that a piecewise-linear map of ``current`` per
     ``direction`` explains (pooled over the experiments): the mean of ``x`` in each of
     :data:`CURRENT_MAP_KNOTS` quantile bins, at the bin's median current, interpolated.
     1 for a constant ``x`` (nothing left to explain)."""
     total = float(np.sum((x - x.mean()) ** 2))
-    if total <= 1e-12 * max(float(np.sum(x * x)), 1e-300):
+    if _negligible(total, x):
         return 1.0
     left = 0.0
     for d in np.unique(direction):
@@ -180,8 +186,7 @@ def regulated_partial(res: ResidualSet, signal: str) -> dict | None:
     cell = _cells(exp, direction, current)
     rr, xx = _detrend(r, cell, current), _detrend(x, cell, current)
     s_rr, s_xx, s_rx = float(rr @ rr), float(xx @ xx), float(rr @ xx)
-    scale = max(float(np.sum(x * x)), 1e-300)
-    if s_rr <= 0 or s_xx <= 1e-12 * scale:
+    if s_rr <= 0 or _negligible(s_xx, x):
         return None
     n_eff = 0.0
     for e in np.unique(exp):
