@@ -28,6 +28,7 @@ def _cmd_discover(args: argparse.Namespace) -> int:
         time_limit_s=args.time_limit,
         max_iter=args.max_iter,
         staged_start=False,  # as DiscoverySettings' default fit (see there)
+        **({} if args.substeps is None else {"substeps": args.substeps}),
     )
     settings = DiscoverySettings(
         fit=fit,
@@ -86,6 +87,12 @@ def register(sub) -> None:
     )
     p.add_argument("--max-iter", type=int, default=50, help="solver iterations per fit (50)")
     p.add_argument("--time-limit", type=float, default=900.0, help="wall limit per fit (s)")
+    p.add_argument(
+        "--substeps",
+        type=int,
+        help="ROS2 integration steps per sample in every fit and score (default 2); more "
+        "when the summary says the model's integration diverged (slower in proportion)",
+    )
     p.add_argument(
         "--physics-model",
         metavar="FIT.json",

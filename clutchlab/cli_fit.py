@@ -35,6 +35,8 @@ def _cmd_fit_physics(args: argparse.Namespace) -> int:
     }
     if args.free:
         kw["free"] = _csv(args.free)
+    if args.substeps is not None:
+        kw["substeps"] = args.substeps
     fitter = PhysicsFitter(model, FitSettings(**kw))
     out = Path(args.out)
     try:
@@ -122,6 +124,12 @@ def register(sub) -> None:
         action="store_true",
         help="a fit stopped at a limit is an error (exit 1, best iterate to "
         "OUT.best-iterate.json); default: the best iterate is the model, marked not converged",
+    )
+    p.add_argument(
+        "--substeps",
+        type=int,
+        help="ROS2 integration steps per sample during the fit (default 2); more for a "
+        "circuit whose simulation diverges at the default (slower in proportion)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", help="also write the fit result here")

@@ -37,6 +37,7 @@ from clutchlab.validation.discover.residuals import (
     loeo_evidence,
     loeo_rss,
     loro_errors,
+    point_sums_of_squares,
 )
 from clutchlab.validation.discover.scoring import Projector, profile_points, score_effect
 
@@ -94,6 +95,13 @@ def cli_run(tiny_dir, tmp_path_factory):
     ]
     code = main(argv)
     return code, out
+
+
+def test_cli_refuses_an_invalid_substep_count_before_writing(tiny_dir, tmp_path, capsys):
+    out = tmp_path / "report"
+    code = main(["discover", str(tiny_dir), "--out", str(out), "--substeps", "0", "--quiet"])
+    assert code == 2 and "substeps must be 1..16" in capsys.readouterr().err
+    assert not out.exists()
 
 
 def test_cli_writes_the_issue_json_and_a_report(cli_run):
@@ -417,9 +425,10 @@ def test_the_profile_look_linearizes_at_its_best_point_and_counts_each_point(sco
     assert prof.status == "scored" and prof.probe == "profile"
     assert prof.n_tests == 2 and prof.statistic >= 0.0
     assert 0.0 <= prof.strength["mhys_H"] <= 3.0
-    best, rss_best = scoring._profile_best(
+    best, rss_best, diverged = scoring._profile_best(
         model.with_effects(name), name, values, train, base.keep, proj, fit
     )
+    assert diverged == [] and prof.diverged == []
     r0 = proj(base.r[base.keep])
     cand = model.with_effects(name)
     problem = residual_problem(cand, cand.params(**values, **best), ("mhys_H",), train, fit)
@@ -437,7 +446,7 @@ def test_no_step_is_taken_from_a_profile_point_worse_than_the_fitted_model(score
     base, proj = scored.base, scored.proj
     rp = proj(base.r[base.keep])
     worse = float(rp @ rp) * 1.5
-    monkeypatch.setattr(scoring, "_profile_best", lambda *a: ({"mhys_H": 3.0}, worse))
+    monkeypatch.setattr(scoring, "_profile_best", lambda *a: ({"mhys_H": 3.0}, worse, []))
 
     def no_sensitivity(*a, **k):
         raise AssertionError("no sensitivity at a point worse than the fitted model")
@@ -456,6 +465,86 @@ def test_no_step_is_taken_from_a_profile_point_worse_than_the_fitted_model(score
     assert out.status == "scored" and out.probe == "profile"
     assert out.statistic == 0.0 and out.share == 0.0 and out.p_value == 1.0
     assert not out.significant
+
+
+@pytest.fixture(scope="module")
+def hot(tmp_path_factory):
+    """The tiny stand with a 70 Hz dither that is high at low current (shape C), the base
+    model at its defaults ready to score, as :func:`scored`."""
+    config = StandConfig(
+        builtin_effects=False, settings=(DitherSetting(70.0, "C"),), ramps=TINY_RAMPS, seed=3
+    )
+    out = tmp_path_factory.mktemp("discover_hot") / "stand"
+    write_stand(out, config, progress=False, figure=False)
+    train = list(load_dataset(out).select(ramps=["fast", "slow"]))
+    model = CircuitModel()
+    params = model.default_params()
+    fit = _settings().fit
+    base = residual_set(residual_problem(model, params, FREE, train, fit), train, True)
+    proj = Projector(base.jacobian[base.keep])
+    return SimpleNamespace(train=train, model=model, params=params, fit=fit, base=base, proj=proj)
+
+
+def test_a_profile_point_where_the_integration_diverges_is_recorded_not_scored(hot):
+    # thin oil: 30 K above the viscosity's reference temperature, exp(−0.1 · 30) = 0.05 of
+    # the spools' damping; under a 70 Hz dither the fit's 2 ROS2 substeps per 1 kHz sample
+    # blow up there (measured: the stand's 8 do not). Such points are reported as not
+    # evaluated, and give no statistic.
+    train, model, params, fit = hot.train, hot.model, hot.params, hot.fit
+    assert fit.substeps == 2
+    assert {round(float(np.mean(t.get("oil_temp_C", 40.0)))) for t in train} == {40}
+    values = dict(params.values) | {"temp_T_ref": 10.0}
+    name = "oil_temperature"
+    out = score_effect(name, model, values, train, hot.base, hot.proj, fit, expansion="profile")
+    assert out.status == "scored" and out.probe == "profile"
+    assert {"temp_b": pytest.approx(0.1)} in out.diverged
+    assert all(p in profile_points(model.with_effects(name), name) for p in out.diverged)
+    assert out.statistic == 0.0 and not out.significant
+    # at the fitted model's own temperature nothing diverges
+    ref = dict(params.values) | {"temp_T_ref": 40.0}
+    cool = score_effect(name, model, ref, train, hot.base, hot.proj, fit, expansion="profile")
+    assert cool.diverged == []
+
+
+def test_a_point_whose_error_exceeds_three_measured_spans_counts_as_diverged(monkeypatch):
+    import clutchlab.validation.discover.residuals as residuals
+
+    target = np.array([0.5, 4.0, 10.5])  # measured span 10 bar
+    errors = {0.0: [0.1, -0.2, 0.3], 1.0: [0.1, 29.0, 0.0], 2.0: [0.1, -31.0, 0.0]}
+
+    class Problem:
+        def __init__(self):
+            self.experiments = [SimpleNamespace(target=target)]
+            self.shared, self.n_z = ("temp_b",), 1
+
+        def start_workers(self, *a):
+            pass
+
+        def evaluate(self, z, jacobian):
+            return {"ok": True, "r": np.array(errors[round(float(z[0]) * 10.0, 6)])}
+
+        def close(self):
+            pass
+
+    monkeypatch.setattr(residuals, "residual_problem", lambda *a: Problem())
+    cand = CircuitModel().with_effects("oil_temperature")
+    scale = {p.name: p for p in cand.parameters}["temp_b"].scale
+    assert scale == pytest.approx(0.1)  # z = strength / scale
+    points = [{"temp_b": 0.0}, {"temp_b": 0.01}, {"temp_b": 0.02}]
+    fit = SimpleNamespace(workers=1)
+    rss = point_sums_of_squares(cand, {}, points, [], fit, np.ones(3, bool))
+    assert rss[0] == pytest.approx(0.14) and rss[1] == pytest.approx(0.01 + 29.0**2)
+    assert rss[2] == np.inf  # 31 bar > 3 × 10 bar
+
+
+def test_the_summary_names_the_candidates_not_evaluated_where_the_model_diverged():
+    from clutchlab.validation.discover import CandidateScore
+
+    assert loop._diverged_note([CandidateScore("sensor_lag", 1)], 2) == ""
+    oil = CandidateScore("oil_temperature", 1, diverged=[{"temp_b": 0.09}, {"temp_b": 0.1}])
+    note = loop._diverged_note([CandidateScore("sensor_lag", 1), oil], 2)
+    assert note.startswith("not evaluated where the model's integration diverged with 2 substeps")
+    assert "oil_temperature at temp_b = 0.09, temp_b = 0.1" in note and "--substeps" in note
 
 
 def test_a_second_expansion_keeps_the_larger_statistic_and_counts_both_tests(monkeypatch):

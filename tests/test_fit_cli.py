@@ -49,6 +49,8 @@ def test_fit_physics_cli_writes_model_and_json(tmp_path):
             "--free",
             "vfs_K_m,vfs_F_pre,reg_F0",
             "--quiet",
+            "--substeps",
+            "3",
             "--json",
             str(js),
         ],
@@ -62,6 +64,7 @@ def test_fit_physics_cli_writes_model_and_json(tmp_path):
     assert fit.free == ["vfs_K_m", "vfs_F_pre", "reg_F0"]
     assert fit.train == ["fast_50Hz_A"]  # the medium ramp is never fitted on
     assert json.loads(js.read_text())["values"] == fit.values
+    assert fit.settings["substeps"] == 3
     bad = subprocess.run(
         [
             sys.executable,
@@ -82,6 +85,16 @@ def test_fit_physics_cli_writes_model_and_json(tmp_path):
         timeout=600,
     )
     assert bad.returncode == 2 and "unknown parameter(s) nope" in bad.stderr
+    fresh = tmp_path / "never.json"
+    cmd = [sys.executable, "-m", "clutchlab.cli", "fit-physics", str(data), "--out", str(fresh)]
+    bad = subprocess.run(
+        [*cmd, "--train", "fast", "--substeps", "0", "--quiet"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert bad.returncode == 2 and "substeps must be 1..16" in bad.stderr
+    assert not fresh.exists()
 
 
 def test_fit_stopped_at_its_limit_writes_the_best_iterate_as_the_model(tmp_path):

@@ -526,7 +526,7 @@ def discover(
     follows = bool(final_diag.signature)
     unexplained = last.effect is None and bool(last.candidates) and structured and follows
     signature = final_diag.signature if unexplained else []
-    summary = _summary(iterations, unexplained, final_diag)
+    summary = _summary(iterations, unexplained, final_diag, settings.fit.substeps)
     return DiscoveryResult(
         iterations=iterations,
         baseline=baseline,
@@ -563,7 +563,7 @@ def _settings_dict(settings: DiscoverySettings) -> dict:
     } | {"fit": {k: (list(v) if isinstance(v, tuple) else v) for k, v in d["fit"].items()}}
 
 
-def _summary(iterations: list[IterationRecord], unexplained: bool, diag) -> str:
+def _summary(iterations: list[IterationRecord], unexplained: bool, diag, substeps: int) -> str:
     added = [it for it in iterations if it.effect]
     parts = []
     for it in added:
@@ -595,4 +595,23 @@ def _summary(iterations: list[IterationRecord], unexplained: bool, diag) -> str:
         )
     if not added and not unexplained:
         parts.insert(0, "no missing effect found")
+    diverged = _diverged_note(last.candidates, substeps)
+    if diverged:
+        parts.append(diverged)
     return "; ".join(parts) + "."
+
+
+def _diverged_note(scores, substeps: int) -> str:
+    """Which candidates could not be simulated at some of their profile strengths."""
+    where = []
+    for s in scores:
+        if s.diverged:
+            points = ", ".join(" ".join(f"{k} = {v:.3g}" for k, v in p.items()) for p in s.diverged)
+            where.append(f"{s.effect} at {points}")
+    if not where:
+        return ""
+    return (
+        "not evaluated where the model's integration diverged with "
+        f"{substeps} substeps per sample: {'; '.join(where)} (more substeps may reach it: "
+        "`--substeps`)"
+    )

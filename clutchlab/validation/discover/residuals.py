@@ -22,6 +22,7 @@ from ...physics.fit.problem import snap_mask
 from ...physics.parameters import ParameterSet
 
 __all__ = [
+    "DIVERGED_SPANS",
     "SIGNALS",
     "ResidualSet",
     "effective_size",
@@ -31,6 +32,7 @@ __all__ = [
     "loeo_rss",
     "loro_errors",
     "point_sums_of_squares",
+    "pressure_span",
     "residual_problem",
     "residual_set",
 ]
@@ -50,6 +52,12 @@ SIGNALS: dict[str, tuple[str, str]] = {
 
 #: |dI/dt| below this fraction of an experiment's largest counts as a hold (sign 0).
 HOLD_FRACTION = 0.02
+
+#: A simulation whose period-mean pressure misses a measured one by more than this many
+#: times the measured pressure span (largest minus smallest, over the experiments) has
+#: diverged: a clutch pressure lies between prime and line pressure, and an error of
+#: three spans is no model of it but a numerical blow-up of the integration.
+DIVERGED_SPANS = 3.0
 
 
 def integrated_time(x: np.ndarray, c: float = 5.0) -> float:
@@ -329,12 +337,19 @@ def point_sums_of_squares(
         Residuals kept (:attr:`ResidualSet.keep`).
     transform : callable, optional
         Applied to the kept residuals before squaring (a projection).
+
+    Returns
+    -------
+    list of float
+        One sum of squares per point; ``inf`` where the simulation diverged (non-finite,
+        or an error beyond :data:`DIVERGED_SPANS` measured pressure spans).
     """
     names = tuple(points[0])
     specs = {p.name: p for p in model.parameters}
     if any(specs[n].transform != "linear" for n in names):
         raise ValueError(f"point_sums_of_squares needs linear transforms: {names}")
     problem = residual_problem(model, model.params(**values, **points[0]), names, traces, fit)
+    span = pressure_span(problem)
     out = []
     try:
         problem.start_workers(traces, fit.workers)
@@ -347,12 +362,23 @@ def point_sums_of_squares(
                 out.append(math.inf)
                 continue
             e = np.asarray(ev["r"], dtype=float)[keep]
+            if span > 0 and e.size and np.max(np.abs(e)) > DIVERGED_SPANS * span:
+                out.append(math.inf)
+                continue
             e = transform(e) if transform is not None else e
             rss = float(np.dot(e, e))
             out.append(rss if np.isfinite(rss) else math.inf)
     finally:
         problem.close()
     return out
+
+
+def pressure_span(problem: FitProblem) -> float:
+    """Largest minus smallest measured period-mean clutch pressure over ``problem``'s
+    experiments (bar)."""
+    targets = [np.asarray(e.target, dtype=float) for e in problem.experiments]
+    values = np.concatenate([t[np.isfinite(t)] for t in targets]) if targets else np.zeros(0)
+    return float(np.ptp(values)) if values.size else 0.0
 
 
 def loeo_rss(res: ResidualSet, rcond: float = 3e-2) -> float | None:

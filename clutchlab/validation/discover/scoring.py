@@ -118,6 +118,11 @@ class CandidateScore:
     refit : dict
         Filled when the candidate was refitted to confirm: ``status``, ``rss_bar2``,
         ``delta_bic``, ``wall_s``.
+    diverged : list of dict
+        Points of the profile look (strengths, and the nuisance values scored with them;
+        engineering units) where the model with the effect could not be simulated: its
+        integration diverged (see :data:`~.residuals.DIVERGED_SPANS`). The effect was not
+        evaluated there; more integration substeps (``FitSettings.substeps``) may reach it.
     wall_s : float
         Time to score it (s).
     """
@@ -137,6 +142,7 @@ class CandidateScore:
     status: str = "scored"
     signature: str = ""
     refit: dict = field(default_factory=dict)
+    diverged: list[dict[str, float]] = field(default_factory=list)
     wall_s: float = 0.0
 
     def to_dict(self) -> dict:
@@ -252,6 +258,7 @@ def score_effect(
         rss0 = float(np.dot(rp, rp))
         best = None
         tried: list[dict[str, float]] = []
+        diverged: list[dict[str, float]] = []
 
         def trial_at(point: dict[str, float]) -> None:
             nonlocal best
@@ -269,6 +276,7 @@ def score_effect(
                 expansion,
             )
             trial.nuisance = point
+            diverged.extend(p for p in trial.diverged if p not in diverged)
             if best is None or trial.statistic > best.statistic:
                 best = trial
 
@@ -283,6 +291,7 @@ def score_effect(
         for key in ("share", "statistic", "p_value", "n_eff", "novelty", "strength", "probe"):
             setattr(out, key, getattr(best, key))
         out.nuisance, out.status = best.nuisance, best.status
+        out.diverged = diverged
         if rss0 <= 0:
             out.status = "confounded"
     except ClutchlabError as exc:
@@ -301,17 +310,21 @@ def nuisance_grid(cand: CircuitModel, name: str) -> list[dict[str, float]]:
     :data:`NUISANCE_FACTORS` × its default (clipped to the bounds) and the largest is
     kept — a sup-score test, whose significance level is divided by the grid size.
     """
-    cls = EFFECTS[name]
     specs = {p.name: p for p in cand.parameters}
-    nuisance = [n for n in cls.fit_parameters() if n not in cls.STRENGTH]
     grid: list[dict[str, float]] = [{}]
-    for n in nuisance:
+    for n in _nuisance_names(name):
         spec = specs[n]
         values = sorted(
             {min(max(spec.default * f, spec.lower), spec.upper) for f in NUISANCE_FACTORS}
         )
         grid = [g | {n: v} for g in grid for v in values]
     return grid
+
+
+def _nuisance_names(name: str) -> list[str]:
+    """The effect's fitted parameters that are not strengths (a lag's time constant)."""
+    cls = EFFECTS[name]
+    return [n for n in cls.fit_parameters() if n not in cls.STRENGTH]
 
 
 def nuisance_refinements(cand: CircuitModel, best: dict[str, float]) -> list[dict[str, float]]:
@@ -365,7 +378,11 @@ def _score_at(
         if expansion == "default":
             probe = clipped(1.0)
         else:
-            probe, rss_at = _profile_best(cand, name, values, traces, base.keep, projector, fit)
+            probe, rss_at, diverged = _profile_best(
+                cand, name, values, traces, base.keep, projector, fit
+            )
+            nuisance = {k: v for k, v in values.items() if k in _nuisance_names(name)}
+            out.diverged = [nuisance | p for p in diverged]
             if rss_at >= rss0:
                 # no profile point explains any of the residual: no step from a point
                 # that is worse than the fitted model (and no sensitivity to pay for)
@@ -436,21 +453,20 @@ def _profile_best(
     keep: np.ndarray,
     projector: Projector,
     fit: FitSettings,
-) -> tuple[dict[str, float], float]:
+) -> tuple[dict[str, float], float, list[dict[str, float]]]:
     """The point of :func:`profile_points` with the smallest projected residual sum of squares.
 
     One simulation per point (no sensitivities), all in one residual problem whose
     experiments are shared among ``fit.workers`` processes; the free parameters enter
-    through the projection, i.e. to first order. Returns the point and its projected sum
-    of squares (bar²). Raises ``ClutchlabError`` when the model diverges at every point.
+    through the projection, i.e. to first order. Returns the point, its projected sum of
+    squares (bar²; ``inf`` when the model diverges at every point) and the points where it
+    diverged.
     """
     points = profile_points(cand, name)
     rss = point_sums_of_squares(cand, values, points, traces, fit, keep, projector)
+    diverged = [p for p, r in zip(points, rss, strict=True) if not np.isfinite(r)]
     k = int(np.argmin(rss))
-    best, best_rss = (points[k], rss[k]) if np.isfinite(rss[k]) else (None, np.inf)
-    if best is None:
-        raise ClutchlabError("the model with the effect diverges at every profile strength")
-    return best, best_rss
+    return points[k], float(rss[k]), diverged
 
 
 def _compile_ahead(model: CircuitModel, name: str, traces: list[Trace], fit: FitSettings) -> None:
@@ -540,8 +556,9 @@ def score_candidates(
             keep_new = new.status == "scored" and (
                 old.status != "scored" or new.statistic > old.statistic
             )
+            diverged = old.diverged + [p for p in new.diverged if p not in old.diverged]
             new = new if keep_new else old
-            new.n_tests = n_tests
+            new.n_tests, new.diverged = n_tests, diverged
         scores.append(new)
     level = alpha / max(len(candidates), 1)
     for s in scores:
