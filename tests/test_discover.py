@@ -377,7 +377,13 @@ def test_a_transport_delay_fit_frees_its_pade_delay_and_scores_over_it():
 def scored(tiny):
     """The base model at its defaults on the tiny stand's training ramps, ready to score:
     training traces, model, parameters, fit settings, residual set, projector."""
-    train = list(tiny.select(ramps=["fast", "slow"]))
+    return _ready_to_score(tiny)
+
+
+def _ready_to_score(dataset):
+    """The base model at its defaults on ``dataset``'s fast and slow ramps, with the
+    training residual, its free parameters' Jacobian and the projector away from them."""
+    train = list(dataset.select(ramps=["fast", "slow"]))
     model = CircuitModel()
     params = model.default_params()
     fit = _settings().fit
@@ -469,20 +475,14 @@ def test_no_step_is_taken_from_a_profile_point_worse_than_the_fitted_model(score
 
 @pytest.fixture(scope="module")
 def hot(tmp_path_factory):
-    """The tiny stand with a 70 Hz dither that is high at low current (shape C), the base
-    model at its defaults ready to score, as :func:`scored`."""
+    """The tiny stand with a 70 Hz dither that is high at low current (shape C), ready to
+    score (:func:`_ready_to_score`)."""
     config = StandConfig(
         builtin_effects=False, settings=(DitherSetting(70.0, "C"),), ramps=TINY_RAMPS, seed=3
     )
     out = tmp_path_factory.mktemp("discover_hot") / "stand"
     write_stand(out, config, progress=False, figure=False)
-    train = list(load_dataset(out).select(ramps=["fast", "slow"]))
-    model = CircuitModel()
-    params = model.default_params()
-    fit = _settings().fit
-    base = residual_set(residual_problem(model, params, FREE, train, fit), train, True)
-    proj = Projector(base.jacobian[base.keep])
-    return SimpleNamespace(train=train, model=model, params=params, fit=fit, base=base, proj=proj)
+    return _ready_to_score(load_dataset(out))
 
 
 def test_a_profile_point_where_the_integration_diverges_is_recorded_not_scored(hot):
