@@ -4,19 +4,26 @@ of the ramp is measured."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
+from clutchlab.physics.stand.scenarios import dither_amplitude
+from clutchlab.validation.discover import loop
 from clutchlab.validation.discover.diagnostics import (
+    RAMP_BOUND_R2,
     SIGNATURE_ETA2,
     current_map_residual,
     diagnose,
+    ramp_bound,
     signal_association,
 )
 from clutchlab.validation.discover.partial import (
     PARTIAL_Z,
     current_determined_share,
     partial_hit,
+    regulated_mask,
     regulated_partial,
 )
 from clutchlab.validation.discover.residuals import SIGNALS, ResidualSet
@@ -251,3 +258,66 @@ def test_a_wandering_signal_is_not_taken_for_a_function_of_the_current():
     cur, sign = res.signals["current_mA"], np.sign(res.signals["didt_sign"]).astype(int)
     assert current_determined_share(res.signals["line_pressure_bar"], cur, sign) < 0.5
     assert partial_hit(regulated_partial(res, "line_pressure_bar"))
+
+
+def _oil_with_the_ramp(levels: bool = False, seed: int = 0) -> ResidualSet:
+    """The oil warms from 40 to 85 °C through every run, with a wander of its own (±5 °C,
+    ~2 s), and the residual follows it; with ``levels`` the oil instead sits at 40 / 55 /
+    70 °C by experiment (the stand's default protocol) and the residual does not follow it."""
+    res = _per_rate(coupling=0.0, seed=seed, oil_drift=not levels)
+    rng = np.random.default_rng(seed + 100)
+    for k, (a, b) in enumerate(res.slices):
+        if levels:
+            res.signals["oil_temp_C"][a:b] = (40.0, 55.0, 70.0)[k % 3]
+            continue
+        w = np.zeros(b - a)
+        c = np.exp(-0.01 / 2.0)
+        for j in range(1, b - a):
+            w[j] = c * w[j - 1] + np.sqrt(1 - c * c) * 5.0 * rng.standard_normal()
+        res.signals["oil_temp_C"][a:b] += w
+    return res
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_an_oil_that_warms_through_every_run_is_reported_as_moving_with_the_ramp(seed):
+    """Issue 17: discovery said the residual "follows none of the examined signals" on a
+    circuit whose oil warmed through every run. The map of the current removes such a signal
+    with the misfit, so no statistic names it; the diagnostics now say which signal it is."""
+    res = _oil_with_the_ramp(seed=seed)
+    bound = ramp_bound(res)
+    assert list(bound) == ["oil_temp_C"]
+    assert RAMP_BOUND_R2 <= bound["oil_temp_C"] < 0.99
+    diag = diagnose(res)
+    assert diag.ramp_bound == bound
+    assert "moves with the ramp in every run" in diag.summary()
+    assert "oil_temp_C (" in diag.ramp_note()
+
+
+def test_signals_that_do_not_move_with_the_ramp_or_that_the_current_sets_are_not_reported():
+    """Oil at a level per experiment, line pressure wandering on its own, and a dither
+    amplitude scheduled on the current (the stand's shape A, faded in over the first 100 mA:
+    a function of the current, its own map) are not "moving with the ramp"."""
+    res = _oil_with_the_ramp(levels=True)
+    cur = res.signals["current_mA"]
+    res.signals["dither_amp_mA"] = dither_amplitude("A", cur)
+    reg = regulated_mask(res)
+    sign = np.sign(res.signals["didt_sign"][reg]).astype(int)
+    assert current_determined_share(res.signals["dither_amp_mA"][reg], cur[reg], sign) >= 0.99
+    assert current_determined_share(res.signals["line_pressure_bar"][reg], cur[reg], sign) < 0.5
+    assert ramp_bound(res) == {}
+    diag = diagnose(res)
+    assert diag.ramp_bound == {} and diag.ramp_note() == ""
+    assert "with the ramp" not in diag.summary()
+
+
+def test_a_residual_left_unexplained_names_the_signal_it_cannot_be_told_from():
+    """The discovery's summary carries the note when the final residual is not white."""
+    res = _oil_with_the_ramp()
+    diag = diagnose(res)
+    assert not diag.whiteness["white"]
+    last = SimpleNamespace(effect=None, decision="no significant effect", candidates=[])
+    text = loop._summary([last], False, diag, 2)
+    assert text.startswith("no missing effect found; stopped: no significant effect")
+    assert "oil_temp_C (" in text and "moves with the ramp in every run" in text
+    diag.whiteness["white"] = True  # nothing left to explain: no note
+    assert "with the ramp" not in loop._summary([last], False, diag, 2)

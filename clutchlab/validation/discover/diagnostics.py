@@ -26,10 +26,25 @@ import numpy as np
 from scipy.signal import welch
 from scipy.stats import chi2
 
-from .partial import partial_hit, quantile_bins, regulated_partial
+from .partial import (
+    CURRENT_DETERMINED_R2,
+    MIN_REGULATED,
+    current_determined_share,
+    partial_hit,
+    quantile_bins,
+    regulated_mask,
+    regulated_partial,
+)
 from .residuals import SIGNALS, ResidualSet, effective_size, integrated_time
 
-__all__ = ["Diagnostics", "current_map_residual", "diagnose", "signal_association"]
+__all__ = [
+    "RAMP_BOUND_R2",
+    "Diagnostics",
+    "current_map_residual",
+    "diagnose",
+    "ramp_bound",
+    "signal_association",
+]
 
 #: Quantile bins of a continuous signal for the correlation ratio.
 N_BINS = 12
@@ -42,6 +57,12 @@ LAGGED = ("didt_mA_s", "dpdt_bar_s")
 MAP_SIGNALS = ("current_mA", "didt_mA_s", "didt_sign", "pressure_bar", "dpdt_bar_s")
 #: Quantile bins of the current in that map (times the direction of travel: −1, 0, +1).
 MAP_CURRENT_BINS = 24
+#: A signal outside that map moves with the ramp when a map of the current and its direction
+#: explains at least this share of its variance (and less than
+#: :data:`~.partial.CURRENT_DETERMINED_R2`, above which the current sets it). Set between the
+#: shares measured on the zoo's datasets in session 29 (line pressure 0.21–0.25, an oil at a
+#: level per setting ≤ 0.003, an oil warming through every run 0.885–0.887).
+RAMP_BOUND_R2 = 0.5
 
 
 def _eta2(r: np.ndarray, x: np.ndarray, n_eff: float) -> tuple[float, list[dict]]:
@@ -104,6 +125,45 @@ def current_map_residual(res: ResidualSet) -> np.ndarray:
     sums = np.bincount(cell, weights=r)
     counts = np.bincount(cell)
     return r - (sums / np.maximum(counts, 1))[cell]
+
+
+def ramp_bound(res: ResidualSet) -> dict[str, float]:
+    """Logged signals that move with the ramp in every run.
+
+    A signal outside :data:`MAP_SIGNALS` of which a map of the current and its direction
+    (:func:`~.partial.current_determined_share`, pooled over the experiments) explains
+    between :data:`RAMP_BOUND_R2` and :data:`~.partial.CURRENT_DETERMINED_R2` of the variance
+    in the regulated region (:func:`~.partial.regulated_mask`, where the clutch pressure
+    depends on the circuit; the share is that of :func:`~.partial.regulated_partial`'s test):
+    an oil that warms through every run, a supply that sags with the current. The current
+    map removes it with any misfit in the current, so no statistic on these data can tell its
+    effect from such a misfit; runs in which it differs at the same current can.
+
+    Parameters
+    ----------
+    res : ResidualSet
+        Residuals and signals.
+
+    Returns
+    -------
+    dict
+        Signal name -> the share (0–1), largest first.
+    """
+    keep = res.keep
+    regulated = regulated_mask(res)
+    cur = res.signals["current_mA"][keep][regulated]
+    if int(regulated.sum()) < MIN_REGULATED or _constant(cur):
+        return {}
+    direction = np.sign(res.signals["didt_sign"][keep][regulated]).astype(int)
+    out = {}
+    for name in SIGNALS:
+        x = np.asarray(res.signals[name][keep][regulated], dtype=float)
+        if name in MAP_SIGNALS or _constant(x):
+            continue
+        share = current_determined_share(x, cur, direction)
+        if RAMP_BOUND_R2 <= share < CURRENT_DETERMINED_R2:
+            out[name] = float(share)
+    return dict(sorted(out.items(), key=lambda kv: -kv[1]))
 
 
 def signal_association(res: ResidualSet, n_eff: float | None = None) -> list[dict]:
@@ -247,6 +307,9 @@ class Diagnostics:
         on these data) is left out.
     aliases : dict
         Signals indistinguishable on these data: name -> the signal standing for it.
+    ramp_bound : dict
+        :func:`ramp_bound`: signals that move with the ramp in every run -> the share of
+        their variance the current and its direction explain.
     """
 
     rms_bar: float
@@ -259,6 +322,20 @@ class Diagnostics:
     whiteness: dict = field(default_factory=dict)
     signature: list[str] = field(default_factory=list)
     aliases: dict[str, str] = field(default_factory=dict)
+    ramp_bound: dict[str, float] = field(default_factory=dict)
+
+    def ramp_note(self) -> str:
+        """What the signals that move with the ramp mean for this residual ("" if none)."""
+        if not self.ramp_bound:
+            return ""
+        which = ", ".join(f"{k} ({v:.0%})" for k, v in self.ramp_bound.items())
+        one = len(self.ramp_bound) == 1
+        return (
+            f"{which} {'moves' if one else 'move'} with the ramp in every run (that share of "
+            f"{'its' if one else 'their'} variance in the regulated region follows the current "
+            f"and its direction): these data cannot tell {'its' if one else 'their'} effect "
+            "from a misfit in the current; runs in which it differs at the same current can"
+        )
 
     def summary(self) -> str:
         """One line: what the residual follows."""
@@ -279,9 +356,10 @@ class Diagnostics:
             follows += f" (aliased on these data: {same})"
         white = "white" if self.whiteness.get("white") else "not white"
         p = self.whiteness.get("p_value", 1.0)
+        ramp = self.ramp_note()
         return (
             f"RMS {self.rms_bar:.4f} bar, {white} (Ljung–Box p {p:.2g}, "
-            f"τ {self.tau_samples:.1f}); follows {follows}; {xc}"
+            f"τ {self.tau_samples:.1f}); follows {follows}; {xc}" + (f"; {ramp}" if ramp else "")
         )
 
     def to_dict(self, curves: bool = False) -> dict:
@@ -380,6 +458,7 @@ def diagnose(res: ResidualSet, max_lag_s: float = 0.1) -> Diagnostics:
         },
         signature=[a["signal"] for a in assoc if _in_signature(a) and a["signal"] not in aliases],
         aliases=aliases,
+        ramp_bound=ramp_bound(res),
     )
 
 

@@ -55,6 +55,7 @@ from .residuals import ResidualSet, integrated_time
 __all__ = [
     "CURRENT_DETERMINED_R2",
     "CURRENT_MAP_KNOTS",
+    "MIN_REGULATED",
     "PARTIAL_CURRENT_BINS",
     "PARTIAL_R2",
     "PARTIAL_Z",
@@ -62,6 +63,7 @@ __all__ = [
     "current_determined_share",
     "partial_hit",
     "quantile_bins",
+    "regulated_mask",
     "regulated_partial",
 ]
 
@@ -80,7 +82,7 @@ CURRENT_MAP_KNOTS = 32
 #: of the current (and get no statistic).
 CURRENT_DETERMINED_R2 = 0.99
 #: Fewest regulated samples for the statistic.
-_MIN_SAMPLES = 50
+MIN_REGULATED = 50
 
 
 def _cells(exp: np.ndarray, direction: np.ndarray, current: np.ndarray) -> np.ndarray:
@@ -147,6 +149,16 @@ def _detrend(v: np.ndarray, cell: np.ndarray, current: np.ndarray) -> np.ndarray
     return dv - slope[cell] * dc
 
 
+def regulated_mask(res: ResidualSet) -> np.ndarray:
+    """Which kept residuals lie in the regulated region: the measured and the predicted
+    pressure (``pressure_bar`` plus the residual) both more than
+    :data:`REGULATED_MARGIN_BAR` below line pressure. Boolean, one per kept residual."""
+    keep = res.keep
+    pressure = res.signals["pressure_bar"][keep]
+    below = res.signals["line_pressure_bar"][keep] - REGULATED_MARGIN_BAR
+    return (pressure < below) & (pressure + res.r[keep] < below)
+
+
 def regulated_partial(res: ResidualSet, signal: str) -> dict | None:
     """Partial association of ``signal`` with the kept residual in the regulated region.
 
@@ -170,10 +182,8 @@ def regulated_partial(res: ResidualSet, signal: str) -> dict | None:
     keep = res.keep
     r = res.r[keep]
     x = np.asarray(res.signals[signal][keep], dtype=float)
-    pressure = res.signals["pressure_bar"][keep]
-    below = res.signals["line_pressure_bar"][keep] - REGULATED_MARGIN_BAR
-    regulated = (pressure < below) & (pressure + r < below)
-    if int(regulated.sum()) < _MIN_SAMPLES:
+    regulated = regulated_mask(res)
+    if int(regulated.sum()) < MIN_REGULATED:
         return None
     exp = np.zeros(r.size, dtype=int)
     for k, (a, b) in enumerate(res.kept_slices):
