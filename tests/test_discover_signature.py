@@ -321,3 +321,16 @@ def test_a_residual_left_unexplained_names_the_signal_it_cannot_be_told_from():
     assert "oil_temp_C (" in text and "moves with the ramp in every run" in text
     diag.whiteness["white"] = True  # nothing left to explain: no note
     assert "with the ramp" not in loop._summary([last], False, diag, 2)
+
+
+def test_the_note_reads_for_one_signal_and_for_several():
+    from clutchlab.validation.discover import Diagnostics
+
+    one = Diagnostics(0.1, 10, 5.0, 2.0, ramp_bound={"oil_temp_C": 0.886})
+    assert one.ramp_note().startswith("oil_temp_C (89%) moves with the ramp in every run")
+    assert "its effect" in one.ramp_note() and "it differs" in one.ramp_note()
+    two = Diagnostics(0.1, 10, 5.0, 2.0, ramp_bound={"oil_temp_C": 0.9, "line_pressure_bar": 0.6})
+    note = two.ramp_note()
+    assert note.startswith("oil_temp_C (90%), line_pressure_bar (60%) move with the ramp")
+    assert "their effect" in note and "they differ" in note
+    assert Diagnostics(0.1, 10, 5.0, 2.0).ramp_note() == ""

@@ -12,7 +12,7 @@ flexible component law of at most its size (``alternatives``).
 """
 
 from .alternatives import Alternative, alternative_note, alternatives_for, fit_alternative
-from .diagnostics import Diagnostics, diagnose
+from .diagnostics import Diagnostics, diagnose, ramp_bound
 from .loop import discover, period_mean_metrics
 from .partial import regulated_partial
 from .report import plot_diagnostics, plot_evidence, plot_residuals, write_report
@@ -41,6 +41,7 @@ __all__ = [
     "plot_diagnostics",
     "plot_evidence",
     "plot_residuals",
+    "ramp_bound",
     "regulated_partial",
     "residual_problem",
     "residual_set",

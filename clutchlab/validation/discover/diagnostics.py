@@ -58,7 +58,7 @@ MAP_SIGNALS = ("current_mA", "didt_mA_s", "didt_sign", "pressure_bar", "dpdt_bar
 #: Quantile bins of the current in that map (times the direction of travel: −1, 0, +1).
 MAP_CURRENT_BINS = 24
 #: A signal outside that map moves with the ramp when a map of the current and its direction
-#: explains at least this share of its variance (and less than
+#: explains at least this share of its variance in the regulated region (and less than
 #: :data:`~.partial.CURRENT_DETERMINED_R2`, above which the current sets it). Set between the
 #: shares measured on the zoo's datasets in session 29 (line pressure 0.21–0.25, an oil at a
 #: level per setting ≤ 0.003, an oil warming through every run 0.885–0.887).
@@ -334,7 +334,8 @@ class Diagnostics:
             f"{which} {'moves' if one else 'move'} with the ramp in every run (that share of "
             f"{'its' if one else 'their'} variance in the regulated region follows the current "
             f"and its direction): these data cannot tell {'its' if one else 'their'} effect "
-            "from a misfit in the current; runs in which it differs at the same current can"
+            f"from a misfit in the current; runs in which {'it differs' if one else 'they differ'} "
+            "at the same current can"
         )
 
     def summary(self) -> str:
