@@ -595,8 +595,9 @@ def _summary(iterations: list[IterationRecord], unexplained: bool, diag, substep
         )
     if not added and not unexplained:
         parts.insert(0, "no missing effect found")
-    if not diag.whiteness.get("white", True) and diag.ramp_note():
-        parts.append(diag.ramp_note())
+    ramp = diag.ramp_note()
+    if ramp and not diag.whiteness.get("white", True):
+        parts.append(ramp)
     diverged = _diverged_note(last.candidates, substeps)
     if diverged:
         parts.append(diverged)

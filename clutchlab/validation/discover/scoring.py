@@ -276,7 +276,7 @@ def score_effect(
                 expansion,
             )
             trial.nuisance = point
-            diverged.extend(p for p in trial.diverged if p not in diverged)
+            diverged[:] = _merged(diverged, trial.diverged)
             if best is None or trial.statistic > best.statistic:
                 best = trial
 
@@ -319,6 +319,11 @@ def nuisance_grid(cand: CircuitModel, name: str) -> list[dict[str, float]]:
         )
         grid = [g | {n: v} for g in grid for v in values]
     return grid
+
+
+def _merged(points: list[dict[str, float]], more: list[dict[str, float]]) -> list[dict[str, float]]:
+    """``points`` followed by the points of ``more`` not already in it (order kept)."""
+    return points + [p for p in more if p not in points]
 
 
 def _nuisance_names(name: str) -> list[str]:
@@ -556,7 +561,7 @@ def score_candidates(
             keep_new = new.status == "scored" and (
                 old.status != "scored" or new.statistic > old.statistic
             )
-            diverged = old.diverged + [p for p in new.diverged if p not in old.diverged]
+            diverged = _merged(old.diverged, new.diverged)
             new = new if keep_new else old
             new.n_tests, new.diverged = n_tests, diverged
         scores.append(new)
