@@ -20,7 +20,8 @@ from clutchlab.validation.discover import (
     alternatives_for,
     discover,
 )
-from clutchlab.validation.discover.alternatives import beats, held_out_log_ratio
+from clutchlab.validation.discover.alternatives import beats, broke_down, held_out_log_ratio
+from clutchlab.validation.discover.loop import _matched_decision
 
 TINY_RAMPS = (
     RampProfile("fast", 1.5, 0.3),
@@ -112,11 +113,50 @@ def test_without_per_experiment_errors_the_sums_decide_and_with_one_experiment_t
     one = {"loeo_rss_bar2": None, "rss_bar2": 1.0}
     assert beats(one, {"loeo_rss_bar2": None, "rss_bar2": 1.2})
     assert not beats(one, {"loeo_rss_bar2": None, "rss_bar2": 0.9})
-    # an alternative whose refit failed explains nothing
     cand = _verdict({"a": 1.0, "b": 1.0})
-    assert beats(cand, {"law": "reg_pilot_lag", "status": "failed: diverged"})
     # different experiments: no per-experiment comparison
     assert held_out_log_ratio(cand, _verdict({"a": 1.0, "c": 1.0})) is None
+
+
+def test_an_alternative_whose_refit_broke_down_is_not_beaten():
+    """A candidate is not claimed over a law that could not be fitted (session 32)."""
+    cand = _verdict({"a": 1.0, "b": 1.0})
+    failed = {"law": "reg_pilot_lag", "k": 1, "status": "failed: diverged"}
+    assert broke_down(failed) == "failed: diverged"
+    assert not beats(cand, failed)
+    # null study, stribeck_supply seed 3 (session 31; subset verdicts, bar²): the pilot
+    # lag's refit stopped after 2 iterations with Error_In_Step_Computation at nine times
+    # the reference; latch_threshold_drift beat it on both counts and was claimed
+    ltd = _verdict({"f30": 84.89, "s30": 1483.6, "f50": 88.56, "f70": 96.53}, rss=1654.6)
+    lag = _verdict({"f30": 1e3, "s30": 3e4, "f50": 1e3, "f70": 1e3}, rss=34574.3)
+    lag |= {"law": "reg_pilot_lag", "rss_ref_bar2": 3767.8}
+    assert held_out_log_ratio(ltd, lag) < 0 and ltd["rss_bar2"] < lag["rss_bar2"]
+    for status in ("Error_In_Step_Computation", "Restoration_Failed (pre-fit)"):
+        assert "against the reference's 3768" in broke_down(lag | {"status": status})
+        assert not beats(ltd, lag | {"status": status})
+    # the same numbers at a limit, or a breakdown below the reference: compared as they
+    # stand (the best iterate, like a candidate's)
+    assert broke_down(lag | {"status": "Maximum_Iterations_Exceeded"}) is None
+    assert beats(ltd, lag | {"status": "Maximum_Iterations_Exceeded"})
+    below = lag | {"status": "Error_In_Step_Computation", "rss_bar2": 3000.0}
+    assert broke_down(below) is None and beats(ltd, below)
+    rows = {"alternatives": [lag | {"status": "Error_In_Step_Computation"}]}
+    assert alternative_note(rows | {"beats_alternatives": False}) == (
+        "not compared: reg_pilot_lag's refit broke down"
+    )
+
+
+def test_the_decision_names_a_law_that_matched_and_one_that_broke_down():
+    matched = {"sensor_lag": {"law": "reg_pilot_lag", "status": "Solve_Succeeded"}}
+    text = _matched_decision(matched, "screening subset")
+    assert text.startswith("a flexible law of at most the same size predicted")
+    assert "sensor_lag by reg_pilot_lag; screening subset" in text
+    assert "broke down" not in text and text.endswith("no effect claimed")
+    broke = {"law": "reg_pilot_lag", "status": "failed: non-finite residual"}
+    text = _matched_decision(matched | {"latch_threshold_drift": broke}, "screening subset")
+    assert "sensor_lag by reg_pilot_lag" in text
+    assert "latch_threshold_drift against reg_pilot_lag: failed: non-finite residual" in text
+    assert text.endswith("no effect claimed")
 
 
 def test_the_evidence_cell_says_what_was_compared_and_how_it_ended():

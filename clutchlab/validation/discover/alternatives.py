@@ -44,6 +44,7 @@ __all__ = [
     "alternative_note",
     "alternatives_for",
     "beats",
+    "broke_down",
     "fit_alternative",
     "held_out_log_ratio",
 ]
@@ -55,6 +56,19 @@ PILOT_LAG_STARTS_MS: tuple[float, ...] = (5.0, 20.0, 80.0, 300.0)
 
 #: What a failing alternative refit may raise (recorded in its evidence, never raised).
 _FAILURES = (ClutchlabError, ArithmeticError, ValueError)
+
+#: IPOPT return statuses of a solver that broke down, as against one that converged or
+#: stopped at one of its limits (iterations, time, a step too small to matter).
+BREAKDOWN_STATUSES: tuple[str, ...] = (
+    "Error_In_Step_Computation",
+    "Restoration_Failed",
+    "Invalid_Number_Detected",
+    "Diverging_Iterates",
+    "Unrecoverable_Exception",
+    "NonIpopt_Exception_Thrown",
+    "Internal_Error",
+    "Insufficient_Memory",
+)
 
 
 @dataclass(frozen=True)
@@ -239,6 +253,28 @@ def held_out_log_ratio(candidate: dict, alternative: dict) -> float | None:
     return sum(math.log(max(mine[e], tiny) / max(theirs[e], tiny)) for e in mine) / len(mine)
 
 
+def broke_down(alternative: dict) -> str | None:
+    """Why an alternative's refit says nothing about the law, or None when it does.
+
+    A refit says nothing when it raised or left a non-finite residual (status
+    ``"failed: …"``), or when its solver broke down (:data:`BREAKDOWN_STATUSES`) at a
+    residual sum of squares above the reference it was judged against: every flexible
+    law holds the current fit at (or near) one of its points, so a law that ends above
+    it was not fitted. A refit that stopped at a limit, or broke down below the
+    reference, is compared as it stands (its best iterate, like a candidate's).
+    """
+    status = str(alternative.get("status", ""))
+    if status.startswith("failed"):
+        return status
+    broke = [s for s in BREAKDOWN_STATUSES if s in status]
+    if not broke:
+        return None
+    rss, ref = alternative.get("rss_bar2", math.nan), alternative.get("rss_ref_bar2", math.nan)
+    if rss <= ref:
+        return None
+    return f"{broke[0]} at {rss:.4g} bar² against the reference's {ref:.4g}"
+
+
 def beats(candidate: dict, alternative: dict) -> bool:
     """Whether a candidate's refit verdict is not matched by an alternative's.
 
@@ -261,10 +297,13 @@ def beats(candidate: dict, alternative: dict) -> bool:
     effect predicts the two slow ones much better) decides alone. Why both: a flexible
     law that fits better is as good an explanation of the training data whatever a
     linearized held-out error says, and one that predicts better is whatever it fits.
-    An alternative whose refit failed is beaten.
+    An alternative whose refit broke down (:func:`broke_down`) is not beaten: the
+    candidate was not shown to predict better than the law, so it is not claimed
+    (issue 17: false attribution is the cardinal sin; before session 32 such an
+    alternative counted as beaten, and gave the one claim over 20 null datasets).
     """
-    if "rss_bar2" not in alternative:
-        return True
+    if broke_down(alternative) is not None or "rss_bar2" not in alternative:
+        return False
     if alternative["rss_bar2"] <= candidate["rss_bar2"]:
         return False
     ratio = held_out_log_ratio(candidate, alternative)
@@ -279,8 +318,9 @@ def beats(candidate: dict, alternative: dict) -> bool:
 def alternative_note(refit: dict | None) -> str:
     """One cell for an evidence table: the flexible laws a candidate's refit was compared
     with (on the screening subset or every training experiment) and the outcome —
-    ``"beat reg_pilot_lag, latch_free_thresholds"``, ``"matched by reg_pilot_lag"`` or
-    ``""`` when it was not compared."""
+    ``"beat reg_pilot_lag, latch_free_thresholds"``, ``"matched by reg_pilot_lag"``,
+    ``"not compared: reg_pilot_lag's refit broke down"`` or ``""`` when it was not
+    compared."""
     refit = refit or {}
     rows = refit.get("alternatives")
     if rows is None:
@@ -291,4 +331,9 @@ def alternative_note(refit: dict | None) -> str:
     won = refit.get("beats_alternatives")
     if won is None:
         won = (refit.get("screen") or {}).get("beats_alternatives")
-    return f"beat {laws}" if won else f"matched by {rows[-1]['law']}"
+    if won:
+        return f"beat {laws}"
+    last = rows[-1]
+    if broke_down(last) is not None:
+        return f"not compared: {last['law']}'s refit broke down"
+    return f"matched by {last['law']}"

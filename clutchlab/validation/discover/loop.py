@@ -36,7 +36,7 @@ from ...physics import CircuitModel, simulate
 from ...physics.effects import EFFECTS
 from ...physics.fit import FitResult, resolve_free
 from ...physics.parameters import ParameterSet
-from .alternatives import alternatives_for, beats, fit_alternative
+from .alternatives import alternatives_for, beats, broke_down, fit_alternative
 from .diagnostics import diagnose
 from .refit import by_criterion, candidate_free, judge, refit_start, residual_at, run_fit
 from .residuals import ResidualSet, loeo_evidence
@@ -205,13 +205,25 @@ def _qualifies(refit: dict, cv_ref: float | None) -> bool:
     return cv_ref is None or (refit["loeo_rss_bar2"] or math.inf) < cv_ref
 
 
-def _matched_decision(matched: dict[str, str], scope: str) -> str:
-    """The decision when every qualifying candidate was matched by a flexible law."""
-    pairs = ", ".join(f"{e} by {law}" for e, law in matched.items())
-    return (
-        "a flexible law of at most the same size predicted the left-out experiments as "
-        f"well ({pairs}; {scope}): no effect claimed"
-    )
+def _matched_decision(matched: dict[str, dict], scope: str) -> str:
+    """The decision when every qualifying candidate was matched by a flexible law, or
+    met one whose refit broke down (``matched``: candidate -> the law's verdict)."""
+    parts = []
+    pairs = [f"{e} by {v['law']}" for e, v in matched.items() if broke_down(v) is None]
+    if pairs:
+        parts.append(
+            "a flexible law of at most the same size predicted the left-out experiments "
+            f"as well ({', '.join(pairs)}; {scope})"
+        )
+    broken = [
+        f"{e} against {v['law']}: {why}" for e, v in matched.items() if (why := broke_down(v))
+    ]
+    if broken:
+        parts.append(
+            "not compared with a flexible law of at most the same size whose refit broke "
+            f"down ({'; '.join(broken)}; {scope})"
+        )
+    return "; ".join(parts) + ": no effect claimed"
 
 
 def _say(settings: DiscoverySettings, text: str) -> None:
@@ -283,7 +295,8 @@ def _iteration(
     ref: list = []
     # flexible-law alternatives refitted in this iteration: (scope, law) -> verdict
     alt_verdicts: dict[tuple[str, str], dict] = {}
-    matched: dict[str, str] = {}  # candidate -> the flexible law that predicted as well
+    # candidate -> the verdict of the flexible law that predicted as well (or broke down)
+    matched: dict[str, dict] = {}
 
     def score(expansion: str = "zero", previous=None) -> list[CandidateScore]:
         # candidates refitted already keep their score: they would not be refitted again
@@ -357,7 +370,7 @@ def _iteration(
                 )
             rows.append(alt_verdicts[key])
             if not beats(s.refit, rows[-1]):
-                matched[s.effect] = alt.law
+                matched[s.effect] = rows[-1]
                 break
         s.refit["alternatives"] = rows
         s.refit["beats_alternatives"] = s.effect not in matched
