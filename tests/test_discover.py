@@ -25,6 +25,7 @@ from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, wri
 from clutchlab.validation.discover import (
     DiscoverySettings,
     ResidualSet,
+    alternative_note,
     discover,
     residual_problem,
     residual_set,
@@ -243,6 +244,37 @@ def test_a_candidate_whose_refit_fails_is_not_added(tiny, monkeypatch):
     assert cand.significant  # so it was refitted
     assert cand.refit["status"].startswith("failed: the model diverges")
     assert it.decision == "information criterion did not improve"
+
+
+def test_no_effect_is_claimed_over_a_flexible_law_whose_refit_broke_down(tiny, monkeypatch):
+    """The true supply droop beats the regulator pilot lag when that law is fitted; when
+    its refit breaks down above the reference, the droop is not claimed (session 32)."""
+    settings = _settings(candidates=("supply_droop",), max_effects=1)
+    res = discover(tiny, settings=settings)
+    it = res.iterations[0]
+    assert res.added == ["supply_droop"] and it.effect == "supply_droop"
+    (cand,) = it.candidates
+    assert [r["law"] for r in cand.refit["alternatives"]] == ["reg_pilot_lag"]
+    assert cand.refit["beats_alternatives"] is True
+
+    def broken(alt, current, traces, settings, reference, fit=None):
+        rss = 9.0 * reference.kept_rss
+        return {"law": alt.law, "k": alt.k, "status": "Error_In_Step_Computation"} | {
+            "rss_bar2": rss,
+            "rss_ref_bar2": reference.kept_rss,
+            "loeo_rss_bar2": rss,
+        }
+
+    monkeypatch.setattr(loop, "fit_alternative", broken)
+    res = discover(tiny, settings=settings)
+    assert res.added == []
+    (it,) = res.iterations
+    (cand,) = it.candidates
+    assert cand.refit["beats_alternatives"] is False
+    assert alternative_note(cand.refit) == "not compared: reg_pilot_lag's refit broke down"
+    assert it.decision.startswith("not compared with a flexible law")
+    assert "supply_droop against reg_pilot_lag: Error_In_Step_Computation at" in it.decision
+    assert it.decision.endswith("no effect claimed")
 
 
 def _linear_residual_set(x, r, slices, names, ramps=None) -> ResidualSet:
