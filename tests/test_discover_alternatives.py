@@ -131,15 +131,20 @@ def test_an_alternative_whose_refit_broke_down_is_not_beaten():
     lag = _verdict({"f30": 1e3, "s30": 3e4, "f50": 1e3, "f70": 1e3}, rss=34574.3)
     lag |= {"law": "reg_pilot_lag", "rss_ref_bar2": 3767.8}
     assert held_out_log_ratio(ltd, lag) < 0 and ltd["rss_bar2"] < lag["rss_bar2"]
+    lag |= {"iterations": 2}
     for status in ("Error_In_Step_Computation", "Restoration_Failed (pre-fit)"):
-        assert "against the reference's 3768" in broke_down(lag | {"status": status})
+        assert "after 2 iterations, at 3.457e+04 bar² (reference 3768)" in broke_down(
+            lag | {"status": status}
+        )
         assert not beats(ltd, lag | {"status": status})
-    # the same numbers at a limit, or a breakdown below the reference: compared as they
-    # stand (the best iterate, like a candidate's)
-    assert broke_down(lag | {"status": "Maximum_Iterations_Exceeded"}) is None
-    assert beats(ltd, lag | {"status": "Maximum_Iterations_Exceeded"})
-    below = lag | {"status": "Error_In_Step_Computation", "rss_bar2": 3000.0}
-    assert broke_down(below) is None and beats(ltd, below)
+    # a breakdown at its best iterate, below the reference (the start, barely moved):
+    # still not compared
+    below = lag | {"status": "Error_In_Step_Computation", "rss_bar2": 3756.5}
+    assert broke_down(below) is not None and not beats(ltd, below)
+    # the same numbers at a limit or converged: compared as they stand
+    for status in ("Maximum_Iterations_Exceeded", "Solved_To_Acceptable_Level"):
+        assert broke_down(lag | {"status": status}) is None
+        assert beats(ltd, lag | {"status": status})
     rows = {"alternatives": [lag | {"status": "Error_In_Step_Computation"}]}
     assert alternative_note(rows | {"beats_alternatives": False}) == (
         "not compared: reg_pilot_lag's refit broke down"

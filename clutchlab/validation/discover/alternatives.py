@@ -257,11 +257,10 @@ def broke_down(alternative: dict) -> str | None:
     """Why an alternative's refit says nothing about the law, or None when it does.
 
     A refit says nothing when it raised or left a non-finite residual (status
-    ``"failed: …"``), or when its solver broke down (:data:`BREAKDOWN_STATUSES`) at a
-    residual sum of squares above the reference it was judged against: every flexible
-    law holds the current fit at (or near) one of its points, so a law that ends above
-    it was not fitted. A refit that stopped at a limit, or broke down below the
-    reference, is compared as it stands (its best iterate, like a candidate's).
+    ``"failed: …"``), or when its solver broke down (:data:`BREAKDOWN_STATUSES`): the law
+    was not explored as far as the candidate it is compared with, whose refit had the
+    same budget. A refit that converged or stopped at a limit is compared as it stands
+    (its best iterate, like a candidate's).
     """
     status = str(alternative.get("status", ""))
     if status.startswith("failed"):
@@ -270,9 +269,8 @@ def broke_down(alternative: dict) -> str | None:
     if not broke:
         return None
     rss, ref = alternative.get("rss_bar2", math.nan), alternative.get("rss_ref_bar2", math.nan)
-    if rss <= ref:
-        return None
-    return f"{broke[0]} at {rss:.4g} bar² against the reference's {ref:.4g}"
+    steps = alternative.get("iterations", "?")
+    return f"{broke[0]} after {steps} iterations, at {rss:.4g} bar² (reference {ref:.4g})"
 
 
 def beats(candidate: dict, alternative: dict) -> bool:
