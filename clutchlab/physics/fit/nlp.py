@@ -121,8 +121,8 @@ class IterationDeadline:
 class BestIterate:
     """The accepted iterate of lowest objective seen so far (IPOPT's iteration 0 = the start).
 
-    IPOPT returns its last iterate. After a breakdown (``Error_In_Step_Computation``) or at
-    a limit that can be far above an earlier one: a regulator-lag refit of a discovery
+    IPOPT returns its last iterate, which after a breakdown (``Error_In_Step_Computation``)
+    or at a limit can be far above an earlier one: a regulator-lag refit of a discovery
     returned 34 574 bar² from a start at 3 757 (session 32). Only meaningful without
     equality constraints (single shooting), where every iterate is a feasible model.
     """
