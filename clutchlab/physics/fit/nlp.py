@@ -17,7 +17,20 @@ import scipy.sparse as sp
 
 from .problem import FitProblem
 
-__all__ = ["BestIterate", "IterationDeadline", "solve_ipopt"]
+__all__ = ["BREAKDOWN_STATUSES", "BestIterate", "IterationDeadline", "solve_ipopt"]
+
+#: IPOPT return statuses of a solver that broke down, as against one that converged or
+#: stopped at one of its limits (iterations, time, a step too small to matter).
+BREAKDOWN_STATUSES: tuple[str, ...] = (
+    "Error_In_Step_Computation",
+    "Restoration_Failed",
+    "Invalid_Number_Detected",
+    "Diverging_Iterates",
+    "Unrecoverable_Exception",
+    "NonIpopt_Exception_Thrown",
+    "Internal_Error",
+    "Insufficient_Memory",
+)
 
 #: IPOPT's status when :class:`IterationDeadline` stopped it; reported as the wall-time limit.
 _USER_STOP = "User_Requested_Stop"

@@ -31,6 +31,7 @@ from ...physics import CircuitModel
 from ...physics.components.latch import latch_thresholds
 from ...physics.effects import FLEXIBLE_LAWS
 from ...physics.fit import FitSettings
+from ...physics.fit.nlp import BREAKDOWN_STATUSES
 from ...physics.fit.staged import measured_thresholds, quasi_static_traces
 from ...physics.parameters import ParameterSet
 from .refit import judge, residual_at, run_fit
@@ -56,19 +57,6 @@ PILOT_LAG_STARTS_MS: tuple[float, ...] = (5.0, 20.0, 80.0, 300.0)
 
 #: What a failing alternative refit may raise (recorded in its evidence, never raised).
 _FAILURES = (ClutchlabError, ArithmeticError, ValueError)
-
-#: IPOPT return statuses of a solver that broke down, as against one that converged or
-#: stopped at one of its limits (iterations, time, a step too small to matter).
-BREAKDOWN_STATUSES: tuple[str, ...] = (
-    "Error_In_Step_Computation",
-    "Restoration_Failed",
-    "Invalid_Number_Detected",
-    "Diverging_Iterates",
-    "Unrecoverable_Exception",
-    "NonIpopt_Exception_Thrown",
-    "Internal_Error",
-    "Insufficient_Memory",
-)
 
 
 @dataclass(frozen=True)

@@ -208,16 +208,15 @@ def _qualifies(refit: dict, cv_ref: float | None) -> bool:
 def _matched_decision(matched: dict[str, dict], scope: str) -> str:
     """The decision when every qualifying candidate was matched by a flexible law, or
     met one whose refit broke down (``matched``: candidate -> the law's verdict)."""
+    why = {e: broke_down(v) for e, v in matched.items()}
     parts = []
-    pairs = [f"{e} by {v['law']}" for e, v in matched.items() if broke_down(v) is None]
+    pairs = [f"{e} by {v['law']}" for e, v in matched.items() if why[e] is None]
     if pairs:
         parts.append(
             "a flexible law of at most the same size predicted the left-out experiments "
             f"as well ({', '.join(pairs)}; {scope})"
         )
-    broken = [
-        f"{e} against {v['law']}: {why}" for e, v in matched.items() if (why := broke_down(v))
-    ]
+    broken = [f"{e} against {v['law']}: {why[e]}" for e, v in matched.items() if why[e]]
     if broken:
         parts.append(
             "not compared with a flexible law of at most the same size whose refit broke "
