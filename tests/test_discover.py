@@ -9,6 +9,7 @@ strength) and short ramps; the fit frees two parameters. The slow tests in
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -279,6 +280,37 @@ def test_no_effect_is_claimed_over_a_flexible_law_whose_refit_broke_down(tiny, m
         in it.decision
     )
     assert it.decision.endswith("no effect claimed")
+
+
+@pytest.mark.parametrize("matching", ["reg_pilot_lag", "latch_free_thresholds"])
+def test_a_matched_candidate_stops_at_the_first_law_that_matches_it(tiny, monkeypatch, matching):
+    """With the latch's preload and rate free, the supply droop meets two laws, the pilot
+    lag (one parameter) first. Whichever law matches it, nothing is claimed; the laws
+    after the matching one are not refitted."""
+    settings = _settings(candidates=("supply_droop",), max_effects=1)
+    settings = replace(settings, fit=replace(settings.fit, free=("reg_F0", "latch_F0", "latch_k")))
+    fitted = []
+
+    def stub(alt, current, traces, settings, reference, fit=None):
+        fitted.append(alt.law)
+        rss = (1e-6 if alt.law == matching else 2.0) * reference.kept_rss
+        by_exp = {t.name: rss / len(traces) for t in traces}
+        return {"law": alt.law, "k": alt.k, "status": "Solve_Succeeded", "iterations": 3} | {
+            "rss_bar2": rss,
+            "rss_ref_bar2": reference.kept_rss,
+            "loeo_rss_bar2": rss,
+            "loeo_bar2_by_experiment": by_exp,
+        }
+
+    monkeypatch.setattr(loop, "fit_alternative", stub)
+    res = discover(tiny, settings=settings)
+    (it,) = res.iterations
+    (cand,) = it.candidates
+    assert res.added == []
+    expected = {"reg_pilot_lag": ["reg_pilot_lag"]}
+    assert fitted == expected.get(matching, ["reg_pilot_lag", "latch_free_thresholds"])
+    assert alternative_note(cand.refit) == f"matched by {matching}"
+    assert f"supply_droop by {matching}" in it.decision
 
 
 def _linear_residual_set(x, r, slices, names, ramps=None) -> ResidualSet:

@@ -61,6 +61,20 @@ def test_alternatives_add_at_most_the_candidates_parameters():
     assert alt.free[-2:] == ("lthr_p_on", "lthr_p_off")
 
 
+def test_the_most_flexible_alternative_comes_first():
+    """A candidate must beat every law, so the order only decides how soon a matched one
+    stops: the law with the most freedom, the likeliest to match, is refitted first."""
+    laws = [a.law for a in alternatives_for(CircuitModel(), DEFAULT_FREE, 4)]
+    assert laws == [
+        "vfs_force_monotone",
+        "vfs_play_hysteresis",
+        "reg_pilot_lag",
+        "latch_free_thresholds",
+    ]
+    sizes = [a.k for a in alternatives_for(CircuitModel(), DEFAULT_FREE, 4)]
+    assert sizes == sorted(sizes, reverse=True)
+
+
 def _verdict(by_experiment, rss=1.0):
     return {
         "loeo_bar2_by_experiment": by_experiment,

@@ -97,7 +97,10 @@ def alternatives_for(current: CircuitModel, free: tuple[str, ...], k: int) -> li
     Returns
     -------
     list of Alternative
-        Smallest first.
+        Most flexible first (most added parameters; then by name). A candidate is
+        claimed only when it beats every law, so the order decides nothing but how soon
+        a matched candidate stops: the law with the most freedom is the likeliest to
+        match it, and the laws after it are then not refitted.
     """
     out = []
     for name, cls in FLEXIBLE_LAWS.items():
@@ -109,7 +112,7 @@ def alternatives_for(current: CircuitModel, free: tuple[str, ...], k: int) -> li
         size = len(new_free) - len(free)
         if size <= k:
             out.append(Alternative(name, current.with_effects(name), new_free, size))
-    return sorted(out, key=lambda a: (a.k, a.law))
+    return sorted(out, key=lambda a: (-a.k, a.law))
 
 
 def _best_start(alt: Alternative, points: list[ParameterSet], traces, settings) -> ParameterSet:
