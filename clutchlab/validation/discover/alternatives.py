@@ -13,6 +13,11 @@ alternative **and** predicts the left-out training experiments better on the geo
 mean of their held-out errors (:func:`beats`). Otherwise the report names the alternative
 that explained the residual as well, and no effect is claimed for it.
 
+The laws are refitted most flexible first (:func:`alternatives_for`), and the first that
+matches ends the comparison. A law whose refit broke down (:func:`broke_down`) is not
+beaten either, but the comparison goes on: a later law that matches is named instead,
+and the broken one only when every other law was beaten.
+
 Sizes are counted against the current fit's free parameters: ``latch_free_thresholds``
 replaces the datasheet latch's preload and rate by its two thresholds (net 0 when those
 are free), ``reg_pilot_lag`` frees one time constant (its weight held at 1), the play
@@ -311,18 +316,15 @@ def alternative_note(refit: dict | None) -> str:
     ``"not compared: reg_pilot_lag's refit broke down"`` or ``""`` when it was not
     compared."""
     refit = refit or {}
-    rows = refit.get("alternatives")
-    if rows is None:
-        rows = (refit.get("screen") or {}).get("alternatives")
+    holder = refit if refit.get("alternatives") is not None else refit.get("screen") or {}
+    rows = holder.get("alternatives")
     if not rows:
         return "" if rows is None else "none to compare"
-    laws = ", ".join(r["law"] for r in rows)
-    won = refit.get("beats_alternatives")
-    if won is None:
-        won = (refit.get("screen") or {}).get("beats_alternatives")
-    if won:
-        return f"beat {laws}"
-    last = rows[-1]
-    if broke_down(last) is not None:
-        return f"not compared: {last['law']}'s refit broke down"
-    return f"matched by {last['law']}"
+    if holder.get("beats_alternatives"):
+        return f"beat {', '.join(r['law'] for r in rows)}"
+    # the law that decided (JSONs written before session 33 have it last)
+    law = holder.get("matched_by", rows[-1]["law"])
+    row = next((r for r in rows if r["law"] == law), rows[-1])
+    if broke_down(row) is not None:
+        return f"not compared: {row['law']}'s refit broke down"
+    return f"matched by {row['law']}"

@@ -356,10 +356,15 @@ def _iteration(
     def alternatives_beaten(s: CandidateScore, scope: str, traces, reference_res, fit) -> bool:
         """Whether the candidate's refit predicts better than every flexible law of at most
         its size refitted on ``traces`` (each law refitted once per scope); recorded
-        under ``s.refit["alternatives"]``."""
+        under ``s.refit["alternatives"]`` and, when not, the law under ``"matched_by"``.
+
+        The laws come most flexible first and the first that matches ends the comparison.
+        A law whose refit broke down is not beaten, but it does not end the comparison: a
+        later law that matches is the better answer to name; the broken one is named only
+        when every other law was beaten."""
         if not settings.alternatives:
             return True
-        rows = []
+        rows, broken = [], None
         for alt in alternatives_for(current.model, tuple(current.fit.free), s.refit["k"]):
             key = (scope, alt.law)
             if key not in alt_verdicts:
@@ -368,11 +373,18 @@ def _iteration(
                     alt, current, traces, settings, reference_res, fit
                 )
             rows.append(alt_verdicts[key])
-            if not beats(s.refit, rows[-1]):
+            if beats(s.refit, rows[-1]):
+                continue
+            if broke_down(rows[-1]) is None:
                 matched[s.effect] = rows[-1]
                 break
+            broken = broken or rows[-1]
+        if s.effect not in matched and broken is not None:
+            matched[s.effect] = broken
         s.refit["alternatives"] = rows
         s.refit["beats_alternatives"] = s.effect not in matched
+        if s.effect in matched:
+            s.refit["matched_by"] = matched[s.effect]["law"]
         return s.effect not in matched
 
     def screen_then_confirm(confirm: list[CandidateScore]) -> None:
