@@ -131,7 +131,9 @@ class FitSettings:
         With the law made stable (tag ``stable-reg-pilot-lag``, not landed) it lowered
         the RMSE on 7 of 8 zoo rows (seeds 0 and 1) but raised it on
         ``preisach_accumulator`` seed 0 (0.199 → 0.325 bar), so it would stay off there
-        too.
+        too. Session 34, on the best-iterate fitter: the stable law (tag
+        ``reg-pilot-signal-lag``) beat this one on 7 of 8 zoo rows but not on
+        ``quadratic_play`` seed 1 (0.366 against 0.350 bar), so ``auto`` keeps this law.
     static_max_iter : int
         Iteration limit of the staged start's static stage.
     static_time_fraction : float
