@@ -15,6 +15,22 @@ def _csv(text: str | None) -> tuple[str, ...]:
     return tuple(s.strip() for s in (text or "").split(",") if s.strip())
 
 
+def limit_hint(status: str) -> str:
+    """What may take a fit stopped at a limit further, from its (possibly staged) status
+    ``"<status> (pre-fit) → <status> (refine)"``: the option of each limit a stage hit;
+    ``""`` when no stage stopped at one (the solver stopped for another reason, which
+    neither more time nor more iterations would change)."""
+    from .physics.fit.fitter import SHORT_OF_TIME
+
+    stages = [part.strip() for part in status.split("→")]
+    hints = []
+    if any("Maximum_Iterations_Exceeded" in st for st in stages):
+        hints.append("more iterations (--max-iter)")
+    if any("Maximum_WallTime_Exceeded" in st or SHORT_OF_TIME in st for st in stages):
+        hints.append("more time (--time-limit)")
+    return " or ".join(hints) + " may improve it" if hints else ""
+
+
 def _cmd_fit_physics(args: argparse.Namespace) -> int:
     from .data import load_dataset
     from .errors import FitError
@@ -37,6 +53,8 @@ def _cmd_fit_physics(args: argparse.Namespace) -> int:
         kw["free"] = _csv(args.free)
     if args.substeps is not None:
         kw["substeps"] = args.substeps
+    if args.max_iter is not None:
+        kw["max_iter"] = args.max_iter
     fitter = PhysicsFitter(model, FitSettings(**kw))
     out = Path(args.out)
     try:
@@ -61,10 +79,12 @@ def _cmd_fit_physics(args: argparse.Namespace) -> int:
     print(res.table())
     print(f"\nstatus {res.status}, {res.iterations} iterations, {res.wall_s:.1f} s")
     if not res.success:
+        hint = limit_hint(res.status)
         print(
             f"warning: NOT CONVERGED ({res.status}): the best iterate is the model, written to "
-            f'{out} with "success": false; more time (--time-limit) may improve it, '
-            "--strict makes this an error",
+            f'{out} with "success": false; '
+            + (f"{hint}, " if hint else "")
+            + "--strict makes this an error",
             file=sys.stderr,
         )
     if res.unidentifiable:
@@ -97,6 +117,12 @@ def register(sub) -> None:
         help=f"wall limit of the whole fit (s; default {FIT_BUDGET_S:g}, the fit budget); the "
         "best iterate "
         "found by then is the model",
+    )
+    p.add_argument(
+        "--max-iter",
+        type=int,
+        help="solver iterations of the fit's main stage (default 50; the refinement on all "
+        "training data keeps its own few)",
     )
     p.add_argument(
         "--no-staged-start",

@@ -6,6 +6,7 @@ import json
 import subprocess
 import sys
 
+from clutchlab.cli_fit import limit_hint
 from clutchlab.data import save_dataset
 from clutchlab.physics.fit import FitResult
 from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
@@ -117,9 +118,44 @@ def test_fit_stopped_at_its_limit_writes_the_best_iterate_as_the_model(tmp_path)
     doc = json.loads(out.read_text())
     assert doc["success"] is False and "Exceeded" in doc["status"]
     assert FitResult.from_json(out).cost_history
+    assert ("--time-limit" in res.stderr) == ("WallTime" in doc["status"]), res.stderr
+    # an iteration limit is named as such: more time would not help it
+    few = tmp_path / "few.json"
+    res = subprocess.run(
+        [*base[:-3], "--time-limit", "600", "--max-iter", "1", "--quiet", "--out", str(few)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert res.returncode == 0, res.stderr
+    doc = json.loads(few.read_text())
+    assert doc["status"].startswith("Maximum_Iterations_Exceeded"), doc["status"]
+    assert "more iterations (--max-iter)" in res.stderr and "--time-limit" not in res.stderr
+    bad = subprocess.run(
+        [*base, "--out", str(tmp_path / "bad.json"), "--max-iter", "0"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert bad.returncode == 2 and "max_iter" in bad.stderr
+    assert not (tmp_path / "bad.json").exists()
     strict = tmp_path / "strict.json"
     res = subprocess.run(
         [*base, "--out", str(strict), "--strict"], capture_output=True, text=True, timeout=600
     )
     assert res.returncode == 1 and "did not converge" in res.stderr
     assert not strict.exists() and (tmp_path / "strict.best-iterate.json").is_file()
+
+
+def test_the_warning_names_the_limit_each_stage_hit():
+    assert limit_hint("Maximum_Iterations_Exceeded (pre-fit)") == (
+        "more iterations (--max-iter) may improve it"
+    )
+    assert limit_hint(
+        "Solved_To_Acceptable_Level (pre-fit) → Maximum_WallTime_Exceeded (refine)"
+    ) == ("more time (--time-limit) may improve it")
+    both = limit_hint("Maximum_Iterations_Exceeded (pre-fit) → Not_Started_Short_Of_Time (refine)")
+    assert "--max-iter" in both and "--time-limit" in both
+    # a solver that stopped for another reason gets no promise
+    assert limit_hint("Search_Direction_Becomes_Too_Small (pre-fit)") == ""
+    assert limit_hint("Error_In_Step_Computation (pre-fit)") == ""
