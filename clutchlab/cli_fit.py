@@ -21,12 +21,13 @@ def limit_hint(status: str) -> str:
     ``""`` when no stage stopped at one (the solver stopped for another reason, which
     neither more time nor more iterations would change)."""
     from .physics.fit.fitter import SHORT_OF_TIME
+    from .physics.fit.nlp import ITERATION_LIMIT, WALL_TIME_LIMIT
 
     stages = [part.strip() for part in status.split("→")]
     hints = []
-    if any("Maximum_Iterations_Exceeded" in st for st in stages):
+    if any(ITERATION_LIMIT in st for st in stages):
         hints.append("more iterations (--max-iter)")
-    if any("Maximum_WallTime_Exceeded" in st or SHORT_OF_TIME in st for st in stages):
+    if any(WALL_TIME_LIMIT in st or SHORT_OF_TIME in st for st in stages):
         hints.append("more time (--time-limit)")
     return " or ".join(hints) + " may improve it" if hints else ""
 

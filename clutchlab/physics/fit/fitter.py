@@ -19,7 +19,7 @@ from ..model import CircuitModel
 from ..parameters import ParameterSet
 from ..settings import SimulationSettings
 from ..simulate import simulate
-from .nlp import solve_ipopt
+from .nlp import ITERATION_LIMIT, WALL_TIME_LIMIT, solve_ipopt
 from .problem import FitProblem
 from .result import FitResult, identifiability
 from .sensitivity import compile_sensitivities_for
@@ -71,7 +71,7 @@ def resolve_free(model: CircuitModel, settings: FitSettings) -> tuple[str, ...]:
 def _stopped_by_time(best: dict) -> bool:
     """The solver of this best start stopped at its wall-time limit."""
     stats = best["stats"]
-    return stats is not None and stats["return_status"] == "Maximum_WallTime_Exceeded"
+    return stats is not None and stats["return_status"] == WALL_TIME_LIMIT
 
 
 def _per_experiment_metrics(
@@ -304,9 +304,7 @@ class PhysicsFitter:
                 sample_s = (time.perf_counter() - t_stage) / n_iter / n_samples
                 # No start of this stage ran when the time limit was reached before it.
                 statuses.append(
-                    best["stats"]["return_status"]
-                    if best["stats"] is not None
-                    else "Maximum_WallTime_Exceeded"
+                    best["stats"]["return_status"] if best["stats"] is not None else WALL_TIME_LIMIT
                 )
                 if best["z"] is not None:
                     z_par = best["z"][: problem.n_par]
@@ -331,7 +329,7 @@ class PhysicsFitter:
                 len(stages) > 1
                 and len(statuses) == 2
                 and statuses[0] in _OK
-                and statuses[1] == "Maximum_Iterations_Exceeded"
+                and statuses[1] == ITERATION_LIMIT
             )
         )
         if len(stages) > 1:

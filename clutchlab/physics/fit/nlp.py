@@ -17,7 +17,19 @@ import scipy.sparse as sp
 
 from .problem import FitProblem
 
-__all__ = ["BREAKDOWN_STATUSES", "BestIterate", "IterationDeadline", "solve_ipopt"]
+__all__ = [
+    "BREAKDOWN_STATUSES",
+    "ITERATION_LIMIT",
+    "WALL_TIME_LIMIT",
+    "BestIterate",
+    "IterationDeadline",
+    "solve_ipopt",
+]
+
+#: IPOPT's return status at its iteration limit, and at its wall-time limit (also what a
+#: stop by this module's deadline, or a stage not started for time, reports).
+ITERATION_LIMIT = "Maximum_Iterations_Exceeded"
+WALL_TIME_LIMIT = "Maximum_WallTime_Exceeded"
 
 #: IPOPT return statuses of a solver that broke down, as against one that converged or
 #: stopped at one of its limits (iterations, time, a step too small to matter).
@@ -274,7 +286,7 @@ def solve_ipopt(
     stats = solver.stats()
     status = stats.get("return_status", "?")
     if status == _USER_STOP and deadline.stopped:
-        status = "Maximum_WallTime_Exceeded"
+        status = WALL_TIME_LIMIT
     z, best_iter = np.asarray(sol["x"]).ravel(), None
     if not problem.n_g:
         z, best_iter = best.choose(z, float(sol["f"]), z0)
