@@ -16,14 +16,13 @@ by marginal likelihood); see :mod:`~clutchlab.residual_ml.base` for the accepted
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from types import MappingProxyType
 
 import numpy as np
 
 from ..data import Trace
 from ..errors import DataError, ModelError
-from ..forkmap import default_workers
+from ._threads import map_folds
 from .base import Block, TraceEstimator
 from .classifiers import lean_decision, make_classifier
 from .features import BASE_FEATURES, LAG_DIDT_FEATURES, target_pressure
@@ -774,8 +773,7 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         # The folds are independent and their binning, sorting and libsvm calls release the
         # GIL: two threads take ~0.6x the wall time of one on 2 cores; results keep the
         # fold order, so they do not depend on the scheduling.
-        with ThreadPoolExecutor(max_workers=default_workers()) as pool:
-            predicted = list(pool.map(held_out, range(len(blocks))))
+        predicted = map_folds(held_out, len(blocks))
         for held, pred in zip(blocks, predicted, strict=True):
             if pred is None:
                 continue

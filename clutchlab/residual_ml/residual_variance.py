@@ -27,13 +27,10 @@ The predictive variance is then ``max(GP variance, floor)``: the floor never nar
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 from sklearn.base import clone
 
-from ..forkmap import default_workers
-from ._threads import single_thread
+from ._threads import map_folds, single_thread
 from .local_gp import LocalGPRegressor
 
 __all__ = ["LOG_CHI2_1_MEAN", "fit_variance_floor", "loeo_residuals", "variance_floor"]
@@ -79,8 +76,7 @@ def loeo_residuals(gp: LocalGPRegressor, blocks, stride: int = 10) -> tuple[np.n
 
     # The folds are independent and their factorizations release the GIL: one BLAS thread
     # per fold, two folds at a time; results keep the fold order.
-    with ThreadPoolExecutor(max_workers=default_workers()) as pool:
-        out = list(pool.map(held_out, range(len(blocks))))
+    out = map_folds(held_out, len(blocks))
     return np.vstack([x for x, _ in out]), np.concatenate([r for _, r in out])
 
 
