@@ -22,7 +22,8 @@ _WAIT_S = 10.0
 
 
 def _blas_threads() -> list[int]:
-    return [lib.num_threads for lib in ThreadpoolController().select(user_api="blas").lib_controllers]
+    blas = ThreadpoolController().select(user_api="blas")
+    return [lib.num_threads for lib in blas.lib_controllers]
 
 
 class _InterleavingGP:
