@@ -32,6 +32,20 @@ def limit_hint(status: str) -> str:
     return " or ".join(hints) + " may improve it" if hints else ""
 
 
+def plateau_note(status: str, settings) -> str:
+    """What a ``Cost_Plateau`` stage status means, in the fit's own numbers (``""`` when no
+    stage stopped on a plateau)."""
+    from .physics.fit.nlp import COST_PLATEAU
+
+    if COST_PLATEAU not in status:
+        return ""
+    return (
+        f"({COST_PLATEAU}: the pre-fit's best cost gained less than "
+        f"{100 * settings.prefit_obj_change_tol:g} % over its last "
+        f"{settings.prefit_plateau_iter} iterations; more iterations would not lower it)"
+    )
+
+
 def _cmd_fit_physics(args: argparse.Namespace) -> int:
     from .data import load_dataset
     from .errors import FitError
@@ -79,6 +93,9 @@ def _cmd_fit_physics(args: argparse.Namespace) -> int:
     print(f"structure: {', '.join(res.effects) or 'base circuit'}")
     print(res.table())
     print(f"\nstatus {res.status}, {res.iterations} iterations, {res.wall_s:.1f} s")
+    note = plateau_note(res.status, fitter.settings or FitSettings())
+    if note:
+        print(note)
     if not res.success:
         hint = limit_hint(res.status)
         print(

@@ -73,6 +73,19 @@ def test_the_subset_takes_every_ramp_and_is_all_data_within_the_budget(stand):
     assert prefit_subset(train, sum(len(t) for t in train)) == train
 
 
+def test_screening_refits_stop_by_ipopt_alone():
+    """The screening's refits keep IPOPT's stop and their short budget: no cost-plateau
+    stop, which the fit's pre-fit (same settings otherwise) has."""
+    from clutchlab.physics.fit import prefit_settings
+    from clutchlab.validation.discover.screen import screen_settings
+
+    settings = _settings()
+    assert prefit_settings(settings.fit).plateau_iter > 0
+    sub = screen_settings(settings)
+    assert sub.plateau_iter == 0
+    assert sub.max_iter == min(settings.fit.max_iter, settings.screen_max_iter)
+
+
 def test_screening_refits_on_the_subset_and_decides_on_every_training_experiment(screened):
     it = screened.iterations[0]
     screening = it.reference["screening"]

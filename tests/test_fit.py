@@ -339,3 +339,77 @@ def test_multiple_shooting_reaches_the_single_shooting_optimum(small_data):
     assert ms.success
     for name in DEFAULT_FREE:
         assert ms.values[name] == pytest.approx(ss.values[name], rel=0.02), name
+
+
+def test_a_cost_plateau_is_told_from_slow_progress():
+    """The plateau test compares the best cost with the one ``n_iter`` iterations before:
+    it needs that many iterations first, and stops only when their whole gain is below
+    ``rtol`` of the cost (a zoo pre-fit's tail: 1367.49 → 1367.42 bar² over 26 iterations)."""
+    from clutchlab.physics.fit.nlp import CostPlateau
+
+    p = CostPlateau(3, 1e-3)
+    # falling by ~1 % per iteration: never a plateau
+    assert not any(p.should_stop(1000.0 * 0.99**k) for k in range(10))
+    flat = CostPlateau(3, 1e-3)
+    seq = [2070.0, 1846.0, 1692.0, 1367.49, 1367.48, 1367.45, 1367.44]
+    stops = [flat.should_stop(f) for f in seq]
+    # 1692 → 1367.44 over the last 3 is a large gain until the 1692 leaves the window
+    assert stops == [False, False, False, False, False, False, True] and flat.stopped
+    # a non-finite best cost (nothing accepted yet) never stops the solver
+    assert not CostPlateau(1, 1e-3).should_stop(math.inf)
+    inf_first = CostPlateau(1, 1e-3)
+    assert not inf_first.should_stop(math.inf) and not inf_first.should_stop(5.0)
+
+
+def test_the_solver_stops_on_a_cost_plateau_and_says_so(small_data):
+    """Wired through IPOPT's iteration callback: with a plateau test that any small gain
+    meets, the solve stops early with status Cost_Plateau and its best iterate; without
+    one, IPOPT's own stop decides."""
+    from clutchlab.physics.fit.nlp import COST_PLATEAU, solve_ipopt
+
+    traces = list(small_data.select(ramps=["fast"]))
+    model = CircuitModel()
+    settings = FitSettings(progress=False, method="single_shooting", train_ramps=("fast",))
+    problem = fit_problem.FitProblem(model, traces, DEFAULT_FREE, settings, model.default_params())
+    lo, hi = problem.bounds_z()
+    z0 = problem.initial_z()
+    opts = {"acceptable_iter": 0}
+    z, stats = solve_ipopt(problem, z0, lo, hi, 30, 1e-14, 60.0, opts, plateau=(1, 0.5))
+    assert stats["return_status"] == COST_PLATEAU
+    assert 1 <= stats["iter_count"] < 30
+    assert problem.cost(z) < problem.cost(z0)
+    _, free_run = solve_ipopt(problem, z0, lo, hi, 3, 1e-14, 60.0, opts)
+    assert free_run["return_status"] != COST_PLATEAU
+
+
+def test_a_pre_fit_on_a_cost_plateau_is_refined_and_converged(small_data, monkeypatch):
+    """A pre-fit stopped on a cost plateau is an optimum like IPOPT's acceptable level:
+    the refinement on every experiment follows, and the fit is converged (no warning).
+    Only the pre-fit stage carries the plateau test."""
+    from clutchlab.physics.fit import prefit_settings, refine_settings
+    from clutchlab.physics.fit.nlp import COST_PLATEAU, ITERATION_LIMIT
+
+    statuses = iter([COST_PLATEAU, ITERATION_LIMIT])
+    plateaus = []
+
+    def staged(problem, starts, settings, t_start):
+        plateaus.append(settings.plateau_iter)
+        problem.on_jacobian(100.0)
+        problem.on_jacobian(50.0)
+        stats = {"return_status": next(statuses), "iter_count": 1, "success": False}
+        return {"cost": 50.0, "z": problem.initial_z(starts[0]), "stats": stats}
+
+    monkeypatch.setattr(PhysicsFitter, "_solve_starts", staticmethod(staged))
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FitWarning)
+        fitter = _fit(small_data, prefit_samples=100)
+    res = fitter.result_
+    assert res.success and res.status == f"{COST_PLATEAU} (pre-fit) → {ITERATION_LIMIT} (refine)"
+    assert plateaus == [FitSettings().prefit_plateau_iter, 0] and plateaus[0] > 0
+    s = FitSettings(prefit_plateau_iter=7)
+    assert prefit_settings(s).plateau_iter == 7 and refine_settings(s).plateau_iter == 0
+    assert prefit_settings(FitSettings(prefit_plateau_iter=0)).plateau_iter == 0
+    with pytest.raises(FitError, match="plateau_iter"):
+        FitSettings(prefit_plateau_iter=-1)

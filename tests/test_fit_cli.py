@@ -6,7 +6,7 @@ import json
 import subprocess
 import sys
 
-from clutchlab.cli_fit import limit_hint
+from clutchlab.cli_fit import limit_hint, plateau_note
 from clutchlab.data import save_dataset
 from clutchlab.physics.fit import FitResult
 from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
@@ -160,3 +160,12 @@ def test_the_warning_names_the_limit_each_stage_hit():
     # a solver that stopped for another reason gets no promise
     assert limit_hint("Search_Direction_Becomes_Too_Small (pre-fit)") == ""
     assert limit_hint("Error_In_Step_Computation (pre-fit)") == ""
+
+
+def test_a_cost_plateau_is_explained_in_the_fit_s_numbers():
+    from clutchlab.physics.fit import FitSettings
+
+    status = "Cost_Plateau (pre-fit) → Maximum_Iterations_Exceeded (refine)"
+    note = plateau_note(status, FitSettings(prefit_plateau_iter=4, prefit_obj_change_tol=2e-3))
+    assert "0.2 %" in note and "last 4 iterations" in note
+    assert plateau_note("Solved_To_Acceptable_Level (pre-fit)", FitSettings()) == ""

@@ -19,7 +19,7 @@ from ..model import CircuitModel
 from ..parameters import ParameterSet
 from ..settings import SimulationSettings
 from ..simulate import simulate
-from .nlp import ITERATION_LIMIT, WALL_TIME_LIMIT, solve_ipopt
+from .nlp import COST_PLATEAU, ITERATION_LIMIT, WALL_TIME_LIMIT, solve_ipopt
 from .problem import FitProblem
 from .result import FitResult, identifiability
 from .sensitivity import compile_sensitivities_for
@@ -34,7 +34,7 @@ from .stages import prefit_settings, prefit_subset, refine_settings
 
 __all__ = ["PhysicsFitter", "resolve_free"]
 
-_OK = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+_OK = ("Solve_Succeeded", "Solved_To_Acceptable_Level", COST_PLATEAU)
 #: Share of the time limit the solver stages may use; the rest is kept for the result (the
 #: Jacobian at the optimum when the solver stopped at its limit, the per-experiment errors:
 #: ~3 s on two processes for the default training set) and for the prediction error of the
@@ -427,6 +427,11 @@ class PhysicsFitter:
                     settings.tol,
                     remaining,
                     settings.ipopt_options,
+                    plateau=(
+                        (settings.plateau_iter, settings.prefit_obj_change_tol)
+                        if settings.plateau_iter
+                        else None
+                    ),
                 )
             except RuntimeError as exc:  # a callback raised: keep what we have
                 z, stats = z0, {"return_status": f"error: {exc}", "iter_count": 0, "success": False}

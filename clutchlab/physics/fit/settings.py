@@ -86,7 +86,15 @@ class FitSettings:
         The pre-fit stops once the cost changes by less than this fraction on two
         successive iterations and the scaled optimality error is below 0.1 (IPOPT
         ``acceptable_obj_change_tol``, ``acceptable_tol``): its optimum only starts
-        the refinement, so a tight pre-fit tolerance buys nothing.
+        the refinement, so a tight pre-fit tolerance buys nothing. It also stops, with
+        status ``Cost_Plateau``, once its best cost has gained less than this fraction
+        over its last ``prefit_plateau_iter`` iterations (a cost with kinks keeps a large
+        optimality error where it no longer falls); the refinement follows either way.
+    prefit_plateau_iter : int
+        Iterations of that plateau test (0: IPOPT's stop only).
+    plateau_iter : int
+        The same test on every solve of a fit with these settings (the pre-fit stage
+        gets ``prefit_plateau_iter``); 0, the default, leaves the stop to IPOPT.
     tol : float
         IPOPT convergence tolerance.
     time_limit_s : float
@@ -161,6 +169,8 @@ class FitSettings:
     prefit_samples: int | None = 160_000
     refine_max_iter: int = 3
     prefit_obj_change_tol: float = 1e-3
+    prefit_plateau_iter: int = 5
+    plateau_iter: int = 0
     tol: float = 1e-6
     time_limit_s: float = 900.0
     multistart: int = 0
@@ -196,6 +206,8 @@ class FitSettings:
             problems.append(f"regulator_lag {self.regulator_lag!r} is not auto or off")
         if not 0 < self.static_time_fraction < 1:
             problems.append("static_time_fraction must be in (0, 1)")
+        if self.prefit_plateau_iter < 0 or self.plateau_iter < 0:
+            problems.append("prefit_plateau_iter and plateau_iter must be ≥ 0")
         if self.max_iter < 1 or self.time_limit_s <= 0:
             problems.append("max_iter and time_limit_s must be positive")
         if problems:

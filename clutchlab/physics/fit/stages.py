@@ -60,9 +60,11 @@ def prefit_subset(traces: list[Trace], budget: int) -> list[Trace]:
 
 def prefit_settings(settings: FitSettings) -> FitSettings:
     """Settings of the pre-fit stage: IPOPT stops at an acceptable level once the cost
-    changes by less than ``prefit_obj_change_tol`` (the user's IPOPT options win)."""
+    changes by less than ``prefit_obj_change_tol`` (the user's IPOPT options win), and on a
+    cost plateau (``prefit_plateau_iter`` iterations that gained less than that)."""
     return replace(
         settings,
+        plateau_iter=settings.prefit_plateau_iter,
         ipopt_options={
             "acceptable_obj_change_tol": settings.prefit_obj_change_tol,
             "acceptable_tol": 0.1,

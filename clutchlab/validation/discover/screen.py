@@ -110,10 +110,15 @@ class Screening:
 
 def screen_settings(settings: DiscoverySettings) -> FitSettings:
     """A screening refit: the pre-fit stage's settings, on the subset alone, at most
-    ``settings.screen_max_iter`` iterations."""
+    ``settings.screen_max_iter`` iterations, stopped by IPOPT alone (no cost-plateau
+    stop: the screening's verdicts were measured with IPOPT's stop and its own short
+    budget)."""
     fit = settings.fit
     return replace(
-        prefit_settings(fit), prefit_samples=0, max_iter=min(fit.max_iter, settings.screen_max_iter)
+        prefit_settings(fit),
+        prefit_samples=0,
+        max_iter=min(fit.max_iter, settings.screen_max_iter),
+        plateau_iter=0,
     )
 
 
