@@ -40,7 +40,7 @@ def plateau_note(status: str, settings) -> str:
     if COST_PLATEAU not in status:
         return ""
     return (
-        f"({COST_PLATEAU}: the pre-fit's best cost gained less than "
+        f"({COST_PLATEAU}: the pre-fit's cost moved by less than "
         f"{100 * settings.prefit_obj_change_tol:g} % over its last "
         f"{settings.prefit_plateau_iter} iterations; more iterations would not lower it)"
     )

@@ -33,7 +33,7 @@ __all__ = [
 ITERATION_LIMIT = "Maximum_Iterations_Exceeded"
 WALL_TIME_LIMIT = "Maximum_WallTime_Exceeded"
 
-#: The status of a solve stopped by :class:`CostPlateau`: its best cost had stopped falling.
+#: The status of a solve stopped by :class:`CostPlateau`: its cost had stopped moving.
 COST_PLATEAU = "Cost_Plateau"
 
 #: IPOPT return statuses of a solver that broke down, as against one that converged or
@@ -178,35 +178,37 @@ class BestIterate:
 
 
 class CostPlateau:
-    """Stop a solver whose best cost has stopped falling: less than ``rtol`` (relative)
-    gained over the last ``n_iter`` iterations.
+    """Stop a solver whose cost has stopped moving: its last ``n_iter + 1`` accepted costs
+    all lie within ``rtol`` (relative) of each other.
 
     IPOPT's own early stop (its acceptable level) also asks for a small optimality error,
     which a cost with kinks (friction, metering edges, latch snaps) never reaches: its
     Gauss–Newton steps are cut back over and over while the cost moves in its sixth digit,
     until a time or iteration limit (a zoo pre-fit, session 37: 1367.49 → 1367.42 bar² over
-    26 iterations, 8 backtracks each, dual infeasibility 5–30).
+    26 iterations, 8 backtracks each, dual infeasibility 5–30). The test is on the current
+    cost, not the best: a solver that went uphill and is falling back (977 → 1844 → … →
+    1074) is not on a plateau although its best has not moved.
 
     Parameters
     ----------
     n_iter : int
-        Iterations over which the gain is measured (≥ 1).
+        Iterations over which the cost must stay flat (≥ 1).
     rtol : float
-        Relative gain of the best cost below which the solver stops.
+        Relative spread of those costs below which the solver stops.
     """
 
     def __init__(self, n_iter: int, rtol: float):
         self.n_iter, self.rtol = int(n_iter), float(rtol)
-        self.bests: list[float] = []
+        self.costs: list[float] = []
         self.stopped = False
 
-    def should_stop(self, best_f: float) -> bool:
-        """Record the best cost after one more iteration; True on a plateau."""
-        self.bests.append(best_f)
-        if len(self.bests) <= self.n_iter or not math.isfinite(best_f):
+    def should_stop(self, f: float) -> bool:
+        """Record the cost of one more accepted iterate; True on a plateau."""
+        self.costs.append(f)
+        last = self.costs[-1 - self.n_iter :]
+        if len(last) <= self.n_iter or not all(math.isfinite(c) for c in last):
             return False
-        before = self.bests[-1 - self.n_iter]
-        self.stopped = before - best_f <= self.rtol * abs(best_f)
+        self.stopped = max(last) - min(last) <= self.rtol * abs(min(last))
         return self.stopped
 
 
@@ -249,7 +251,8 @@ class _StopCallback(ca.Callback):
         names = [ca.nlpsol_out(i) for i in range(ca.nlpsol_n_out())]
         self.best.offer(float(arg[names.index("f")]), np.asarray(arg[names.index("x")]).ravel())
         late = self.deadline.should_stop()
-        flat = self.plateau is not None and self.plateau.should_stop(self.best.f)
+        f = float(arg[names.index("f")])
+        flat = self.plateau is not None and self.plateau.should_stop(f)
         return [1 if late or flat else 0]
 
 
@@ -275,8 +278,8 @@ def solve_ipopt(
     ``time_limit_s`` is IPOPT's wall limit, and no iteration is started that would end
     after it (:class:`IterationDeadline`; reported as ``Maximum_WallTime_Exceeded``).
 
-    ``plateau = (n_iter, rtol)`` also stops the solver when its best cost gained less than
-    ``rtol`` (relative) over its last ``n_iter`` iterations (:class:`CostPlateau`;
+    ``plateau = (n_iter, rtol)`` also stops the solver when its last ``n_iter + 1`` costs
+    lie within ``rtol`` (relative) of each other (:class:`CostPlateau`;
     reported as ``Cost_Plateau``). Single shooting only: a multiple-shooting iterate is
     not a model, so its cost alone says nothing about convergence.
 

@@ -87,7 +87,7 @@ class FitSettings:
         successive iterations and the scaled optimality error is below 0.1 (IPOPT
         ``acceptable_obj_change_tol``, ``acceptable_tol``): its optimum only starts
         the refinement, so a tight pre-fit tolerance buys nothing. It also stops, with
-        status ``Cost_Plateau``, once its best cost has gained less than this fraction
+        status ``Cost_Plateau``, once its cost has moved by less than this fraction
         over its last ``prefit_plateau_iter`` iterations (a cost with kinks keeps a large
         optimality error where it no longer falls); the refinement follows either way.
     prefit_plateau_iter : int
@@ -169,7 +169,7 @@ class FitSettings:
     prefit_samples: int | None = 160_000
     refine_max_iter: int = 3
     prefit_obj_change_tol: float = 1e-3
-    prefit_plateau_iter: int = 5
+    prefit_plateau_iter: int = 10
     plateau_iter: int = 0
     tol: float = 1e-6
     time_limit_s: float = 900.0

@@ -61,7 +61,7 @@ def prefit_subset(traces: list[Trace], budget: int) -> list[Trace]:
 def prefit_settings(settings: FitSettings) -> FitSettings:
     """Settings of the pre-fit stage: IPOPT stops at an acceptable level once the cost
     changes by less than ``prefit_obj_change_tol`` (the user's IPOPT options win), and on a
-    cost plateau (``prefit_plateau_iter`` iterations that gained less than that)."""
+    cost plateau (``prefit_plateau_iter`` iterations that moved the cost by less than that)."""
     return replace(
         settings,
         plateau_iter=settings.prefit_plateau_iter,
