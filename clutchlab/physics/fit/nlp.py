@@ -249,9 +249,9 @@ class _StopCallback(ca.Callback):
 
     def eval(self, arg):
         names = [ca.nlpsol_out(i) for i in range(ca.nlpsol_n_out())]
-        self.best.offer(float(arg[names.index("f")]), np.asarray(arg[names.index("x")]).ravel())
-        late = self.deadline.should_stop()
         f = float(arg[names.index("f")])
+        self.best.offer(f, np.asarray(arg[names.index("x")]).ravel())
+        late = self.deadline.should_stop()
         flat = self.plateau is not None and self.plateau.should_stop(f)
         return [1 if late or flat else 0]
 
