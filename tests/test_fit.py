@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 
 import numpy as np
 import pytest
@@ -413,8 +414,6 @@ def test_a_pre_fit_on_a_cost_plateau_is_refined_and_converged(small_data, monkey
         return {"cost": 50.0, "z": problem.initial_z(starts[0]), "stats": stats}
 
     monkeypatch.setattr(PhysicsFitter, "_solve_starts", staticmethod(staged))
-    import warnings
-
     with warnings.catch_warnings():
         warnings.simplefilter("error", FitWarning)
         fitter = _fit(small_data, prefit_samples=100)
