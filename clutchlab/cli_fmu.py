@@ -77,7 +77,9 @@ def _cmd_export_fmu(args: argparse.Namespace) -> int:
             "parameters": n_par,
             "validation_problems": problems,
         }
-        Path(args.json).write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+        from .cli import write_json_output
+
+        write_json_output(args.json, json.dumps(doc, indent=2))
     return 0 if not problems else 1
 
 

@@ -193,3 +193,19 @@ def test_ml_program_names_what_is_missing():
     assert "unknown feature(s) ['foo']" in text
     assert "two GPs need a decision function" in text
     assert "feature(s) didt_causal_mA_s need a DidtSpec" in text
+
+
+def test_an_fmu_that_does_not_validate_replaces_nothing(tmp_path, monkeypatch):
+    """The archive is validated under its temporary name: on a problem the earlier file at
+    the path is kept as it was and no temporary file is left behind."""
+    import fmpy.validation
+
+    out = tmp_path / "gp.fmu"
+    out.write_bytes(b"an earlier export")
+    monkeypatch.setattr(fmpy.validation, "validate_fmu", lambda f: ["an injected problem"])
+    features = ("current_mA", "dither_amp_mA", "dither_freq_Hz")
+    program = ml_program(synthetic_gp(5, 3, n=10), features, name="gp_invalid")
+    with pytest.raises(FmuError, match="does not validate"):
+        build_fmu(program, out)
+    assert out.read_bytes() == b"an earlier export"
+    assert [p.name for p in tmp_path.iterdir()] == ["gp.fmu"]

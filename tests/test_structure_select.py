@@ -15,10 +15,12 @@ import numpy as np
 import pytest
 
 from clutchlab.data import save_dataset
-from clutchlab.errors import FitError, ModelError
+from clutchlab.errors import FitError, ModelError, OutputError
 from clutchlab.physics import CircuitModel
 from clutchlab.physics.fit import FitSettings, StructureSelector
 from clutchlab.physics.fit.structure import (
+    CandidateScore,
+    StructureSelection,
     effective_sample_size,
     information_criterion,
     structure_effects,
@@ -142,3 +144,25 @@ def test_select_structure_cli_names_the_known_structures_on_a_bad_request(tmp_pa
     )
     assert res.returncode == 2
     assert "unknown structure 'spline9'" in res.stderr and "flex" in res.stderr
+
+
+def test_the_choice_is_written_atomically(tmp_path):
+    """The summary replaces an earlier file in one step, refuses a folder at its path with a
+    clear error, and leaves no temporary file behind."""
+    sel = StructureSelection(
+        chosen="plain",
+        effects=[],
+        criterion="BIC",
+        n_periods=100,
+        n_eff=40.0,
+        candidates=[CandidateScore("plain", [], 8, 0.05, -10.0, "ok", True, 1.0)],
+        train=["fast_50Hz_A"],
+        wall_s=1.0,
+    )
+    path = tmp_path / "structure.json"
+    path.write_text("an earlier choice\n")
+    text = sel.to_json(path)
+    assert path.read_text() == text + "\n" and json.loads(text)["chosen"] == "plain"
+    with pytest.raises(OutputError, match="is a folder"):
+        sel.to_json(tmp_path)
+    assert [p.name for p in tmp_path.iterdir()] == ["structure.json"]

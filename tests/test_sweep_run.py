@@ -95,6 +95,9 @@ def test_local_sweep_writes_results_figures_and_skips_finished_points(tmp_path):
         "sensitivity.csv",
         "sweep.html",
     }
+    # each written atomically under a temporary name: real PNGs, no temporary file left
+    assert {f.name for f in res.figures[0].parent.iterdir()} == {f.name for f in res.figures}
+    assert all(f.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for f in res.figures[:2])
     # The same numbers as evaluating the points directly.
     direct = pd.DataFrame(evaluate_batch(spec, design_points(spec)))[df.columns]
     pd.testing.assert_frame_equal(_numbers(df), _numbers(direct))

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
+from ...data import write_file_atomic
 from .evaluate import STATUS_FAILED, STATUS_OK
 from .metrics import METRIC_UNITS, metric_names
 from .sensitivity import sensitivity_table
@@ -156,10 +157,17 @@ def write_figures(table: pd.DataFrame, spec: SweepSpec, folder: str | Path) -> t
         folder / "sensitivity.csv",
         folder / "sweep.html",
     )
-    plot_tornado(table, spec).savefig(paths[0], dpi=110)
-    plot_metrics_vs_variables(table, spec).savefig(paths[1], dpi=90)
-    sensitivity_table(table, spec, _metrics(spec)).to_csv(paths[2], index=False)
     from .interactive import sweep_html
 
-    paths[3].write_text(sweep_html(table, spec), encoding="utf-8")
+    # each file atomically: an interrupted sweep leaves the previous figures, never half a file
+    for path, fig, dpi in (
+        (paths[0], plot_tornado(table, spec), 110),
+        (paths[1], plot_metrics_vs_variables(table, spec), 90),
+    ):
+        write_file_atomic(
+            path, lambda tmp, f=fig, d=dpi: f.savefig(tmp, dpi=d, format="png"), overwrite=True
+        )
+    csv = sensitivity_table(table, spec, _metrics(spec)).to_csv(index=False)
+    write_file_atomic(paths[2], csv.encode("utf-8"), overwrite=True)
+    write_file_atomic(paths[3], sweep_html(table, spec).encode("utf-8"), overwrite=True)
     return paths

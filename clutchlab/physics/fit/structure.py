@@ -28,11 +28,16 @@ import json
 import math
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
-from ...data import Dataset, Trace, dither_period_mean, dither_period_samples
+from ...data import (
+    Dataset,
+    Trace,
+    dither_period_mean,
+    dither_period_samples,
+    write_file_atomic,
+)
 from ...errors import FitError, ModelError
 from ..components.latch import latch_thresholds
 from ..effects import FLEXIBLE_LAWS
@@ -244,10 +249,10 @@ class StructureSelection:
         }
 
     def to_json(self, path=None) -> str:
-        """The summary as JSON text; also written to ``path`` when given."""
+        """The summary as JSON text; also written to ``path`` when given (atomically)."""
         text = json.dumps(self.to_dict(), indent=2)
         if path is not None:
-            Path(path).write_text(text + "\n", encoding="utf-8")
+            write_file_atomic(path, (text + "\n").encode("utf-8"), overwrite=True)
         return text
 
     def table(self) -> str:

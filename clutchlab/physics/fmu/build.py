@@ -28,6 +28,7 @@ import casadi as ca
 import fmpy
 
 from ... import __version__
+from ...data import write_file_atomic
 from ..integrator import cache_dir
 from .csource import wrapper_source
 from .description import model_description_xml
@@ -152,16 +153,20 @@ def build_fmu(
             )
         xml = model_description_xml(program, guid, (wrapper, c_name))
         (root / "modelDescription.xml").write_text(xml, encoding="utf-8")
-        part = path.with_name(path.name + ".part")
-        with zipfile.ZipFile(part, "w", zipfile.ZIP_DEFLATED) as zf:
-            for file in sorted(root.rglob("*")):
-                if file.is_file():
-                    zf.write(file, file.relative_to(root).as_posix())
-        part.replace(path)
-    if validate:
-        from fmpy.validation import validate_fmu
 
-        problems = validate_fmu(str(path))
-        if problems:
-            raise FmuError(f"{path}: the exported FMU does not validate", problems)
+        def package(part: Path) -> None:
+            # the archive is validated under its temporary name: an FMU that does not
+            # validate never replaces ``path``
+            with zipfile.ZipFile(part, "w", zipfile.ZIP_DEFLATED) as zf:
+                for file in sorted(root.rglob("*")):
+                    if file.is_file():
+                        zf.write(file, file.relative_to(root).as_posix())
+            if validate:
+                from fmpy.validation import validate_fmu
+
+                problems = validate_fmu(str(part))
+                if problems:
+                    raise FmuError(f"{path}: the exported FMU does not validate", problems)
+
+        write_file_atomic(path, package, overwrite=True)
     return path
