@@ -46,6 +46,32 @@ def plateau_note(status: str, settings) -> str:
     )
 
 
+def fit_rate_note(dataset, settings) -> str:
+    """What the fit does with training experiments logged faster than its rate: which it
+    resamples (``--fit-rate``), or, without ``--fit-rate``, what fitting every sample costs
+    (``""`` when no experiment is logged that fast)."""
+    from .physics.fit import SUGGESTED_FIT_RATE_HZ, faster_than_fit
+
+    rate = settings.fit_rate_Hz
+    train = [t for t in dataset if t.ramp in settings.train_ramps]
+    fast = [t for t in train if faster_than_fit(t, rate or SUGGESTED_FIT_RATE_HZ)]
+    if not fast:
+        return ""
+    logged = ", ".join(sorted({f"{t.sample_rate_Hz:.6g}" for t in fast}))
+    head = f"note: {len(fast)} of {len(train)} training experiments are logged at {logged} Hz"
+    if rate is not None:
+        return (
+            f"{head}; they are fitted resampled to {rate:g} Hz (--fit-rate; --substeps sets "
+            "the integration step)"
+        )
+    ratio = max(t.sample_rate_Hz for t in fast) / SUGGESTED_FIT_RATE_HZ
+    return (
+        f"{head}: the fit simulates every sample, so an iteration costs up to {ratio:.3g}× "
+        f"one on {SUGGESTED_FIT_RATE_HZ:g} Hz data within the same time limit; "
+        f"--fit-rate {SUGGESTED_FIT_RATE_HZ:g} fits them resampled to {SUGGESTED_FIT_RATE_HZ:g} Hz"
+    )
+
+
 def _cmd_fit_physics(args: argparse.Namespace) -> int:
     from .data import load_dataset
     from .errors import FitError
@@ -70,7 +96,12 @@ def _cmd_fit_physics(args: argparse.Namespace) -> int:
         kw["substeps"] = args.substeps
     if args.max_iter is not None:
         kw["max_iter"] = args.max_iter
-    fitter = PhysicsFitter(model, FitSettings(**kw))
+    if args.fit_rate is not None:
+        kw["fit_rate_Hz"] = args.fit_rate
+    settings = FitSettings(**kw)
+    if note := fit_rate_note(dataset, settings):
+        print(note)
+    fitter = PhysicsFitter(model, settings)
     out = Path(args.out)
     try:
         fitter.fit(dataset)
@@ -174,6 +205,14 @@ def register(sub) -> None:
         type=int,
         help="ROS2 integration steps per sample during the fit (default 2); more for a "
         "circuit whose simulation diverges at the default (slower in proportion)",
+    )
+    p.add_argument(
+        "--fit-rate",
+        type=float,
+        metavar="HZ",
+        help="sample rate of the fit: training experiments logged faster than 1.5 × this "
+        "are resampled to it first (default: every sample is fitted; a hint is printed for "
+        "data logged faster than 1.5 kHz)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", help="also write the fit result here")

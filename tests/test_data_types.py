@@ -194,6 +194,24 @@ def test_with_signals_and_slice_time():
         tr.slice_time(0.5, 0.1)
 
 
+def test_resample_onto_a_uniform_grid():
+    tr = make_trace(n=101)  # 1 kHz, 0.1 s
+    down = tr.resample(250.0)
+    assert len(down) == 26 and down.sample_rate_Hz == pytest.approx(250.0)
+    np.testing.assert_allclose(down.time_s, np.arange(26) * 4e-3, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(down.get("current_mA"), tr.get("current_mA")[::4], atol=1e-9)
+    assert down.meta == tr.meta and down.name == tr.name
+    up = tr.resample(4000.0)
+    assert len(up) == 401
+    p = tr.get("clutch_pressure_bar")
+    np.testing.assert_allclose(up.get("clutch_pressure_bar"), np.interp(up.time_s, tr.time_s, p))
+    for bad in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(DataError, match="must be > 0 Hz"):
+            tr.resample(bad)
+    with pytest.raises(DataError, match="fewer than two samples"):
+        tr.resample(5.0)
+
+
 # -- Dataset ------------------------------------------------------------------------------
 
 

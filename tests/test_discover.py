@@ -718,3 +718,18 @@ def test_refits_are_ranked_by_one_information_criterion():
     assert by_criterion([b, a]) == [1, 0]
     assert by_criterion([b, {**a, "n_eff": 3000.0}]) == [0, 1]
     assert by_criterion([]) == []
+
+
+def test_training_experiments_are_taken_at_the_fit_rate():
+    """With a fit rate, the base fit, the screening refits and the evidence see the same
+    1 kHz samples of an experiment logged at 5 kHz; the test ramps keep their own samples."""
+    from synthetic import make_trace
+
+    knots = ([0.0, 0.5, 1.0], [0.0, 900.0, 0.0])
+    fast = make_trace(*knots, dt=2e-4, name="fast_a", ramp="fast")
+    medium = make_trace(*knots, dt=2e-4, name="medium_a", ramp="medium")
+    settings = DiscoverySettings(fit=FitSettings(fit_rate_Hz=1000.0))
+    train, test = loop._split([fast, medium], settings)
+    assert [t.sample_rate_Hz for t in train] == [pytest.approx(1000.0)]
+    assert test == [medium]
+    assert loop._split([fast, medium], DiscoverySettings())[0] == [fast]  # default: as logged

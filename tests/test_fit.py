@@ -15,7 +15,14 @@ import clutchlab.physics.fit.problem as fit_problem
 from clutchlab.data import Dataset
 from clutchlab.errors import FitError, FitWarning, SimulationError
 from clutchlab.physics import CircuitModel
-from clutchlab.physics.fit import DEFAULT_FREE, FitResult, FitSettings, PhysicsFitter
+from clutchlab.physics.fit import (
+    DEFAULT_FREE,
+    FitResult,
+    FitSettings,
+    PhysicsFitter,
+    at_fit_rate,
+    faster_than_fit,
+)
 from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
 
 #: Known truth: every default-free parameter moved 3–8 % off its datasheet value.
@@ -425,3 +432,53 @@ def test_a_pre_fit_on_a_cost_plateau_is_refined_and_converged(small_data, monkey
     assert prefit_settings(FitSettings(prefit_plateau_iter=0)).plateau_iter == 0
     with pytest.raises(FitError, match="plateau_iter"):
         FitSettings(prefit_plateau_iter=-1)
+
+
+def test_experiments_logged_faster_than_the_fit_rate_are_resampled():
+    at_1k = make_trace([0.0, 0.5, 1.0], [0.0, 900.0, 0.0], name="a")
+    at_5k = make_trace([0.0, 0.5, 1.0], [0.0, 900.0, 0.0], dt=2e-4, name="b")
+    out = at_fit_rate([at_1k, at_5k], 1000.0)
+    assert out[0] is at_1k  # within the margin: the very same samples
+    assert out[1].sample_rate_Hz == pytest.approx(1000.0) and len(out[1]) == len(at_1k)
+    np.testing.assert_allclose(out[1].get("current_cmd_mA"), at_1k.get("current_cmd_mA"))
+    assert at_fit_rate([at_5k], None)[0] is at_5k
+    assert not faster_than_fit(make_trace([0.0, 1.0], [0.0, 1.0], dt=1 / 1400), 1000.0)
+    assert faster_than_fit(make_trace([0.0, 1.0], [0.0, 1.0], dt=1 / 1600), 1000.0)
+    for bad in (0.0, -5.0, float("inf")):
+        with pytest.raises(FitError, match="fit_rate_Hz"):
+            FitSettings(fit_rate_Hz=bad)
+    assert FitSettings().fit_rate_Hz is None  # default: every sample is fitted
+
+
+def test_a_fit_on_data_logged_at_5_khz_runs_at_the_fit_rate(small_data, monkeypatch):
+    """Every stage's problem sees the experiments at the fit's 1 kHz, and the result's
+    per-experiment metrics are those of the fit's samples."""
+    import clutchlab.physics.fit.fitter as fitter_module
+
+    rates = []
+
+    class Spy(fitter_module.FitProblem):
+        def __init__(self, model, traces, *args, **kw):
+            rates.extend(t.sample_rate_Hz for t in traces)
+            super().__init__(model, traces, *args, **kw)
+
+    monkeypatch.setattr(fitter_module, "FitProblem", Spy)
+    fast = Dataset([t.resample(5000.0) for t in small_data])
+    res = _fit(fast, max_iter=2, staged_start=False, fit_rate_Hz=1000.0).result_
+    assert rates and all(r == pytest.approx(1000.0) for r in rates)
+    assert res.settings["fit_rate_Hz"] == 1000.0 and set(res.per_experiment) == set(res.train)
+
+
+def test_fit_physics_says_which_experiments_it_resamples():
+    from clutchlab.cli_fit import fit_rate_note
+
+    at_1k = make_trace([0.0, 0.5, 1.0], [0.0, 900.0, 0.0], name="fast_a")
+    at_5k = make_trace([0.0, 0.5, 1.0], [0.0, 900.0, 0.0], dt=2e-4, name="fast_b")
+    test = make_trace([0.0, 0.5, 1.0], [0.0, 900.0, 0.0], dt=2e-4, name="m", ramp="medium")
+    data = Dataset([at_1k, at_5k, test])
+    hint = fit_rate_note(data, FitSettings(train_ramps=("fast",)))
+    assert hint.startswith("note: 1 of 2 training experiments are logged at 5000 Hz")
+    assert "up to 5× one on 1000 Hz data" in hint and "--fit-rate 1000" in hint
+    done = fit_rate_note(data, FitSettings(train_ramps=("fast",), fit_rate_Hz=1000.0))
+    assert "fitted resampled to 1000 Hz" in done
+    assert fit_rate_note(Dataset([at_1k]), FitSettings(train_ramps=("fast",))) == ""

@@ -416,6 +416,41 @@ class Trace:
         """
         return Trace(self._name, {**self._signals, **arrays}, meta=self.meta, source=self._source)
 
+    def resample(self, rate_Hz: float) -> Trace:
+        """New trace on a uniform grid at ``rate_Hz`` from the first sample on, every signal
+        linearly interpolated (as ``clutchlab data convert --rate``).
+
+        Parameters
+        ----------
+        rate_Hz : float
+            Grid rate, Hz.
+
+        Returns
+        -------
+        Trace
+            Same name, metadata and source.
+
+        Raises
+        ------
+        DataError
+            If ``rate_Hz`` is not a positive finite number, or the grid holds fewer than two
+            samples.
+        """
+        rate = float(rate_Hz)
+        if not (np.isfinite(rate) and rate > 0):
+            raise DataError(f"trace {self._name!r}: resampling rate must be > 0 Hz, not {rate_Hz}")
+        t = self.time_s
+        n = int(np.floor((t[-1] - t[0]) * rate + 1e-9)) + 1
+        if n < 2:
+            raise DataError(
+                f"trace {self._name!r}: {self.duration_s:.6g} s hold fewer than two samples at "
+                f"{rate:g} Hz"
+            )
+        grid = t[0] + np.arange(n) / rate
+        signals = {k: np.interp(grid, t, v) for k, v in self._signals.items()}
+        signals["time_s"] = grid
+        return Trace(self._name, signals, meta=self.meta, source=self._source)
+
     def slice_time(self, t0: float | None = None, t1: float | None = None) -> Trace:
         """New trace with the samples whose time lies in ``[t0, t1]``.
 

@@ -2,6 +2,7 @@
 
 from .fitter import PhysicsFitter, resolve_free
 from .problem import FitProblem
+from .rate import FIT_RATE_MARGIN, SUGGESTED_FIT_RATE_HZ, at_fit_rate, faster_than_fit
 from .result import FitResult, identifiability
 from .sensitivity import (
     SENSITIVITY_CHUNK,
@@ -25,8 +26,10 @@ from .structure import (
 __all__ = [
     "DEFAULT_FREE",
     "FIT_BUDGET_S",
+    "FIT_RATE_MARGIN",
     "SENSITIVITY_CHUNK",
     "STRUCTURES",
+    "SUGGESTED_FIT_RATE_HZ",
     "CandidateScore",
     "FitProblem",
     "FitResult",
@@ -35,9 +38,11 @@ __all__ = [
     "SensitivityRun",
     "StructureSelection",
     "StructureSelector",
+    "at_fit_rate",
     "compile_fit_code",
     "compile_sensitivities_for",
     "compile_sensitivities_in_background",
+    "faster_than_fit",
     "identifiability",
     "prefit_settings",
     "prefit_subset",

@@ -21,6 +21,7 @@ from ..settings import SimulationSettings
 from ..simulate import simulate
 from .nlp import COST_PLATEAU, ITERATION_LIMIT, WALL_TIME_LIMIT, solve_ipopt
 from .problem import FitProblem
+from .rate import at_fit_rate
 from .result import FitResult, identifiability
 from .sensitivity import compile_sensitivities_for
 from .settings import DEFAULT_FREE, FitSettings
@@ -208,7 +209,7 @@ class PhysicsFitter:
             start = self.start or model.default_params()
         except ModelError as exc:
             raise FitError(str(exc)) from exc
-        traces = self._training(data)
+        traces = at_fit_rate(self._training(data), settings.fit_rate_Hz)
         free = resolve_free(model, settings)
         self._check_bounds(model, free, settings, start)
         self.staged_ = None

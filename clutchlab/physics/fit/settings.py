@@ -62,6 +62,14 @@ class FitSettings:
     decimate : int
         Keep every ``decimate``-th residual (the period mean is smooth over a
         dither period, so little information is lost; measured in the benchmark).
+    fit_rate_Hz : float or None
+        Sample rate of the fit, Hz: training experiments logged faster than 1.5 × this are
+        resampled onto a grid at this rate before the fit
+        (:func:`~clutchlab.physics.fit.rate.at_fit_rate`), so that the fit's cost and its
+        sample budgets do not grow with the logger's rate; the per-experiment metrics are
+        then those of the resampled experiments. None (default) fits every sample: as a
+        default, 1000 Hz failed its landing rule on one of two zoo datasets (BENCHMARKS,
+        "Data logged faster than 1 kHz").
     snap_rate_bar_s, snap_guard_s : float
         Residuals within ``snap_guard_s`` (s) of a latch snap — where the measured
         period-mean pressure moves faster than ``snap_rate_bar_s`` (bar/s; the
@@ -162,6 +170,7 @@ class FitSettings:
     drive: Literal["auto", "command", "measured"] = "auto"
     objective: Literal["period_mean", "raw"] = "period_mean"
     decimate: int = 10
+    fit_rate_Hz: float | None = None
     snap_rate_bar_s: float = 60.0
     snap_guard_s: float = 0.0
     train_ramps: tuple[str, ...] = ("fast", "slow")
@@ -200,6 +209,10 @@ class FitSettings:
             problems.append("substeps must be 1..16")
         if self.decimate < 1:
             problems.append("decimate must be ≥ 1")
+        if self.fit_rate_Hz is not None and not (
+            isinstance(self.fit_rate_Hz, (int, float)) and 0 < self.fit_rate_Hz < float("inf")
+        ):
+            problems.append(f"fit_rate_Hz must be > 0 Hz or None, not {self.fit_rate_Hz!r}")
         if self.latch_law not in ("auto", "datasheet"):
             problems.append(f"latch_law {self.latch_law!r} is not auto or datasheet")
         if self.regulator_lag not in ("auto", "off"):

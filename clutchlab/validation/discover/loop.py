@@ -34,7 +34,7 @@ from ...data import Dataset, Trace, dither_period_mean, dither_period_samples, p
 from ...errors import ClutchlabError, FitError
 from ...physics import CircuitModel, simulate
 from ...physics.effects import EFFECTS
-from ...physics.fit import FitResult, resolve_free
+from ...physics.fit import FitResult, at_fit_rate, resolve_free
 from ...physics.parameters import ParameterSet
 from .alternatives import alternatives_for, beats, broke_down, fit_alternative
 from .diagnostics import diagnose
@@ -83,7 +83,9 @@ def period_mean_metrics(
 def _split(dataset: Dataset | list[Trace], settings: DiscoverySettings):
     traces = list(dataset)
     train_ramps = set(settings.fit.train_ramps)
-    train = [t for t in traces if t.ramp in train_ramps]
+    # at the fit's rate, so that the base fit, the screening refits and the evidence all
+    # see the same samples (a no-op for data logged at up to 1.5 × that rate)
+    train = at_fit_rate([t for t in traces if t.ramp in train_ramps], settings.fit.fit_rate_Hz)
     test = [t for t in traces if t.ramp in set(settings.test_ramps)]
     if not train:
         ramps = sorted({str(t.ramp) for t in traces})
