@@ -464,7 +464,8 @@ def test_a_fit_on_data_logged_at_5_khz_runs_at_the_fit_rate(small_data, monkeypa
 
     monkeypatch.setattr(fitter_module, "FitProblem", Spy)
     fast = Dataset([t.resample(5000.0) for t in small_data])
-    res = _fit(fast, max_iter=2, staged_start=False, fit_rate_Hz=1000.0).result_
+    with pytest.warns(FitWarning, match="stopped at a limit"):  # two iterations only
+        res = _fit(fast, max_iter=2, staged_start=False, fit_rate_Hz=1000.0).result_
     assert rates and all(r == pytest.approx(1000.0) for r in rates)
     assert res.settings["fit_rate_Hz"] == 1000.0 and set(res.per_experiment) == set(res.train)
 
