@@ -14,6 +14,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from synthetic import make_trace
 
 import clutchlab.validation.discover.loop as loop
 import clutchlab.validation.discover.scoring as scoring
@@ -723,8 +724,6 @@ def test_refits_are_ranked_by_one_information_criterion():
 def test_training_experiments_are_taken_at_the_fit_rate():
     """With a fit rate, the base fit, the screening refits and the evidence see the same
     1 kHz samples of an experiment logged at 5 kHz; the test ramps keep their own samples."""
-    from synthetic import make_trace
-
     knots = ([0.0, 0.5, 1.0], [0.0, 900.0, 0.0])
     fast = make_trace(*knots, dt=2e-4, name="fast_a", ramp="fast")
     medium = make_trace(*knots, dt=2e-4, name="medium_a", ramp="medium")

@@ -451,8 +451,8 @@ def test_experiments_logged_faster_than_the_fit_rate_are_resampled():
 
 
 def test_a_fit_on_data_logged_at_5_khz_runs_at_the_fit_rate(small_data, monkeypatch):
-    """Every stage's problem sees the experiments at the fit's 1 kHz, and the result's
-    per-experiment metrics are those of the fit's samples."""
+    """Every stage's problem sees the experiments at the fit's 1 kHz, and the result records
+    that rate in its settings."""
     import clutchlab.physics.fit.fitter as fitter_module
 
     rates = []
