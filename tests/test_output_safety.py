@@ -279,3 +279,50 @@ def test_unwritable_output_is_a_clear_error_before_any_work(small_ds, tmp_path, 
 
 def test_output_error_is_a_clutchlab_and_an_os_error():
     assert issubclass(OutputError, ClutchlabError) and issubclass(OutputError, OSError)
+
+
+# ---- the data layer's public writers --------------------------------------------------------
+
+_WRITERS = ["write_csv", "write_parquet", "write_mf4", "write_mat", "write_mat73"]
+
+
+def _writer(name):
+    import clutchlab.data as data
+
+    return getattr(data, name)
+
+
+def _small_trace(temp_C=40.0):
+    from synthetic import make_trace
+
+    return make_trace([0.0, 0.05], [0.0, 500.0], temp_C=temp_C, name="fast_50Hz_B")
+
+
+@pytest.mark.parametrize("name", _WRITERS)
+def test_public_writer_failing_at_the_rename_keeps_the_earlier_file(name, tmp_path, monkeypatch):
+    """A public writer called directly replaces a file only once the new one is complete."""
+    import clutchlab.data.output as output
+
+    dst = tmp_path / f"trace.{name.split('_')[1][:3]}"
+    _writer(name)(_small_trace(), dst)
+    before = dst.read_bytes()
+
+    def no_rename(src, dst_):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(output.os, "replace", no_rename)
+    with pytest.raises(OutputError, match="No space left"):
+        _writer(name)(_small_trace(temp_C=80.0), dst)
+    assert dst.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == [dst.name]  # no temporary left
+
+
+@pytest.mark.parametrize("name", _WRITERS)
+def test_public_writer_replaces_a_file_and_refuses_a_folder(name, tmp_path):
+    dst = tmp_path / "out"
+    dst.write_bytes(b"old")
+    assert _writer(name)(_small_trace(), dst) == dst
+    assert dst.read_bytes() != b"old"
+    (tmp_path / "folder").mkdir()
+    with pytest.raises(OutputError, match="is a folder"):
+        _writer(name)(_small_trace(), tmp_path / "folder")

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import DataError
+from .output import atomic_file_writer
 from .paths import check_input_file
 from .rawlog import RawChannel, RawLog
 from .signals import CANONICAL_ORDER
@@ -48,6 +49,7 @@ def _line_label(i: int) -> str:
     return f"line {i + 2} (data row {i + 1})"
 
 
+@atomic_file_writer
 def write_csv(trace: Trace, path: str | Path, *, float_format: str = _FLOAT_FORMAT) -> Path:
     """Write a trace to CSV.
 
@@ -57,7 +59,9 @@ def write_csv(trace: Trace, path: str | Path, *, float_format: str = _FLOAT_FORM
         Trace to write; every signal present is written, in canonical order and units
         (s, mA, Hz, bar, °C).
     path : path-like
-        Destination file; overwritten if it exists.
+        Destination file. An existing file is replaced atomically: the new one is
+        written to a temporary sibling and renamed into place, so a failure leaves
+        the earlier file as it was.
     float_format : str, optional
         printf-style format of the values. The default ``"%.9g"`` keeps 9 significant digits
         (relative rounding error at most 5e-9). If it would make ``time_s`` not strictly

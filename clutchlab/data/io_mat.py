@@ -24,6 +24,7 @@ import numpy as np
 
 from ..errors import DataError
 from .meta_json import embedded_meta_json, parse_embedded_meta
+from .output import atomic_file_writer
 from .paths import check_input_file
 from .rawlog import RawChannel, RawLog
 from .signals import CANONICAL_ORDER, SIGNALS
@@ -205,6 +206,7 @@ def _columns(trace: Trace) -> list[tuple[str, np.ndarray]]:
     return [(n, np.asarray(trace.signals[n], dtype=float)) for n in CANONICAL_ORDER if trace.has(n)]
 
 
+@atomic_file_writer
 def write_mat(trace: Trace, path: str | Path) -> Path:
     """Write a trace as a MATLAB v7 ``.mat`` file (compressed v5 format, readable by MATLAB).
 
@@ -214,7 +216,9 @@ def write_mat(trace: Trace, path: str | Path) -> Path:
         Trace to write: one column vector per signal in canonical names and units (s, mA, Hz,
         bar, °C), a ``units`` struct and the metadata as JSON text in ``clutchlab``.
     path : path-like
-        Destination file; overwritten if it exists.
+        Destination file. An existing file is replaced atomically: the new one is
+        written to a temporary sibling and renamed into place, so a failure leaves
+        the earlier file as it was.
 
     Returns
     -------
@@ -241,6 +245,7 @@ def _h5_char(group, name: str, text: str) -> None:
         ds.attrs["MATLAB_empty"] = np.uint8(1)
 
 
+@atomic_file_writer
 def write_mat73(trace: Trace, path: str | Path, *, struct: str | None = None) -> Path:
     """Write a trace as a MATLAB v7.3 ``.mat`` file (HDF5 in MATLAB's layout).
 
@@ -249,7 +254,9 @@ def write_mat73(trace: Trace, path: str | Path, *, struct: str | None = None) ->
     trace : Trace
         Trace to write (as :func:`write_mat`).
     path : path-like
-        Destination file; overwritten if it exists.
+        Destination file. An existing file is replaced atomically: the new one is
+        written to a temporary sibling and renamed into place, so a failure leaves
+        the earlier file as it was.
     struct : str, optional
         Write the signals (and ``units``) as fields of one struct of this name instead of one
         variable per channel.

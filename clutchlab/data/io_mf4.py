@@ -20,6 +20,7 @@ import numpy as np
 from ..errors import DataError
 from .mdf_check import check_mdf4_structure
 from .meta_json import embedded_meta_json, parse_embedded_meta
+from .output import atomic_file_writer
 from .paths import check_input_file
 from .rawlog import RawChannel, RawLog, TimeBase
 from .signals import CANONICAL_ORDER, SIGNALS
@@ -40,6 +41,7 @@ def _quiet_asammdf() -> None:
     logging.getLogger("asammdf").setLevel(logging.CRITICAL)
 
 
+@atomic_file_writer
 def write_mf4(trace: Trace, path: str | Path) -> Path:
     """Write a trace to an MDF 4.10 file.
 
@@ -49,7 +51,9 @@ def write_mf4(trace: Trace, path: str | Path) -> Path:
         Trace to write: one channel group, master ``time`` (s), one float64 channel per
         canonical signal present with its canonical unit (mA, Hz, bar, °C) and description.
     path : path-like
-        Destination file; overwritten if it exists.
+        Destination file. An existing file is replaced atomically: the new one is
+        written to a temporary sibling and renamed into place, so a failure leaves
+        the earlier file as it was.
 
     Returns
     -------
@@ -74,6 +78,9 @@ def write_mf4(trace: Trace, path: str | Path) -> Path:
         for n in CANONICAL_ORDER
         if n != "time_s" and trace.has(n)
     ]
+    # asammdf saves a name without an MDF suffix (the atomic writer's temporary) under that
+    # name with ``.mf4``; it is moved to ``path`` below, or removed if anything fails.
+    renamed = path if path.suffix.lower() == ".mf4" else path.with_suffix(".mf4")
     mdf = MDF(version="4.10")
     try:
         mdf.header.comment = f"clutchlab trace {trace.name}"
@@ -87,10 +94,14 @@ def write_mf4(trace: Trace, path: str | Path) -> Path:
             embedded=True,
         )
         written = Path(mdf.save(path, overwrite=True))
+        if written != path:  # asammdf may normalise the suffix; keep the name asked for
+            written.replace(path)
+    except BaseException:
+        if renamed != path:
+            renamed.unlink(missing_ok=True)
+        raise
     finally:
         mdf.close()
-    if written != path:  # asammdf may normalise the suffix; keep the name asked for
-        written.replace(path)
     return path
 
 

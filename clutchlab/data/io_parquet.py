@@ -17,6 +17,7 @@ import numpy as np
 
 from ..errors import DataError
 from .meta_json import embedded_meta_json, parse_embedded_meta
+from .output import atomic_file_writer
 from .paths import check_input_file
 from .rawlog import RawChannel, RawLog
 from .signals import CANONICAL_ORDER, SIGNALS
@@ -32,6 +33,7 @@ __all__ = ["decode_parquet", "read_parquet", "write_parquet"]
 META_KEY = b"clutchlab"
 
 
+@atomic_file_writer
 def write_parquet(trace: Trace, path: str | Path) -> Path:
     """Write a trace to a Parquet file.
 
@@ -42,7 +44,9 @@ def write_parquet(trace: Trace, path: str | Path) -> Path:
         (s, mA, Hz, bar, °C). Units go to the field metadata, name and metadata to the
         schema metadata.
     path : path-like
-        Destination file; overwritten if it exists.
+        Destination file. An existing file is replaced atomically: the new one is
+        written to a temporary sibling and renamed into place, so a failure leaves
+        the earlier file as it was.
 
     Returns
     -------

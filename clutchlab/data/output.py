@@ -25,6 +25,7 @@ import contextlib
 import ctypes
 import ctypes.util
 import errno
+import functools
 import json
 import os
 import shutil
@@ -33,11 +34,13 @@ import stat
 import tempfile
 from collections.abc import Callable, Mapping
 from pathlib import Path
+from typing import Any
 
 from ..errors import OutputError
 
 __all__ = [
     "OWNED_NAME",
+    "atomic_file_writer",
     "check_output",
     "owned_files",
     "write_file_atomic",
@@ -192,6 +195,34 @@ def write_file_atomic(path: str | Path, content: Content, *, overwrite: bool = F
         tmp.unlink(missing_ok=True)
         raise
     return path
+
+
+def atomic_file_writer(write_to: Callable[..., Any]) -> Callable[..., Path]:
+    """Make a public ``write_x(obj, path, ...)`` function write its file atomically.
+
+    The decorated function writes at the path it is given; the wrapper hands it
+    :func:`write_file_atomic`'s temporary sibling and renames that into place, replacing an
+    existing file only once the new one is complete. A failure (or a kill) leaves the earlier
+    file byte for byte; a folder at the path is an :class:`~clutchlab.errors.OutputError`.
+
+    Parameters
+    ----------
+    write_to : callable
+        ``write_to(obj, path, *args, **kwargs)``; writes one complete file at ``path``.
+
+    Returns
+    -------
+    callable
+        ``write(obj, path, *args, **kwargs) -> pathlib.Path`` (the destination).
+    """
+
+    @functools.wraps(write_to)
+    def write(obj: Any, path: str | Path, *args: Any, **kwargs: Any) -> Path:
+        return write_file_atomic(
+            path, lambda tmp: write_to(obj, tmp, *args, **kwargs), overwrite=True
+        )
+
+    return write
 
 
 def owned_files(folder: str | Path) -> set[str]:
