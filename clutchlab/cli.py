@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import os
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from . import __version__
-from .errors import ClutchlabError
+from .errors import ClutchlabError, OutputError
 
 if TYPE_CHECKING:
     from .data import ReadOptions
@@ -306,8 +308,59 @@ def check_outputs(args: argparse.Namespace) -> None:
 
     if getattr(args, "json", None):
         check_output(args.json, kind="file", overwrite=True, what="--json")
+        _check_json_replaceable(args)
     if getattr(args, "report_out", False) and getattr(args, "out", None):
         check_output(args.out, kind="folder", overwrite=True, what="--out")
+
+
+#: Arguments that name what a command writes, not what it reads.
+_OUTPUT_ARGS = ("json", "out")
+
+
+def _input_paths(args: argparse.Namespace) -> list[Path]:
+    """Every existing file or folder a command's arguments name, outputs excepted."""
+    found = []
+    for key, value in vars(args).items():
+        values = value if isinstance(value, list | tuple) else [value]
+        for v in values:
+            if key in _OUTPUT_ARGS or not isinstance(v, str | Path) or not str(v):
+                continue
+            with contextlib.suppress(OSError, ValueError):
+                if Path(v).exists():
+                    found.append(Path(v))
+    return found
+
+
+def _check_json_replaceable(args: argparse.Namespace) -> None:
+    """Refuse a ``--json`` file that exists and is not a JSON document, or is an input.
+
+    ``--json`` replaces an earlier result of the same command without ``--overwrite``; it
+    must never replace a user's log, map or manifest. So an existing file there is replaced
+    only when it parses as JSON and is neither one of the command's inputs nor the manifest of
+    an input dataset folder.
+    """
+    from .data.manifest import MANIFEST_NAME
+
+    target = Path(args.json)
+    if not target.is_file():
+        return
+    for source in _input_paths(args):
+        inside = source / MANIFEST_NAME if source.is_dir() else source
+        same = False
+        with contextlib.suppress(OSError):  # OutputError is an OSError: raised outside
+            same = inside.exists() and os.path.samefile(inside, target)
+        if same:
+            raise OutputError(
+                f"--json {target}: is {'the manifest of ' if source.is_dir() else ''}"
+                f"this command's input {source}; write the result elsewhere"
+            )
+    try:
+        json.loads(target.read_bytes())
+    except (OSError, ValueError):
+        raise OutputError(
+            f"--json {target}: exists and is not a JSON document, so clutchlab did not write "
+            "it; choose another name (or remove the file)"
+        ) from None
 
 
 def write_json_output(path: str | Path, text: str) -> Path:

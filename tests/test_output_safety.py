@@ -326,3 +326,38 @@ def test_public_writer_replaces_a_file_and_refuses_a_folder(name, tmp_path):
     (tmp_path / "folder").mkdir()
     with pytest.raises(OutputError, match="is a folder"):
         _writer(name)(_small_trace(), tmp_path / "folder")
+
+
+# ---- --json never replaces an input or a file that is not JSON --------------------------------
+
+
+def _check_json(path, json_path):
+    from clutchlab.cli import main
+
+    return main(["data", "check", str(path), "--json", str(json_path)])
+
+
+def test_json_output_refuses_the_checked_log_and_the_manifest(small_ds, tmp_path, capsys):
+    import shutil
+
+    ds = tmp_path / "ds"
+    shutil.copytree(small_ds, ds)
+    log = next(p for p in ds.iterdir() if p.suffix == ".csv")
+    before = snapshot(ds)
+    assert _check_json(log, log) == 2
+    assert "is this command's input" in capsys.readouterr().err
+    assert _check_json(ds, ds / "manifest.json") == 2
+    assert "is the manifest of this command's input" in capsys.readouterr().err
+    assert snapshot(ds) == before
+
+
+def test_json_output_replaces_a_json_result_but_not_another_file(small_ds, tmp_path, capsys):
+    notes = tmp_path / "notes.txt"
+    notes.write_text("my notes")
+    assert _check_json(small_ds, notes) == 2
+    assert "is not a JSON document" in capsys.readouterr().err
+    assert notes.read_text() == "my notes"
+    result = tmp_path / "check.json"
+    result.write_text('{"earlier": true}')
+    assert _check_json(small_ds, result) == 0
+    assert "earlier" not in result.read_text()
