@@ -91,6 +91,16 @@ def test_csv_keeps_time_increasing_beyond_9_digits(tmp_path):
     np.testing.assert_array_equal(back.time_s, t)
 
 
+def test_csv_writes_time_exactly_when_9_digits_would_move_a_sample(tmp_path):
+    """A late start time at a fast rate still increases at 9 digits, but 30 % off a step."""
+    t = 20000.0 + np.arange(50) / 7000.0
+    tr = Trace(
+        "x", {"time_s": t, "current_mA": np.full(50, 500.0), "clutch_pressure_bar": np.ones(50)}
+    )
+    back = read_csv(write_csv(tr, tmp_path / "x.csv"))
+    np.testing.assert_array_equal(back.time_s, t)
+
+
 def test_read_csv_missing_and_empty_files(tmp_path):
     with pytest.raises(DataError, match=r"nope\.csv: file not found"):
         read_csv(tmp_path / "nope.csv")
@@ -138,6 +148,43 @@ def test_read_csv_time_and_missing_column_problems_with_lines(tmp_path):
     assert "'clutch_pressure_bar' is missing" in text
     assert "not strictly increasing at line 4 (data row 3)" in text
     assert "non-finite value at line 5 (data row 4)" in text  # blank line inside the data
+
+
+@pytest.mark.parametrize("quoted", [False, True])
+def test_read_csv_refuses_a_row_with_a_field_missing(tmp_path, quoted):
+    """A short row would shift every later value into the wrong column."""
+    rows = ["0,100,1", "0.001,200,2", "0.002,3", "0.003,400,4", "0.004,500,5"]
+    if quoted:
+        rows = [",".join(f'"{c}"' for c in r.split(",")) for r in rows]
+    path = write_text(tmp_path / "short.csv", HEADER + "\n" + "\n".join(rows) + "\n")
+    with pytest.raises(DataError) as info:
+        read_csv(path, options=ReadOptions(interpolate_gaps=1))
+    text = str(info.value)
+    assert "fewer fields than the 3 columns of the header at line 4 (data row 3)" in text
+    assert "missing values" not in text  # the row is reported once, as short
+
+
+def test_read_csv_ignores_text_in_a_column_the_map_does_not_use(tmp_path):
+    path = write_text(
+        tmp_path / "text.csv",
+        "t,I,P,comment\n0,100,1,start\n0.001,200,2,\n0.002,300,3,ramp up\n",
+    )
+    cmap = {"signals": {"time_s": "t", "current_mA": "I", "clutch_pressure_bar": "P"}}
+    tr = read_csv(path, channel_map=cmap)
+    np.testing.assert_array_equal(tr.get("current_mA"), [100.0, 200.0, 300.0])
+    cmap["signals"]["oil_temp_C"] = "comment"  # a used column must still parse
+    with pytest.raises(DataError, match=r"column 'comment': unparseable number at line 2"):
+        read_csv(path, channel_map=cmap)
+
+
+def test_read_csv_array_index_header_is_a_name_not_a_unit(tmp_path):
+    path = write_text(
+        tmp_path / "arr.csv", "time_s,current_mA,P[0],P[1]\n0,100,1,17\n0.001,200,2,17\n"
+    )
+    cmap = {"signals": {"clutch_pressure_bar": "P[0]", "line_pressure_bar": "P[1]"}}
+    tr = read_csv(path, channel_map=cmap)
+    np.testing.assert_array_equal(tr.get("clutch_pressure_bar"), [1.0, 2.0])
+    np.testing.assert_array_equal(tr.get("line_pressure_bar"), [17.0, 17.0])
 
 
 def test_read_csv_tolerates_trailing_blank_lines(tmp_path):

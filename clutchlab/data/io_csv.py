@@ -49,6 +49,21 @@ def _line_label(i: int) -> str:
     return f"line {i + 2} (data row {i + 1})"
 
 
+#: Largest error of a written sample time, as a fraction of the smallest sample interval.
+TIME_TEXT_TOLERANCE = 1e-3
+
+
+def _time_text_exact(values: np.ndarray, text: list[str]) -> bool:
+    """Whether ``text`` holds every sample time to :data:`TIME_TEXT_TOLERANCE` of a step."""
+    values = np.asarray(values, dtype=float)
+    back = np.array([float(s) for s in text])
+    steps = np.diff(values)
+    if steps.size == 0:
+        return bool(np.all(back == values))
+    error = float(np.max(np.abs(back - values)))
+    return bool(np.all(np.diff(back) > 0)) and error <= TIME_TEXT_TOLERANCE * float(steps.min())
+
+
 @atomic_file_writer
 def write_csv(trace: Trace, path: str | Path, *, float_format: str = _FLOAT_FORMAT) -> Path:
     """Write a trace to CSV.
@@ -64,8 +79,9 @@ def write_csv(trace: Trace, path: str | Path, *, float_format: str = _FLOAT_FORM
         the earlier file as it was.
     float_format : str, optional
         printf-style format of the values. The default ``"%.9g"`` keeps 9 significant digits
-        (relative rounding error at most 5e-9). If it would make ``time_s`` not strictly
-        increasing (very long, finely sampled logs), ``time_s`` is written with ``"%.17g"``.
+        (relative rounding error at most 5e-9). If it would move a ``time_s`` sample by more
+        than :data:`TIME_TEXT_TOLERANCE` of the smallest sample interval (a late start time, a
+        fast logger), ``time_s`` is written with ``"%.17g"`` (exact).
 
     Returns
     -------
@@ -80,10 +96,8 @@ def write_csv(trace: Trace, path: str | Path, *, float_format: str = _FLOAT_FORM
     for name in names:
         values = trace.signals[name]
         text = [float_format % v for v in values.tolist()]
-        if name == "time_s" and text:
-            back = np.array([float(s) for s in text])
-            if np.any(np.diff(back) <= 0):
-                text = [_EXACT_FORMAT % v for v in values.tolist()]
+        if name == "time_s" and text and not _time_text_exact(values, text):
+            text = [_EXACT_FORMAT % v for v in values.tolist()]
         columns.append(text)
     with path.open("w", encoding="utf-8", newline="") as fh:
         fh.write(",".join(names) + "\n")
@@ -165,8 +179,9 @@ def _read_header(path: Path, limits: CsvLimits) -> list[str]:
 
 
 def _split_unit(header: str) -> tuple[str, str | None]:
+    """``"P_CL [kPa]"`` → ``("P_CL", "kPa")``; an array index (``"P[0]"``) stays in the name."""
     match = _UNIT_HEADER.match(header)
-    if match and match["name"]:
+    if match and match["name"] and not match["unit"].strip().isdigit():
         return match["name"], match["unit"].strip() or None
     return header, None
 
@@ -194,7 +209,9 @@ def decode_csv(path: str | Path, wanted: Callable[[str], bool] | None = None) ->
     path : path-like
         Comma-separated text file with a header line. Empty cells and ``NaN`` are NaN.
     wanted : callable, optional
-        Ignored (every column is parsed); accepted for a uniform decoder signature.
+        ``wanted(name)`` tells whether a column is needed. Every column is parsed, but
+        unparseable cells are problems only in wanted columns; another column with text in it
+        (a comment, a status) is returned as not numeric. None: every column is wanted.
 
     Returns
     -------
@@ -225,19 +242,38 @@ def decode_csv(path: str | Path, wanted: Callable[[str], bool] | None = None) ->
         raise DataError(f"{path}: bad CSV header", problems)
 
     try:
-        columns, problems, unparseable = _parse_values(path, header)
+        columns, by_column, unparseable = _parse_values(path, header)
         n = next(iter(columns.values())).size
         fields = len(next(csv.reader([_last_line(path)]), []))
+        short = _short_rows(path, len(header), n)
     except csv.Error as exc:  # e.g. a field longer than the csv module's field size limit
         raise DataError(f"{path}: malformed CSV ({exc})") from None
     if fields < len(header):
         problems.append(
             f"{path}: file truncated: {_line_label(n - 1)} has {fields} of {len(header)} fields"
         )
-    channels = [
-        RawChannel(name, columns[h], unit, where=f"column {name!r}", reported=unparseable.get(h))
-        for h, (name, unit) in zip(header, names_units, strict=True)
-    ]
+        short = [line for line in short if line != n - 1]
+    if short:
+        shown = ", ".join(_line_label(i) for i in short[:_MAX_ROWS_LISTED])
+        more = f" … ({len(short)} lines)" if len(short) > _MAX_ROWS_LISTED else ""
+        problems.append(
+            f"{path}: fewer fields than the {len(header)} columns of the header at {shown}{more} "
+            "(a value is missing, so the values after it would land in the wrong columns)"
+        )
+    channels = []
+    short_mask = np.isin(np.arange(n), short) if short else None
+    for h, (name, unit) in zip(header, names_units, strict=True):
+        where = f"column {name!r}"
+        if h in by_column and wanted is not None and not wanted(name):
+            # A column nobody asked for (a comment, a status text) does not fail the file.
+            channels.append(RawChannel(name, None, unit, where=where, problem="not numeric"))
+            continue
+        if h in by_column:
+            problems.append(by_column[h])
+        reported = unparseable.get(h)
+        if short_mask is not None:  # already reported: not again as missing values
+            reported = short_mask if reported is None else reported | short_mask
+        channels.append(RawChannel(name, columns[h], unit, where=where, reported=reported))
     return RawLog(path, "csv", channels, row_label=_line_label, problems=problems)
 
 
@@ -283,6 +319,36 @@ def read_csv(
     )[0]
 
 
+def _short_rows(path: Path, n_fields: int, n_rows: int) -> list[int]:
+    """0-based data rows (of the first ``n_rows``) with fewer fields than the header.
+
+    Blank lines are left out (they read as rows of missing values, reported as such). Counts
+    separators in bulk; a file with quotes, where a comma may be inside a field, is read
+    with the ``csv`` module instead.
+    """
+    data = path.read_bytes()
+    if b'"' in data:
+        short = []
+        with path.open("r", encoding="utf-8-sig", errors="replace", newline="") as fh:
+            for i, row in enumerate(csv.reader(fh)):
+                if 0 < i <= n_rows and 0 < len(row) < n_fields and any(c.strip() for c in row):
+                    short.append(i - 1)
+        return short
+    raw = np.frombuffer(data, dtype=np.uint8)
+    ends = np.flatnonzero(raw == ord("\n"))
+    if not ends.size or ends[-1] != raw.size - 1:
+        ends = np.append(ends, raw.size)
+    ends = ends[1 : n_rows + 1]  # line 1 is the header
+    starts = np.concatenate(([0], np.flatnonzero(raw == ord("\n"))))[1 : ends.size + 1] + 1
+    commas = np.flatnonzero(raw == ord(","))
+    fields = np.searchsorted(commas, ends) - np.searchsorted(commas, starts) + 1
+    short = []
+    for row in np.flatnonzero(fields < n_fields):
+        if data[starts[row] : ends[row]].strip():  # a blank line is not a short row
+            short.append(int(row))
+    return short
+
+
 def _long_rows(path: Path, n_fields: int) -> list[str]:
     """Problems naming the lines with more fields than the header (data would be lost)."""
     bad = []
@@ -296,11 +362,11 @@ def _long_rows(path: Path, n_fields: int) -> list[str]:
 
 def _parse_values(
     path: Path, header: list[str]
-) -> tuple[dict[str, np.ndarray], list[str], dict[str, np.ndarray]]:
+) -> tuple[dict[str, np.ndarray], dict[str, str], dict[str, np.ndarray]]:
     """Parse the data rows of ``path`` into float64 columns named by ``header``.
 
-    Unparseable cells become NaN and are listed, by column and line, in the returned problems
-    (and flagged in the returned masks, by column).
+    Unparseable cells become NaN and are listed, by line, in the returned problems (one per
+    column, keyed by header) and flagged in the returned masks, by column.
 
     The fast path parses floats in the C engine; only if that fails are the values re-read
     as text to name every unparseable cell by column and line.
@@ -340,9 +406,9 @@ def _parse_values(
     if n == 0:
         raise DataError(f"{path}: empty file (header but no data rows)")
     if text is None:
-        return {col: df[col].to_numpy(dtype=np.float64)[:n] for col in header}, [], {}
+        return {col: df[col].to_numpy(dtype=np.float64)[:n] for col in header}, {}, {}
 
-    problems: list[str] = []
+    problems: dict[str, str] = {}
     signals: dict[str, np.ndarray] = {}
     masks: dict[str, np.ndarray] = {}
     for col in header:
@@ -360,6 +426,6 @@ def _parse_values(
             )
             more = f" … ({bad.size} in total)" if bad.size > _MAX_ROWS_LISTED else ""
             label = _split_unit(col)[0]
-            problems.append(f"{path}: column {label!r}: unparseable number at {shown}{more}")
+            problems[col] = f"{path}: column {label!r}: unparseable number at {shown}{more}"
         signals[col] = values
     return signals, problems, masks
