@@ -380,6 +380,12 @@ def main(argv: list[str] | None = None) -> int:
         command = " ".join(filter(None, [args.command, getattr(args, "data_command", None)]))
         print(f"clutchlab {command}: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:
+        # The reader of our output went away (``clutchlab data check DS | head``): stop
+        # quietly, as other command-line tools do, without a traceback at exit either.
+        with contextlib.suppress(OSError, ValueError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141  # 128 + SIGPIPE, what a shell reports for a tool killed by it
 
 
 if __name__ == "__main__":

@@ -136,3 +136,16 @@ def test_failed_convert_leaves_no_partial_output(stand_ds, tmp_path, monkeypatch
     assert sorted(p.name for p in tmp_path.iterdir()) == ["src"]
     with pytest.raises(DataError, match="suffix does not match the format 'csv'"):
         convert(stand_ds / "medium_50Hz_B.csv", tmp_path / "one.mf4", format="csv")
+
+
+def test_check_into_a_closed_pipe_stops_quietly(stand_ds):
+    """``clutchlab data check DS | head -1``: the reader goes away; no traceback."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "clutchlab.cli", "data", "check", str(stand_ds)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    proc.stdout.close()  # the reader is gone before the first line is written
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 141
+    assert "Traceback" not in err and "BrokenPipeError" not in err
