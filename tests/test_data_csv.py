@@ -319,6 +319,10 @@ def test_save_rejects_bad_input_before_writing(tmp_path):
 def test_load_missing_and_invalid_manifest(tmp_path):
     with pytest.raises(DataError, match="dataset folder not found"):
         load_dataset(tmp_path / "nope")
+    log = write_csv(make_trace("fast_30Hz_A"), tmp_path / "log.csv")
+    with pytest.raises(DataError, match=r"log\.csv: a file, not a dataset folder"):
+        load_dataset(log)  # said "dataset folder None"
+    log.unlink()
     with pytest.raises(DataError, match=r"manifest\.json: manifest not found"):
         load_dataset(tmp_path)
     write_text(tmp_path / "manifest.json", '{"experiments": [\n{"file": "a.csv",}]}')

@@ -219,7 +219,14 @@ def read_manifest(path: str | Path) -> Manifest:
         root, manifest_path = path, path / MANIFEST_NAME
     if not root.is_dir():
         why = file_kind_problem(root)
-        raise DataError(f"{root}: dataset folder {'not found' if why == 'not found' else why}")
+        if why == "not found":
+            raise DataError(f"{root}: dataset folder not found")
+        if why is None:  # a regular file where the folder was expected
+            raise DataError(
+                f"{root}: a file, not a dataset folder (give the folder or its manifest.json; "
+                "one log is read with read_log)"
+            )
+        raise DataError(f"{root}: {why}; a dataset folder or a log file was expected")
     check_input_file(manifest_path, "manifest")
     try:
         data = json.loads(manifest_path.read_text(encoding="utf-8-sig"))
