@@ -147,6 +147,27 @@ def test_mapped_channel_missing_is_named_with_the_map(tmp_path):
     )
 
 
+def test_a_mapped_column_is_not_also_read_under_its_canonical_name(tmp_path):
+    # 'current_mA' holds the commanded current: the map says so, and no signal may take it
+    # a second time by canonical-name lookup (it would pass the command off as the measurement)
+    path = tmp_path / "log.csv"
+    rows = [f"{k * 1e-3:.3f},1.0,{400 + k},{380 + k}" for k in range(20)]
+    path.write_text("time_s,clutch_pressure_bar,current_mA,I_meas\n" + "\n".join(rows) + "\n")
+    trace, report = read_log(path, channel_map={"signals": {"current_cmd_mA": "current_mA"}})
+    assert not trace.has("current_mA")
+    assert "current_mA" not in report.sources
+    assert report.sources["current_cmd_mA"] == "column 'current_mA'"
+    assert (
+        f"{path}: column 'current_mA' is mapped to current_cmd_mA by channel map, so it is not "
+        "also read as current_mA" in report.notes
+    )
+    # mapping the measured current too gives both, each from its own column
+    both = {"signals": {"current_cmd_mA": "current_mA", "current_mA": "I_meas"}}
+    trace, report = read_log(path, channel_map=both)
+    np.testing.assert_array_equal(trace.get("current_mA") - trace.get("current_cmd_mA"), -20.0)
+    assert not any("not also read" in note for note in report.notes)
+
+
 def test_invalid_map_lists_every_problem(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text(

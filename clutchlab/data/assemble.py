@@ -58,6 +58,23 @@ def _hint_names(names: list[str]) -> str:
     return ", ".join(hints)
 
 
+def _claimed(raw: RawLog, cmap: ChannelMap | None) -> dict[int, str]:
+    """Source channels a channel map assigns to a signal: ``id(channel)`` → signal.
+
+    A claimed channel is not also taken, under its own name, for another canonical signal
+    the map does not mention.
+    """
+    if cmap is None:
+        return {}
+    claimed: dict[int, str] = {}
+    for signal, spec in cmap.signals.items():
+        if signal == "time_s" and not raw.tabular:
+            continue  # MF4 time comes from the master channels; the mapping is ignored
+        for channel in raw.find(spec.channel, spec.group, spec.source):
+            claimed.setdefault(id(channel), signal)
+    return claimed
+
+
 def _resolve_unit(
     spec: ChannelSpec, channel: RawChannel, signal: str, mapped: bool, where: str
 ) -> tuple[str | None, list[str], list[str]]:
@@ -208,6 +225,7 @@ def assemble(
 
     picked: dict[str, _Signal] = {}
     missing_mapped: dict[str, str] = {}
+    claimed = _claimed(raw, cmap)
     for signal in CANONICAL_ORDER:
         spec = cmap.spec(signal) if cmap is not None else ChannelSpec(signal)
         mapped = cmap is not None and signal in cmap.signals
@@ -219,6 +237,14 @@ def assemble(
                 )
             continue
         candidates = raw.find(spec.channel, spec.group, spec.source)
+        if not mapped and claimed:
+            taken = [c for c in candidates if id(c) in claimed]
+            candidates = [c for c in candidates if id(c) not in claimed]
+            for c in taken:
+                notes.append(
+                    f"{file}: {c.where} is mapped to {claimed[id(c)]} by {cmap.label}, so it "
+                    f"is not also read as {signal}"
+                )
         if not candidates and spec.source is not None:
             known = sorted({x for c in raw.find(spec.channel, spec.group) for x in c.sources})
             problems.append(

@@ -23,8 +23,10 @@ conversion, offset in the canonical unit:
 ``canonical = convert_units(raw, unit, canonical_unit) * scale + offset``) and, for MF4 files
 whose channel name occurs in several groups, ``group`` (0-based group index).
 
-Signals a map does not mention are looked up under their canonical name. Source channels the
-map does not use are ignored (a log without a map must have canonical names only).
+Signals a map does not mention are looked up under their canonical name, but a source channel
+the map assigns to one signal is never also taken that way for another (``current_cmd_mA =
+"current_mA"`` leaves ``current_mA`` absent, with a note). Source channels the map does not
+use are ignored (a log without a map must have canonical names only).
 """
 
 from __future__ import annotations
