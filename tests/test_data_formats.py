@@ -102,6 +102,37 @@ def test_parquet_and_mf4_are_exact_and_carry_units_and_meta(tmp_path, stand_data
             assert units[name] == SIGNALS[name].unit, name
 
 
+def _write_time_typed_parquet(path, arrow_type, n=3000):
+    """A 1 kHz log whose time column is an Arrow timestamp / duration (epoch nanoseconds)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    ticks = 1_700_000_000_000_000_000 + np.arange(n, dtype=np.int64) * 1_000_000  # 1 ms
+    table = pa.table(
+        {
+            "time_s": pa.array(ticks, pa.int64()).cast(arrow_type),
+            "current_mA": np.full(n, 400.0),
+            "clutch_pressure_bar": np.linspace(0.5, 10.0, n),
+        }
+    )
+    pq.write_table(table, path)
+    return path
+
+
+@pytest.mark.parametrize("arrow_type", ["timestamp[ns]", "duration[ns]"])
+def test_parquet_time_typed_column_keeps_exact_steps(tmp_path, arrow_type):
+    # epoch nanoseconds (1.7e18) are beyond float64's 2**53: the first sample is subtracted
+    # in int64 ticks, before the conversion, so 1 ms steps stay 1 ms (not 999936 / 1000192 ns)
+    import pyarrow as pa
+
+    arrow = pa.timestamp("ns") if arrow_type.startswith("timestamp") else pa.duration("ns")
+    path = _write_time_typed_parquet(tmp_path / "ts.parquet", arrow)
+    trace, report = read_log(path)
+    np.testing.assert_allclose(np.diff(trace.time_s), 1e-3, rtol=0, atol=1e-12)
+    assert trace.time_s[0] == 0.0
+    assert report.rate_Hz == pytest.approx(1000.0, rel=1e-9)
+
+
 def _identity(x):
     return x
 

@@ -69,22 +69,46 @@ def write_parquet(trace: Trace, path: str | Path) -> Path:
     return path
 
 
+#: Seconds per tick of an Arrow timestamp / duration unit.
+_TICK_S = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+
+
+def _is_time_type(t: Any) -> bool:
+    import pyarrow as pa
+
+    return pa.types.is_timestamp(t) or pa.types.is_duration(t)
+
+
+def _seconds_since_first(column: Any) -> np.ndarray:
+    """Seconds since the first valid sample of a timestamp / duration column (NaN for nulls).
+
+    The first sample is subtracted in int64 ticks before the conversion to float64, so epoch
+    nanoseconds (~1.7e18, beyond float64's 2**53) keep their exact steps.
+    """
+    import pyarrow as pa
+
+    ticks = np.asarray(column.cast(pa.int64()).fill_null(0).to_numpy(zero_copy_only=False))
+    ticks = ticks.astype(np.int64, copy=False)
+    nulls = np.asarray(column.is_null().to_numpy(zero_copy_only=False), dtype=bool)
+    valid = ticks[~nulls]
+    first = int(valid[0]) if valid.size else 0
+    if valid.size and max(int(valid.max()) - first, first - int(valid.min())) < 2**63:
+        elapsed = (ticks - np.int64(first)).astype(np.float64)
+    else:  # a span beyond int64 (absurd stamps): float is as good, and the checks will tell
+        elapsed = ticks.astype(np.float64) - float(first)
+    elapsed[nulls] = np.nan
+    return elapsed * _TICK_S[column.type.unit]
+
+
 def _to_float(column: Any, name: str) -> tuple[np.ndarray | None, str | None, str | None]:
     """float64 values of an Arrow column; or None with the reason; plus a note."""
     import pyarrow as pa
     import pyarrow.compute as pc
 
     t = column.type
-    if pa.types.is_timestamp(t) or pa.types.is_duration(t):
-        ints = pc.cast(column, pa.int64()).to_numpy(zero_copy_only=False)
-        unit = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}[t.unit]
-        ints = np.asarray(ints, dtype=np.float64)
-        nulls = column.is_null().to_numpy(zero_copy_only=False)
-        ints[np.asarray(nulls, dtype=bool)] = np.nan
-        finite = ints[np.isfinite(ints)]
-        first = finite[0] if finite.size else 0.0
+    if _is_time_type(t):
         note = f"column {name!r}: {t} converted to seconds since its first sample"
-        return (ints - first) * unit, None, note
+        return _seconds_since_first(column), None, note
     if pa.types.is_integer(t) or pa.types.is_floating(t) or pa.types.is_decimal(t):
         try:
             values = pc.cast(column, pa.float64(), safe=False).to_numpy(zero_copy_only=False)
