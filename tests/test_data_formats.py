@@ -26,6 +26,7 @@ from clutchlab.data import (
     write_mf4,
     write_parquet,
 )
+from clutchlab.errors import DataError
 from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
 
 FLOAT32_EPS = float(np.finfo(np.float32).eps)
@@ -131,6 +132,26 @@ def test_parquet_time_typed_column_keeps_exact_steps(tmp_path, arrow_type):
     np.testing.assert_allclose(np.diff(trace.time_s), 1e-3, rtol=0, atol=1e-12)
     assert trace.time_s[0] == 0.0
     assert report.rate_Hz == pytest.approx(1000.0, rel=1e-9)
+
+
+@pytest.mark.parametrize("arrow_type", ["timestamp[ns]", "duration[ns]"])
+def test_parquet_time_typed_column_refuses_a_map_unit(tmp_path, arrow_type):
+    # the decoder already turned the column into seconds: a map unit 'ms' would convert it a
+    # second time (a 1 kHz, 3 s log read as 1 MHz, 3 ms)
+    import pyarrow as pa
+
+    arrow = pa.timestamp("ns") if arrow_type.startswith("timestamp") else pa.duration("ns")
+    path = _write_time_typed_parquet(tmp_path / "ts.parquet", arrow)
+    cmap = {"signals": {"time_s": {"channel": "time_s", "unit": "ms"}}}
+    with pytest.raises(DataError) as info:
+        read_log(path, channel_map=cmap)
+    assert (
+        f"{path}: column 'time_s': is {arrow_type}, already in seconds; the map's unit 'ms' "
+        "does not apply" in str(info.value)
+    )
+    # the unit it already has is fine
+    trace = read_log(path, channel_map={"signals": {"time_s": {"channel": "time_s", "unit": "s"}}})
+    assert trace[0].time_s[-1] == pytest.approx(2.999, abs=1e-12)
 
 
 def _identity(x):

@@ -75,6 +75,15 @@ def _claimed(raw: RawLog, cmap: ChannelMap | None) -> dict[int, str]:
     return claimed
 
 
+def _converted_twice(channel: RawChannel, map_unit: str, where: str) -> str:
+    """The problem of a map unit on a channel the decoder already converted (timestamps)."""
+    unit = "seconds" if channel.unit == "s" else repr(channel.unit)
+    return (
+        f"{where}: is {channel.converted}, already in {unit}; the map's unit {map_unit!r} does "
+        f"not apply (remove it from the channel map)"
+    )
+
+
 def _resolve_unit(
     spec: ChannelSpec, channel: RawChannel, signal: str, mapped: bool, where: str
 ) -> tuple[str | None, list[str], list[str]]:
@@ -82,6 +91,9 @@ def _resolve_unit(
     canonical = SIGNALS[signal].unit
     file_unit = None
     notes: list[str] = []
+    if channel.converted is not None and spec.unit is not None:
+        if parse_unit(spec.unit) != parse_unit(channel.unit):
+            return None, [_converted_twice(channel, spec.unit, where)], notes
     if channel.unit is not None:
         try:
             file_unit = parse_unit(channel.unit)

@@ -4,7 +4,8 @@ Written files hold one float64 column per canonical signal present, in canonical
 field with its unit in the field metadata (``unit``), and the trace name and metadata as JSON
 in the schema metadata (key ``clutchlab``). Read files may hold any names and numeric types
 (integers, floats, decimals; a timestamp or duration time column is turned into seconds since
-its first sample); rows are named ``row N`` (1-based) in messages.
+its first sample, exactly in integer ticks, and is then in seconds: a channel map may not
+declare another unit for it); rows are named ``row N`` (1-based) in messages.
 """
 
 from __future__ import annotations
@@ -184,7 +185,17 @@ def decode_parquet(path: str | Path, wanted: Callable[[str], bool] | None = None
             values, problem, note = None, f"unreadable column ({type(exc).__name__}: {exc})", None
         if note:
             notes.append(note)
-        channels.append(RawChannel(name, values, unit, where=f"column {name!r}", problem=problem))
+        converted = None
+        if values is not None and _is_time_type(table.column(i).type):
+            converted = str(table.column(i).type)
+            if unit is not None and unit != "s":
+                notes.append(f"column {name!r}: field unit {unit!r} ignored ({converted})")
+            unit = "s"
+        channels.append(
+            RawChannel(
+                name, values, unit, where=f"column {name!r}", problem=problem, converted=converted
+            )
+        )
     return RawLog(path, "parquet", channels, meta=meta, notes=notes)
 
 

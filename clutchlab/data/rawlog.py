@@ -67,6 +67,10 @@ class RawChannel:
         Names of where the channel came from, as the measurement tool wrote them (MF4: the
         channel group's acquisition name, its source's name and path, the channel's source
         name and path); a channel map's ``source`` picks among them.
+    converted : str or None
+        Source type the decoder already turned into ``unit`` (a Parquet ``timestamp[ns]``
+        column, read as seconds since its first sample); a channel map may then not declare
+        another unit for it.
     """
 
     name: str
@@ -77,6 +81,7 @@ class RawChannel:
     problem: str | None = None
     reported: np.ndarray | None = None
     sources: tuple[str, ...] = ()
+    converted: str | None = None
 
 
 @dataclass
