@@ -149,3 +149,69 @@ def test_bad_mat_files_name_file_variable_and_row(stand, tmp_path):
         truncated.write_bytes((tmp_path / src).read_bytes()[:700])
         with pytest.raises(DataError, match=re.escape(truncated.name)):
             read_log(truncated)
+
+
+MAT_MAP = {
+    "signals": {
+        "time_s": "t",
+        "current_mA": {"channel": "I_sol", "unit": "A"},
+        "clutch_pressure_bar": {"channel": "P_CL", "unit": "kPa"},
+    },
+    "defaults": {"dither_freq_Hz": 50.0},
+}
+
+
+def logger_fields(tr):
+    """A trace's channels as a logger names them: t (s), I_sol (A), P_CL (kPa)."""
+    return {
+        "t": tr.time_s,
+        "I_sol": tr.get("current_mA") / 1000.0,
+        "P_CL": tr.get("clutch_pressure_bar") * 100.0,
+    }
+
+
+def test_unused_variable_of_another_length_is_ignored(stand, tmp_path):
+    # a 10 Hz temperature next to the 1 kHz vectors: the map does not use it, so its length
+    # does not matter; once the map uses it, the mismatch is an error naming the file
+    tr = stand[0]
+    slow = np.full(30, 60.0)
+    v73 = tmp_path / "v73.mat"
+    write_matlab_v73(v73, "run", {**logger_fields(tr), "T": slow})
+    v7 = tmp_path / "v7.mat"
+    scipy.io.savemat(v7, {**logger_fields(tr), "T": slow})
+    for path, label in ((v73, "run.T"), (v7, "T")):
+        got, report = read_log(path, channel_map=MAT_MAP)
+        np.testing.assert_allclose(got.get("current_mA"), tr.get("current_mA"), rtol=1e-9)
+        assert any("ignored: 'T'" in note for note in report.notes)
+        with_t = {"signals": {**MAT_MAP["signals"], "oil_temp_C": "T"}}
+        with pytest.raises(DataError) as info:
+            read_log(path, channel_map=with_t)
+        expected = f"{path}: variable {label!r}: 30 samples where the other vectors have"
+        assert any(p.startswith(expected) for p in info.value.problems), info.value.problems
+
+
+def test_struct_next_to_a_scalar_variable(stand, tmp_path):
+    # MATLAB save('run.mat', 'run', 'f_dither'): the struct is the experiment, the scalar a
+    # constant channel next to it
+    tr = stand[0]
+    v73 = tmp_path / "v73.mat"
+    write_matlab_v73(v73, "run", logger_fields(tr))
+    with h5py.File(v73, "a") as f:
+        h5_matlab_double(f, "f_dither", [50.0])
+    v7 = tmp_path / "v7.mat"
+    scipy.io.savemat(v7, {"run": logger_fields(tr), "f_dither": 50.0})
+    with_f = {"signals": {**MAT_MAP["signals"], "dither_freq_Hz": "f_dither"}}
+    for path in (v73, v7):
+        got, report = read_log(path, channel_map=with_f)
+        np.testing.assert_allclose(got.get("current_mA"), tr.get("current_mA"), rtol=1e-9)
+        np.testing.assert_array_equal(got.get("dither_freq_Hz"), 50.0)
+        assert "variable 'f_dither' is a scalar (50): used as a constant channel" in report.notes
+        got, report = read_log(path, channel_map=MAT_MAP)  # not mapped: ignored
+        assert report.sources["current_mA"].startswith("variable 'run.I_sol'")
+        assert any("ignored: 'f_dither'" in note for note in report.notes)
+    # a scalar named like one of the struct's fields does not replace it
+    clash = tmp_path / "clash.mat"
+    scipy.io.savemat(clash, {"run": logger_fields(tr), "t": 5.0})
+    got, report = read_log(clash, channel_map=MAT_MAP)
+    np.testing.assert_array_equal(got.time_s, tr.time_s)
+    assert "variable 't' ignored: struct 'run' has a field of that name" in report.notes

@@ -3,9 +3,13 @@
 Layout read (what MATLAB and dSPACE exports look like):
 
 - **one variable per channel**: numeric vectors of one length (``time_s``, ``P_CL``, …), or
-- **one struct per experiment**: a single struct variable whose fields are those vectors.
+- **one struct per experiment**: a single struct variable whose fields are those vectors,
+  possibly next to scalar variables (``save('run.mat', 'run', 'Fs')``).
 
 A numeric scalar is a constant channel (a logged set point such as a dither frequency).
+Only the vectors that are read — those a channel map uses, or without a map those named like
+canonical signals — must share one length; a variable that is not read may have any length
+(a map ignores it; without a map, every name must still be canonical, as in every format).
 Optional companions, written by :func:`write_mat` / :func:`write_mat73`: ``units`` (a struct
 of unit strings per channel) and ``clutchlab`` (the experiment's name and metadata as JSON
 text). Decoding only turns the file into named float64 columns; mapping, units and checks
@@ -121,6 +125,55 @@ def _units(value: Any) -> dict[str, str]:
     return {str(k): str(v) for k, v in value.items() if isinstance(v, str) and v}
 
 
+def _is_series(value: Any) -> bool:
+    """True for a numeric vector of more than one sample (a channel, not a scalar)."""
+    values, _ = _vector(value)
+    return values is not None and len(values) > 1
+
+
+def _layout(
+    data: Mapping[str, Any], path: Path, units: dict[str, str]
+) -> tuple[dict[str, tuple[str, Any]], dict[str, str], list[str]]:
+    """The variables holding channels: name → (label for messages, value); units; notes.
+
+    One variable per channel, or — when no variable outside a struct is a vector — the
+    fields of the one struct, next to the file's other variables (scalars such as a sample
+    rate saved with it: ``save('run.mat', 'run', 'Fs')``).
+    """
+    variables = {k: v for k, v in data.items() if k not in _RESERVED}
+    structs = {k: v for k, v in variables.items() if isinstance(v, Mapping)}
+    if not structs or any(_is_series(v) for v in variables.values()):
+        return {k: (k, v) for k, v in variables.items()}, units, []
+    if len(structs) > 1:
+        raise DataError(
+            f"{path}: {len(structs)} structs ({', '.join(sorted(structs))}); one experiment "
+            "per file is read — save one struct (or one variable per channel) per file"
+        )
+    ((struct, fields),) = structs.items()
+    out = {k: (f"{struct}.{k}", v) for k, v in fields.items() if k != UNITS_VAR}
+    notes = []
+    for k, v in variables.items():
+        if k == struct:
+            continue
+        if k in out:
+            notes.append(f"variable {k!r} ignored: struct {struct!r} has a field of that name")
+        else:
+            out[k] = (k, v)
+    return out, {**units, **_units(fields.get(UNITS_VAR))}, notes
+
+
+def _common_length(
+    columns: Mapping[str, tuple[np.ndarray | None, str | None]],
+    used: Callable[[str], bool],
+) -> int | None:
+    """The most frequent length of the vectors used (of all vectors if none is used)."""
+    lengths = {k: len(v) for k, (v, _) in columns.items() if v is not None and len(v) > 1}
+    if not lengths:
+        return None
+    pool = [n for k, n in lengths.items() if used(k)] or list(lengths.values())
+    return max(set(pool), key=pool.count)
+
+
 def decode_mat(path: str | Path, wanted: Callable[[str], bool] | None = None) -> RawLog:
     """Decode a MATLAB ``.mat`` file into named float64 columns (no mapping, no value checks).
 
@@ -128,10 +181,10 @@ def decode_mat(path: str | Path, wanted: Callable[[str], bool] | None = None) ->
     ----------
     path : path-like
         ``.mat`` file, v5 – v7.2 or v7.3 (HDF5): one variable per channel, or one struct
-        per experiment.
+        per experiment (with, optionally, scalar variables next to it).
     wanted : callable, optional
         ``wanted(name)`` tells whether a channel's values are needed; others are listed
-        without values. Default: every channel.
+        without values, and their lengths do not matter. Default: every channel.
 
     Returns
     -------
@@ -143,7 +196,8 @@ def decode_mat(path: str | Path, wanted: Callable[[str], bool] | None = None) ->
     ------
     DataError
         Missing or unreadable file, no numeric vector in it, several structs (which is the
-        experiment is ambiguous), or vectors of different lengths (each named).
+        experiment is ambiguous), or wanted vectors of different lengths (each named, with
+        the file).
     """
     path = check_input_file(path)
     if path.stat().st_size == 0:
@@ -156,45 +210,31 @@ def decode_mat(path: str | Path, wanted: Callable[[str], bool] | None = None) ->
     units = _units(data.get(UNITS_VAR))
     if meta and isinstance(meta.get("units"), dict):
         units = {**meta["units"], **units}
-    variables = {k: v for k, v in data.items() if k not in _RESERVED}
-    structs = {k: v for k, v in variables.items() if isinstance(v, Mapping)}
-    prefix = ""
-    if structs and not any(_vector(v)[0] is not None for v in variables.values()):
-        if len(structs) > 1:
-            raise DataError(
-                f"{path}: {len(structs)} structs ({', '.join(sorted(structs))}); one experiment "
-                "per file is read — save one struct (or one variable per channel) per file"
-            )
-        ((name, fields),) = structs.items()
-        variables, prefix = dict(fields), f"{name}."
-        units = {**units, **_units(fields.get(UNITS_VAR))}
-        variables.pop(UNITS_VAR, None)
-
-    columns: dict[str, tuple[np.ndarray | None, str | None]] = {
-        k: _vector(v) for k, v in variables.items()
-    }
-    lengths = [len(v) for v, _ in columns.values() if v is not None and len(v) > 1]
-    if not lengths:
+    variables, units, layout_notes = _layout(data, path, units)
+    used = wanted or (lambda name: True)
+    columns = {k: _vector(v) for k, (_, v) in variables.items()}
+    n = _common_length(columns, used)
+    if n is None:
         raise DataError(
             f"{path}: no numeric vector in the file ({version}); variables: "
-            f"{', '.join(map(repr, variables)) or 'none'}"
+            f"{', '.join(repr(label) for label, _ in variables.values()) or 'none'}"
         )
-    n = max(set(lengths), key=lengths.count)
     channels: list[RawChannel] = []
-    notes: list[str] = [f"MATLAB {version} file"]
+    notes: list[str] = [f"MATLAB {version} file", *layout_notes]
     problems: list[str] = []
     for name, (values, why) in columns.items():
-        where = f"variable {prefix + name!r}"
-        unit = units.get(name)
-        if values is not None and len(values) == 1:
+        where = f"variable {variables[name][0]!r}"
+        if values is not None and not used(name):
+            values, why = None, "not loaded"
+        elif values is not None and len(values) == 1:
             notes.append(f"{where} is a scalar ({values[0]:g}): used as a constant channel")
             values = np.full(n, values[0])
         elif values is not None and len(values) != n:
-            problems.append(f"{where}: {len(values)} samples where the other vectors have {n}")
+            problems.append(
+                f"{path}: {where}: {len(values)} samples where the other vectors have {n}"
+            )
             values, why = None, f"{len(values)} samples, not {n}"
-        if values is not None and wanted is not None and not wanted(name):
-            values, why = None, "not loaded"
-        channels.append(RawChannel(name, values, unit, where=where, problem=why))
+        channels.append(RawChannel(name, values, units.get(name), where=where, problem=why))
     if problems:
         raise DataError(f"{path}: cannot read the MATLAB file", problems)
     return RawLog(path, "mat", channels, meta=meta, notes=notes)
