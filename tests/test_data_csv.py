@@ -363,3 +363,23 @@ def test_load_collects_every_manifest_and_file_problem(tmp_path):
     assert "line 2 (data row 1) 'x'" in text
     assert "experiments[5]: experiment name 'fast_30Hz_A'" in text
     assert "experiments[6]: must be an object" in text
+
+
+def test_a_column_with_a_unit_problem_is_not_also_called_missing(tmp_path):
+    path = write_text(
+        tmp_path / "psi.csv", "time_s,current_mA,clutch_pressure_bar [psi]\n0,1,2\n0.001,1,2\n"
+    )
+    with pytest.raises(DataError) as info:
+        read_csv(path)
+    problems = info.value.problems
+    assert any("is in 'psi'" in p for p in problems)
+    assert not any("required column" in p for p in problems)
+
+
+def test_check_names_the_file_once_in_its_notes(tmp_path):
+    from clutchlab.data.check import check_path
+
+    path = write_text(tmp_path / "gap.csv", HEADER + "\n0,100,1\n0.001,,2\n0.002,300,3\n")
+    text = check_path(path, options=ReadOptions(interpolate_gaps=1)).table()
+    assert "gap.csv: column 'current_mA': interpolated" in text
+    assert "gap.csv: gap.csv" not in text

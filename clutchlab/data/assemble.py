@@ -237,6 +237,7 @@ def assemble(
 
     picked: dict[str, _Signal] = {}
     missing_mapped: dict[str, str] = {}
+    rejected: set[str] = set()  # found, but unusable (its problem is reported)
     claimed = _claimed(raw, cmap)
     for signal in CANONICAL_ORDER:
         spec = cmap.spec(signal) if cmap is not None else ChannelSpec(signal)
@@ -282,11 +283,13 @@ def assemble(
         where = f"{file}: {channel.where}" + (f" ({signal})" if channel.name != signal else "")
         if channel.values is None:
             problems.append(f"{where}: {channel.problem}")
+            rejected.add(signal)
             continue
         unit, unit_problems, unit_notes = _resolve_unit(spec, channel, signal, mapped, where)
         problems += unit_problems
         notes += unit_notes
         if unit is None:
+            rejected.add(signal)
             continue
         values = _convert(channel.values, unit, signal, spec)
         sources[signal] = _source_text(channel, unit, signal, spec)
@@ -305,7 +308,7 @@ def assemble(
     if raw.tabular:
         time_sig = picked.pop("time_s", None)
         if time_sig is None:
-            if "time_s" not in missing_mapped:
+            if "time_s" not in missing_mapped and "time_s" not in rejected:
                 problems.append(f"{file}: required column 'time_s' is missing")
             bases = []
         else:
@@ -347,9 +350,10 @@ def assemble(
         problems += check_values(sig.name, sig.values, sig.where, row_label)
 
     # -- 4. required signals ---------------------------------------------------------------
-    if "clutch_pressure_bar" not in picked and "clutch_pressure_bar" not in missing_mapped:
+    accounted = picked.keys() | missing_mapped.keys() | rejected  # absent, or said why
+    if "clutch_pressure_bar" not in accounted:
         problems.append(f"{file}: required column 'clutch_pressure_bar' is missing")
-    if not any(c in picked or c in missing_mapped for c in CURRENT_SIGNALS):
+    if not any(c in accounted for c in CURRENT_SIGNALS):
         problems.append(
             f"{file}: one of the columns {' / '.join(map(repr, CURRENT_SIGNALS))} is required; "
             "neither is present"

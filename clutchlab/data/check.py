@@ -92,7 +92,7 @@ class CheckResult:
         lines = ["  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)) for row in rows]
         lines.insert(1, "  ".join("-" * w for w in widths))
         problems = list(self.problems) + [p for r in self.reports for p in r.problems]
-        notes = [f"{r.file.name}: {n}" for r in self.reports for n in (*r.filled, *r.notes)]
+        notes = [_named(r.file, n) for r in self.reports for n in (*r.filled, *r.notes)]
         notes += [
             f"{r.file.name}: resampled onto a uniform grid at {r.rate_Hz:.6g} Hz ({r.resampled});"
             f" jitter up to {r.jitter_max_s * 1e6:.3g} µs"
@@ -106,6 +106,13 @@ class CheckResult:
         if problems:
             lines += [f"  - {p}" for p in problems]
         return "\n".join(lines)
+
+
+def _named(file: Path, text: str) -> str:
+    """``text`` led by the file's name, unless it already names the file."""
+    if text.startswith((f"{file}: ", f"{file.name}: ")):
+        return text
+    return f"{file.name}: {text}"
 
 
 def check_path(
