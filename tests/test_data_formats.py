@@ -303,3 +303,25 @@ def test_data_layer_does_not_import_physics():
         "assert not bad, bad\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_parquet_pandas_index_column_is_ignored(tmp_path):
+    """pandas writes an unnamed, non-range index as ``__index_level_0__``: not a channel."""
+    import pandas as pd
+
+    from clutchlab.data import read_log
+
+    n = 400
+    df = pd.DataFrame(
+        {
+            "time_s": np.arange(n) * 1e-3,
+            "current_mA": np.linspace(0.0, 500.0, n),
+            "clutch_pressure_bar": np.linspace(0.5, 5.0, n),
+        },
+        index=np.arange(n) * 2,  # not a RangeIndex from 0: stored as a column
+    )
+    path = tmp_path / "idx.parquet"
+    df.to_parquet(path)
+    trace, report = read_log(path)
+    np.testing.assert_array_equal(trace.get("current_mA"), df["current_mA"].to_numpy())
+    assert any("'__index_level_0__' ignored" in n for n in report.notes)

@@ -122,3 +122,18 @@ def test_a_name_under_several_sources_is_refused_with_the_sources_listed(tmp_pat
     trace, report = check_log(path, channel_map=cmap)
     assert trace is not None, report.problems
     assert np.allclose(trace.get("clutch_pressure_bar"), 6.0)
+
+
+def test_a_wrong_group_names_the_group_the_channel_is_in(mf4, tmp_path):
+    cmap = tmp_path / "group.toml"
+    cmap.write_text(
+        MAP.replace('unit = "mA" }', 'unit = "mA", group = 7 }').replace(
+            'channel = "ASAM.M.VIRTUAL.SCALAR.SWORD.PHYSICAL"',
+            'channel = "ASAM.M.VIRTUAL.SCALAR.SWORD.PHYSICAL", source = "no such device"',
+        )
+    )
+    _, report = check_log(mf4, channel_map=cmap)
+    text = "\n".join(report.problems)
+    assert "is not in group 7; it is in group" in text
+    assert "not logged from source 'no such device'" in text
+    assert "required column" not in text and "is required" not in text  # each said once

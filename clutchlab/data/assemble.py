@@ -264,6 +264,7 @@ def assemble(
                 f"{file}: channel {spec.channel!r} ({signal}) is not logged from source "
                 f"{spec.source!r}; its sources: {', '.join(map(repr, known)) or 'none written'}"
             )
+            rejected.add(signal)
             continue
         if not candidates:
             if mapped and signal not in cmap.defaults:
@@ -278,6 +279,7 @@ def assemble(
                 )
                 + "; set 'source' (or 'group') in the channel map"
             )
+            rejected.add(signal)
             continue
         channel = candidates[0]
         where = f"{file}: {channel.where}" + (f" ({signal})" if channel.name != signal else "")
@@ -297,10 +299,19 @@ def assemble(
 
     for signal, channel_name in missing_mapped.items():
         label = cmap.label if cmap is not None else ""
+        group = cmap.spec(signal).group if cmap is not None else None
+        elsewhere = sorted({c.base for c in raw.find(channel_name)} - {None})
+        if group is not None and elsewhere:
+            problems.append(
+                f"{file}: channel {channel_name!r}, mapped to {signal} by {label}, is not in "
+                f"group {group}; it is in group {', '.join(map(str, elsewhere))} (fix 'group' "
+                "in the channel map, or leave it out when the name is unique)"
+            )
+            continue
         available = ", ".join(repr(c.name) for c in raw.channels[:20])
         problems.append(
             f"{file}: channel {channel_name!r}, mapped to {signal} by {label}, not found; "
-            f"channels: {available}"
+            f"channels: {available}" + (" …" if len(raw.channels) > 20 else "")
         )
 
     # -- 2. time bases ---------------------------------------------------------------------

@@ -10,6 +10,7 @@ declare another unit for it); rows are named ``row N`` (1-based) in messages.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -69,6 +70,9 @@ def write_parquet(trace: Trace, path: str | Path) -> Path:
     pq.write_table(table, path)
     return path
 
+
+#: Name pandas gives an unnamed index it writes as a column.
+_PANDAS_INDEX = re.compile(r"__index_level_\d+__")
 
 #: Seconds per tick of an Arrow timestamp / duration unit.
 _TICK_S = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
@@ -165,11 +169,19 @@ def decode_parquet(path: str | Path, wanted: Callable[[str], bool] | None = None
     if dupes:
         raise DataError(f"{path}: duplicate column(s) {', '.join(map(repr, dupes))}")
 
+    # pandas stores an unnamed index it could not keep as metadata (not a RangeIndex) as
+    # ``__index_level_N__`` columns: row labels, not channels.
+    index = [i for i, n in enumerate(names) if _PANDAS_INDEX.fullmatch(n)]
+    if index:
+        table = table.drop_columns([names[i] for i in index])
+        field_meta = [m for i, m in enumerate(field_meta) if i not in index]
+        dropped = ", ".join(repr(names[i]) for i in index)
+        names = [n for i, n in enumerate(names) if i not in index]
     meta = None
     if META_KEY in schema_meta:
         meta = parse_embedded_meta(schema_meta[META_KEY])
     channels: list[RawChannel] = []
-    notes: list[str] = []
+    notes: list[str] = [f"pandas index column(s) {dropped} ignored"] if index else []
     for i, name in enumerate(names):
         unit = None
         if b"unit" in field_meta[i]:
