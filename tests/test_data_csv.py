@@ -383,3 +383,17 @@ def test_check_names_the_file_once_in_its_notes(tmp_path):
     text = check_path(path, options=ReadOptions(interpolate_gaps=1)).table()
     (line,) = [ln for ln in text.splitlines() if "interpolated" in ln]
     assert line.count("gap.csv") == 1, line
+
+
+def test_a_time_column_not_in_seconds_gets_a_note(tmp_path):
+    """Time logged in ms and mapped without a unit reads as a 1 Hz log: say so."""
+    from clutchlab.data import read_log
+
+    rows = "\n".join(f"{k},{100 * k},{0.1 * k}" for k in range(20))
+    path = write_text(tmp_path / "ms.csv", "Time,I,P\n" + rows + "\n")
+    cmap = {"signals": {"time_s": "Time", "current_mA": "I", "clutch_pressure_bar": "P"}}
+    _, report = read_log(path, channel_map=cmap)
+    assert any("sample rate 1 Hz: is the time in seconds?" in n for n in report.notes)
+    cmap["signals"]["time_s"] = {"channel": "Time", "unit": "ms"}
+    _, report = read_log(path, channel_map=cmap)
+    assert not any("is the time in seconds" in n for n in report.notes)

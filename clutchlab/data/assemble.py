@@ -50,6 +50,10 @@ class _Signal:
     base: int
 
 
+#: Sample rates (Hz) outside which a note asks whether the time column is in seconds.
+RATE_PLAUSIBLE_HZ = (10.0, 1e6)
+
+
 def _hint_names(names: list[str]) -> str:
     hints = []
     for name in names:
@@ -395,6 +399,12 @@ def assemble(
             problems.append(
                 f"{base_where[b]}: time gap(s) of missing samples before {shown} "
                 f"(interval {tm.interval_s:.6g} s; {hint})"
+            )
+    for b, tm in timings.items():
+        if not RATE_PLAUSIBLE_HZ[0] <= tm.rate_Hz <= RATE_PLAUSIBLE_HZ[1]:
+            notes.append(
+                f"{base_where[b]}: sample rate {tm.rate_Hz:.6g} Hz: is the time in seconds? A "
+                "time logged in ms, µs or ns needs its unit in the channel map (unit = 'ms')"
             )
     if options.rate_Hz is not None:
         reasons.append(f"rate_Hz = {options.rate_Hz:g} requested")
