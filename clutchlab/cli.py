@@ -304,13 +304,16 @@ def check_outputs(args: argparse.Namespace) -> None:
     A report folder (``evaluate``, ``demo``, ``discover``) may exist: what clutchlab wrote
     there is replaced and every other file is kept (see :mod:`clutchlab.data.output`).
     """
-    from .data.output import check_output
+    from .data.output import check_folder_kind, check_output
 
     if getattr(args, "json", None):
         check_output(args.json, kind="file", overwrite=True, what="--json")
         _check_json_replaceable(args)
     if getattr(args, "report_out", False) and getattr(args, "out", None):
         check_output(args.out, kind="folder", overwrite=True, what="--out")
+        from .validation.report import REPORT_FOLDER
+
+        check_folder_kind(args.out, REPORT_FOLDER)
 
 
 #: Arguments that name what a command writes, not what it reads.

@@ -160,7 +160,7 @@ def test_rename_fallback_killed_between_renames_is_recovered(small_ds, tmp_path)
     )
     assert res.returncode == -signal.SIGKILL, res.stderr
     assert not dst.exists()
-    write_folder_atomic(tmp_path / "dst", {"x.txt": b"new"}, overwrite=True)
+    write_folder_atomic(tmp_path / "dst", {"x.txt": b"new"}, overwrite=True, what="dataset folder")
     got = snapshot(dst)
     assert got["x.txt"] == b"new"
     assert {k: v for k, v in got.items() if k != "x.txt"} == {
@@ -361,3 +361,41 @@ def test_json_output_replaces_a_json_result_but_not_another_file(small_ds, tmp_p
     result.write_text('{"earlier": true}')
     assert _check_json(small_ds, result) == 0
     assert "earlier" not in result.read_text()
+
+
+# ---- a report never goes into a dataset folder clutchlab wrote (it would remove the data) ---
+
+
+def test_report_out_naming_the_input_dataset_is_refused_before_any_work(tmp_path):
+    from clutchlab.cli import main
+
+    run = run_stand(
+        StandConfig(
+            settings=(DitherSetting(50.0, "B"),),
+            ramps=(
+                RampProfile("fast", 1.0, 0.2),
+                RampProfile("medium", 1.5, 0.2),
+                RampProfile("slow", 2.0, 0.2),
+            ),
+        ),
+        progress=False,
+    )
+    ds = save_dataset(run.dataset, tmp_path / "ds")
+    before = snapshot(ds)
+    assert main(["evaluate", str(ds), "--out", str(ds), "--variants", "physics_default"]) == 2
+    assert snapshot(ds) == before
+
+
+def test_a_folder_of_another_kind_is_not_rewritten_legacy_record_included(tmp_path):
+    folder = tmp_path / "ds"
+    write_folder_atomic(folder, {"manifest.json": b"{}", "a.csv": b"1"}, what="dataset folder")
+    with pytest.raises(OutputError, match="holds a dataset folder clutchlab wrote"):
+        write_folder_atomic(folder, {"report.md": b"# r"}, overwrite=True, what="report folder")
+    record = json.loads((folder / OWNED_NAME).read_text())
+    del record["kind"]  # written before the kind was recorded
+    (folder / OWNED_NAME).write_text(json.dumps(record))
+    with pytest.raises(OutputError, match="holds a dataset folder"):
+        write_folder_atomic(folder, {"report.md": b"# r"}, overwrite=True, what="report folder")
+    assert sorted(p.name for p in folder.iterdir()) == [OWNED_NAME, "a.csv", "manifest.json"]
+    write_folder_atomic(folder, {"manifest.json": b"{}"}, overwrite=True, what="dataset folder")
+    assert not (folder / "a.csv").exists()  # the same kind still replaces its stale files

@@ -41,6 +41,7 @@ from ..errors import OutputError
 __all__ = [
     "OWNED_NAME",
     "atomic_file_writer",
+    "check_folder_kind",
     "check_output",
     "owned_files",
     "write_file_atomic",
@@ -227,17 +228,32 @@ def atomic_file_writer(write_to: Callable[..., Any]) -> Callable[..., Path]:
 
 def owned_files(folder: str | Path) -> set[str]:
     """The files (relative POSIX paths) clutchlab recorded as written in ``folder``."""
+    return _ownership(folder)[0]
+
+
+def _ownership(folder: str | Path) -> tuple[set[str], str | None]:
+    """The files clutchlab recorded as written in ``folder``, and what it wrote there.
+
+    The kind is the ``what`` of :func:`write_folder_atomic` (``"dataset folder"``, ``"report
+    folder"`` …); records written before it was kept are recognized by their files (a
+    ``manifest.json``: a dataset; a ``report.html`` or ``report.md``: a report), else None.
+    """
     record = Path(folder) / OWNED_NAME
     if not record.is_file():
-        return set()
+        return set(), None
     try:
         doc = json.loads(record.read_text(encoding="utf-8"))
         files = doc["files"]
         if not isinstance(files, list) or not all(isinstance(f, str) for f in files):
             raise TypeError("files is not a list of names")
     except (OSError, ValueError, KeyError, TypeError):
-        return set()  # an unreadable record owns nothing: everything is kept
-    return {f for f in files if _safe_relative(f)}
+        return set(), None  # an unreadable record owns nothing: everything is kept
+    kind = doc.get("kind") if isinstance(doc.get("kind"), str) else None
+    if kind is None and "manifest.json" in files:
+        kind = "dataset folder"
+    elif kind is None and {"report.html", "report.md"} & set(files):
+        kind = "report folder"
+    return {f for f in files if _safe_relative(f)}, kind
 
 
 def _safe_relative(name: str) -> bool:
@@ -321,6 +337,26 @@ def _recover(path: Path) -> None:
             return
 
 
+def check_folder_kind(path: str | Path, what: str) -> None:
+    """Refuse to write a ``what`` into a folder that holds another kind of clutchlab output.
+
+    A folder clutchlab wrote records what it is (:func:`write_folder_atomic`'s ``what``).
+    Writing another kind there (a report into a dataset folder) would count the dataset's
+    files as the report's stale files and remove them; so it is refused.
+
+    Raises
+    ------
+    OutputError
+        Naming the folder, what it holds and how many files.
+    """
+    owned, kind = _ownership(path)
+    if kind is not None and kind != what and owned:
+        raise OutputError(
+            f"{what} {path}: holds a {kind} clutchlab wrote ({len(owned)} files); writing a "
+            f"{what} there would replace it; choose another folder"
+        )
+
+
 def write_folder_atomic(
     path: str | Path,
     files: Mapping[str, Content],
@@ -363,6 +399,7 @@ def write_folder_atomic(
     exists = path.is_dir()
     keep: list[str] = []
     if exists:
+        check_folder_kind(path, what)
         owned = owned_files(path)
         keep = [n for n in _tree(path) if n not in owned]
         clash = sorted(k for k in keep if _clashes(k, set(files)))
@@ -385,7 +422,7 @@ def write_folder_atomic(
             target = tmp / name
             target.parent.mkdir(parents=True, exist_ok=True)
             _write_content(target, content)
-        record = {"written_by": "clutchlab", "files": sorted(files)}
+        record = {"written_by": "clutchlab", "kind": what, "files": sorted(files)}
         (tmp / OWNED_NAME).write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
         if exists:
             _carry_over(path, tmp, keep)

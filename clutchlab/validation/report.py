@@ -38,6 +38,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "METRIC_LABELS",
+    "REPORT_FOLDER",
     "ReportFiles",
     "fmt",
     "jsonable",
@@ -48,6 +49,9 @@ __all__ = [
     "write_json",
     "write_report",
 ]
+
+#: What a report folder is called in messages and in its ownership record.
+REPORT_FOLDER = "report folder"
 
 #: Column heading and unit of each metric key.
 METRIC_LABELS: dict[str, tuple[str, str]] = {
@@ -834,7 +838,7 @@ def write_report(ev: Evaluation, out: str | Path, interactive: bool = True) -> R
     # One atomic swap of the whole folder: a kill leaves the old report or the new one; a
     # user's file in the way is refused, every other file (cached stand data) is kept, and
     # figures of an earlier report that this one does not draw go.
-    write_folder_atomic(out, files, overwrite=True, what="report folder")
+    write_folder_atomic(out, files, overwrite=True, what=REPORT_FOLDER)
     return ReportFiles(
         folder=out,
         html=out / "report.html",

@@ -13,6 +13,7 @@ from matplotlib.figure import Figure
 
 from ..._plotly import MARKER_SCRIPT, figure_div, plotlyjs_script
 from ...data.output import write_folder_atomic
+from ..report import REPORT_FOLDER
 from .alternatives import alternative_note
 from .interactive import iplot_diagnostics, iplot_evidence, iplot_residuals
 from .result import DiscoveryResult, IterationRecord, ModelState
@@ -296,5 +297,5 @@ def write_report(
     files["report.html"] = page.encode("utf-8")
     files["discovery.json"] = (result.to_json() + "\n").encode("utf-8")
     # One atomic step: a kill leaves the old report or the new one, a user's file is kept.
-    write_folder_atomic(out, files, overwrite=True, what="report folder")
+    write_folder_atomic(out, files, overwrite=True, what=REPORT_FOLDER)
     return out / "report.html"
