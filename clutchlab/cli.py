@@ -299,21 +299,36 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def check_outputs(args: argparse.Namespace) -> None:
-    """Check ``--json`` and a report command's ``--out`` before any work is done.
+    """Check every output a command names before any work is done.
 
-    A report folder (``evaluate``, ``demo``, ``discover``) may exist: what clutchlab wrote
-    there is replaced and every other file is kept (see :mod:`clutchlab.data.output`).
+    - ``--json``, and a command's single-file ``--out`` (``file_out``: the kind of file it
+      writes, e.g. ``"json"``): replaced without ``--overwrite`` when they hold an earlier
+      result, so an existing file there must be of that kind and not one of the inputs
+      (:func:`_check_replaceable`);
+    - a model folder (``folder_out``, ``train``): a folder, and its ``model.json`` as above;
+    - a report folder (``evaluate``, ``demo``, ``discover``) may exist: what clutchlab wrote
+      there is replaced and every other file is kept (see :mod:`clutchlab.data.output`); a
+      folder holding another kind of clutchlab output (a dataset) is refused.
     """
     from .data.output import check_folder_kind, check_output
 
     if getattr(args, "json", None):
         check_output(args.json, kind="file", overwrite=True, what="--json")
-        _check_json_replaceable(args)
-    if getattr(args, "report_out", False) and getattr(args, "out", None):
-        check_output(args.out, kind="folder", overwrite=True, what="--out")
+        _check_replaceable(args.json, args, "--json", "json")
+    out = getattr(args, "out", None)
+    if not out:
+        return
+    if getattr(args, "file_out", None):
+        check_output(out, kind="file", overwrite=True, what="--out")
+        _check_replaceable(out, args, "--out", args.file_out)
+    if getattr(args, "folder_out", False):
+        check_output(out, kind="folder", overwrite=True, what="--out")
+        _check_replaceable(Path(out) / "model.json", args, "--out", "json")
+    if getattr(args, "report_out", False):
+        check_output(out, kind="folder", overwrite=True, what="--out")
         from .validation.report import REPORT_FOLDER
 
-        check_folder_kind(args.out, REPORT_FOLDER)
+        check_folder_kind(out, REPORT_FOLDER)
 
 
 #: Arguments that name what a command writes, not what it reads.
@@ -334,17 +349,35 @@ def _input_paths(args: argparse.Namespace) -> list[Path]:
     return found
 
 
-def _check_json_replaceable(args: argparse.Namespace) -> None:
-    """Refuse a ``--json`` file that exists and is not a JSON document, or is an input.
+def _is_json(path: Path) -> bool:
+    try:
+        json.loads(path.read_bytes())
+    except (OSError, ValueError):
+        return False
+    return True
 
-    ``--json`` replaces an earlier result of the same command without ``--overwrite``; it
-    must never replace a user's log, map or manifest. So an existing file there is replaced
-    only when it parses as JSON and is neither one of the command's inputs nor the manifest of
-    an input dataset folder.
+
+def _is_zip(path: Path) -> bool:
+    import zipfile
+
+    return zipfile.is_zipfile(path)
+
+
+#: The kinds of single-file output a command replaces: description, and the test of a file.
+_REPLACEABLE = {"json": ("a JSON document", _is_json), "fmu": ("an FMU (zip archive)", _is_zip)}
+
+
+def _check_replaceable(path: str | Path, args: argparse.Namespace, flag: str, kind: str) -> None:
+    """Refuse an output file that exists and is not of the ``kind`` written, or is an input.
+
+    ``--json`` and a fitted model's ``--out`` replace an earlier result of the same command
+    without ``--overwrite``; they must never replace a user's log, map or manifest. So an
+    existing file there is replaced only when it is of that kind and is neither one of the
+    command's inputs nor the manifest of an input dataset folder.
     """
     from .data.manifest import MANIFEST_NAME
 
-    target = Path(args.json)
+    target = Path(path)
     if not target.is_file():
         return
     for source in _input_paths(args):
@@ -354,16 +387,15 @@ def _check_json_replaceable(args: argparse.Namespace) -> None:
             same = inside.exists() and os.path.samefile(inside, target)
         if same:
             raise OutputError(
-                f"--json {target}: is {'the manifest of ' if source.is_dir() else ''}"
+                f"{flag} {target}: is {'the manifest of ' if source.is_dir() else ''}"
                 f"this command's input {source}; write the result elsewhere"
             )
-    try:
-        json.loads(target.read_bytes())
-    except (OSError, ValueError):
+    description, looks_right = _REPLACEABLE[kind]
+    if not looks_right(target):
         raise OutputError(
-            f"--json {target}: exists and is not a JSON document, so clutchlab did not write "
+            f"{flag} {target}: exists and is not {description}, so clutchlab did not write "
             "it; choose another name (or remove the file)"
-        ) from None
+        )
 
 
 def write_json_output(path: str | Path, text: str) -> Path:

@@ -211,7 +211,7 @@ def register(sub) -> None:
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", help="also write the training metrics here")
-    p.set_defaults(func=_cmd_train)
+    p.set_defaults(func=_cmd_train, folder_out=True)
 
 
 def _latch_decision(model) -> str | None:

@@ -399,3 +399,24 @@ def test_a_folder_of_another_kind_is_not_rewritten_legacy_record_included(tmp_pa
     assert sorted(p.name for p in folder.iterdir()) == [OWNED_NAME, "a.csv", "manifest.json"]
     write_folder_atomic(folder, {"manifest.json": b"{}"}, overwrite=True, what="dataset folder")
     assert not (folder / "a.csv").exists()  # the same kind still replaces its stale files
+
+
+def test_model_outputs_never_replace_an_input_or_a_foreign_file(small_ds, tmp_path, capsys):
+    """fit-physics --out / train --out are checked before any work (a fit takes minutes)."""
+    import shutil
+
+    from clutchlab.cli import main
+
+    ds = tmp_path / "ds"
+    shutil.copytree(small_ds, ds)
+    log = next(p for p in ds.iterdir() if p.suffix == ".csv")
+    before = snapshot(ds)
+    assert main(["fit-physics", str(ds), "--out", str(ds / "manifest.json")]) == 2
+    assert "is the manifest of this command's input" in capsys.readouterr().err
+    assert main(["fit-physics", str(ds), "--out", str(log)]) == 2
+    assert "is not a JSON document" in capsys.readouterr().err
+    assert main(["fit-physics", str(ds), "--out", str(tmp_path)]) == 2
+    assert "is a folder" in capsys.readouterr().err
+    assert main(["train", str(ds), "--variant", "gp_didt", "--out", str(log)]) == 2
+    assert "exists and is not a folder" in capsys.readouterr().err
+    assert snapshot(ds) == before
