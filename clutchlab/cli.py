@@ -415,6 +415,10 @@ def main(argv: list[str] | None = None) -> int:
         command = " ".join(filter(None, [args.command, getattr(args, "data_command", None)]))
         print(f"clutchlab {command}: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        command = " ".join(filter(None, [args.command, getattr(args, "data_command", None)]))
+        print(f"\nclutchlab {command}: interrupted (Ctrl-C)", file=sys.stderr)
+        return 130  # 128 + SIGINT, what a shell reports for an interrupted tool
     except BrokenPipeError:
         # The reader of our output went away (``clutchlab data check DS | head``): stop
         # quietly, as other command-line tools do, without a traceback at exit either.

@@ -483,3 +483,26 @@ def test_fit_physics_says_which_experiments_it_resamples():
     done = fit_rate_note(data, FitSettings(train_ramps=("fast",), fit_rate_Hz=1000.0))
     assert "fitted resampled to 1000 Hz" in done
     assert fit_rate_note(Dataset([at_1k]), FitSettings(train_ramps=("fast",))) == ""
+
+
+def test_ctrl_c_during_a_solve_interrupts_the_fit(small_data, monkeypatch):
+    """A SIGINT in the middle of a solve stops it and raises KeyboardInterrupt, instead of
+    ending as a solve stopped at a limit (CasADi turned the callback's KeyboardInterrupt
+    into NonIpopt_Exception_Thrown, and the best iterate was handed back as the model)."""
+    import os
+    import signal
+
+    calls = {"n": 0}
+    evaluate = fit_problem.FitProblem.evaluate
+
+    def evaluate_then_ctrl_c(self, z, jacobian):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            os.kill(os.getpid(), signal.SIGINT)
+        return evaluate(self, z, jacobian)
+
+    monkeypatch.setattr(fit_problem.FitProblem, "evaluate", evaluate_then_ctrl_c)
+    with pytest.raises(KeyboardInterrupt):
+        _fit(small_data, staged_start=False, max_iter=50)
+    assert 3 <= calls["n"] < 12  # it stopped at the next iteration, not at the limit
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler

@@ -9,6 +9,8 @@ dropped, as in constrained Gauss–Newton for multiple shooting).
 from __future__ import annotations
 
 import math
+import signal
+import threading
 import time
 
 import casadi as ca
@@ -25,6 +27,7 @@ __all__ = [
     "BestIterate",
     "CostPlateau",
     "IterationDeadline",
+    "SigintLatch",
     "solve_ipopt",
 ]
 
@@ -212,6 +215,36 @@ class CostPlateau:
         return self.stopped
 
 
+class SigintLatch:
+    """Ctrl-C during a solve as a flag: the solver stops at its next iteration, then the
+    caller raises :class:`KeyboardInterrupt`.
+
+    IPOPT calls back into Python; a ``KeyboardInterrupt`` raised inside a callback is caught
+    by CasADi and reported as ``NonIpopt_Exception_Thrown``, which a fit would take for a
+    stop at a limit and hand back as its result. A second Ctrl-C interrupts at once. Only
+    the main thread can hold signal handlers; elsewhere this does nothing.
+    """
+
+    def __init__(self):
+        self.hit = False
+        self._previous = None
+
+    def _on_sigint(self, signum, frame):
+        if self.hit:
+            raise KeyboardInterrupt
+        self.hit = True
+
+    def __enter__(self) -> SigintLatch:
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGINT, self._on_sigint)
+        return self
+
+    def __exit__(self, *exc) -> bool:
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+        return False
+
+
 class _StopCallback(ca.Callback):
     """IPOPT's iteration callback around an :class:`IterationDeadline` and an optional
     :class:`CostPlateau` (1 = stop); it also hands every iterate to a
@@ -224,10 +257,11 @@ class _StopCallback(ca.Callback):
         deadline: IterationDeadline,
         best: BestIterate,
         plateau: CostPlateau | None = None,
+        latch: SigintLatch | None = None,
     ):
         ca.Callback.__init__(self)
         self.n_x, self.n_g, self.deadline, self.best = n_x, n_g, deadline, best
-        self.plateau = plateau
+        self.plateau, self.latch = plateau, latch
         self.construct("iteration_deadline", {})
 
     def get_n_in(self):
@@ -253,7 +287,8 @@ class _StopCallback(ca.Callback):
         self.best.offer(f, np.asarray(arg[names.index("x")]).ravel())
         late = self.deadline.should_stop()
         flat = self.plateau is not None and self.plateau.should_stop(f)
-        return [1 if late or flat else 0]
+        interrupted = self.latch is not None and self.latch.hit
+        return [1 if late or flat or interrupted else 0]
 
 
 def solve_ipopt(
@@ -282,6 +317,9 @@ def solve_ipopt(
     lie within ``rtol`` (relative) of each other (:class:`CostPlateau`;
     reported as ``Cost_Plateau``). Single shooting only: a multiple-shooting iterate is
     not a model, so its cost alone says nothing about convergence.
+
+    Ctrl-C stops the solver at its next iteration and raises :class:`KeyboardInterrupt`
+    (:class:`SigintLatch`), instead of ending as a solve stopped at a limit.
 
     ``reg`` (bar² per unit of z²) is a small Levenberg damping added to the Gauss–Newton
     Hessian so that directions the residuals do not see (the fast states of a
@@ -318,7 +356,8 @@ def solve_ipopt(
     deadline = IterationDeadline(time.perf_counter() + time_limit_s)
     best = BestIterate()
     flat = CostPlateau(*plateau) if plateau is not None and not problem.n_g else None
-    stop = _StopCallback(problem.n_z, problem.n_g, deadline, best, flat)
+    latch = SigintLatch()
+    stop = _StopCallback(problem.n_z, problem.n_g, deadline, best, flat, latch)
     keep.append(stop)
     opts = {
         "hess_lag": hess,
@@ -341,7 +380,10 @@ def solve_ipopt(
     args = {"x0": z0, "lbx": lbz, "ubx": ubz}
     if problem.n_g:
         args |= {"lbg": 0.0, "ubg": 0.0}
-    sol = solver(**args)
+    with latch:
+        sol = solver(**args)
+    if latch.hit:
+        raise KeyboardInterrupt("the fit was interrupted (Ctrl-C)")
     stats = solver.stats()
     status = stats.get("return_status", "?")
     if status == _USER_STOP and deadline.stopped:
