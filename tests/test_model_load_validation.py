@@ -395,3 +395,20 @@ def test_gp_spec_refuses_values_an_fmu_cannot_start_with():
     bad = {**good, "x_scale": np.array([1.0, 0.0]), "weights": np.array([1.0, np.nan, 1.0])}
     with pytest.raises(ModelError, match=r"weights must be finite.*x_scale must be finite and > 0"):
         GPSpec(**bad)
+
+
+def test_fit_result_without_a_value_for_a_fitted_parameter_is_refused(tmp_path):
+    """Without the check the datasheet value stood in silently (export-fmu), or evaluate
+    crashed with a KeyError after scoring."""
+    from fmu_support import fit_result
+
+    from clutchlab.physics.fit import FitResult
+
+    doc = json.loads(fit_result(("sensor_lag",)).to_json())
+    name = doc["free"][0]
+    del doc["values"][name]
+    path = tmp_path / "fit.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ModelFileError) as info:
+        FitResult.from_json(path)
+    assert info.value.problems == [f"values: no value for the fitted parameter(s) [{name!r}]"]

@@ -215,8 +215,9 @@ def check_fit_document(doc, source: str = "fit result") -> None:
         Listing every problem, each naming its key: missing, unknown or mistyped keys;
         unknown effects; unknown parameter names (in ``values``, ``units``, ``free``,
         ``std_errors``, ``unidentifiable``, ``per_experiment_values``); parameter values
-        not finite or outside their bounds (engineering units); units other than the
-        model's; numbers that are not numbers.
+        not finite or outside their bounds (engineering units); a fitted (``free``)
+        parameter without a value; units other than the model's; numbers that are not
+        numbers.
     """
     if not isinstance(doc, dict):
         raise FitResultError(
@@ -283,6 +284,16 @@ def check_fit_document(doc, source: str = "fit result") -> None:
             bad = [n for n in ok.get(key, []) if n not in specs]
             if bad:
                 problems.append(f"{key}: unknown parameter(s) {bad!r}")
+        per_exp = [v for v in ok.get("per_experiment_values", {}).values() if isinstance(v, dict)]
+        lost = [
+            n
+            for n in ok.get("free", [])
+            if n in specs
+            and n not in ok.get("values", {})
+            and not (per_exp and all(n in v for v in per_exp))
+        ]
+        if lost and "values" in ok:  # the datasheet value would stand in for the fitted one
+            problems.append(f"values: no value for the fitted parameter(s) {lost!r}")
         for name, se in ok.get("std_errors", {}).items():
             if name not in specs:
                 problems.append(f"std_errors.{name}: unknown parameter")
