@@ -405,18 +405,39 @@ def write_json_output(path: str | Path, text: str) -> Path:
     return write_file_atomic(path, text.rstrip("\n").encode("utf-8") + b"\n", overwrite=True)
 
 
+def _clean_warnings(command: str) -> None:
+    """Show clutchlab's own warnings as one line for the user, not as source locations.
+
+    Python's default shows ``path/cli_fit.py:107: FitWarning: ...`` and the source line;
+    a warning of another library keeps that form (it helps report it upstream).
+    """
+    import warnings
+
+    from .errors import FitWarning
+
+    default = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, FitWarning) or category.__module__.startswith("clutchlab"):
+            print(f"clutchlab {command}: warning: {message}", file=file or sys.stderr)
+        else:
+            default(message, category, filename, lineno, file, line)
+
+    warnings.showwarning = show
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``clutchlab`` console script."""
     args = build_parser().parse_args(argv)
+    command = " ".join(filter(None, [args.command, getattr(args, "data_command", None)]))
+    _clean_warnings(command)
     try:
         check_outputs(args)
         return int(args.func(args) or 0)
     except ClutchlabError as exc:
-        command = " ".join(filter(None, [args.command, getattr(args, "data_command", None)]))
         print(f"clutchlab {command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        command = " ".join(filter(None, [args.command, getattr(args, "data_command", None)]))
         print(f"\nclutchlab {command}: interrupted (Ctrl-C)", file=sys.stderr)
         return 130  # 128 + SIGINT, what a shell reports for an interrupted tool
     except BrokenPipeError:

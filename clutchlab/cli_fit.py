@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from pathlib import Path
 
 from .budgets import FIT_BUDGET_S
@@ -74,7 +75,7 @@ def fit_rate_note(dataset, settings) -> str:
 
 def _cmd_fit_physics(args: argparse.Namespace) -> int:
     from .data import load_dataset
-    from .errors import FitError
+    from .errors import FitError, FitWarning
     from .physics import CircuitModel
     from .physics.fit import FitSettings, PhysicsFitter
 
@@ -104,7 +105,10 @@ def _cmd_fit_physics(args: argparse.Namespace) -> int:
     fitter = PhysicsFitter(model, settings)
     out = Path(args.out)
     try:
-        fitter.fit(dataset)
+        with warnings.catch_warnings():
+            # said below, with where the model went and what to do ("NOT CONVERGED")
+            warnings.filterwarnings("ignore", "the fit stopped at a limit", FitWarning)
+            fitter.fit(dataset)
     except FitError as exc:
         # A fit that ran and failed (--strict and stopped at a limit, or nothing improved
         # on the start) carries its best iterate and exits 1, as documented; bad input

@@ -337,8 +337,25 @@ def test_a_fit_that_never_improved_is_an_error(small_data, monkeypatch):
         return {"cost": np.inf, "z": None, "stats": None}
 
     monkeypatch.setattr(PhysicsFitter, "_solve_starts", staticmethod(nothing))
-    with pytest.raises(FitError, match="did not improve on its start"):
+    with pytest.raises(FitError, match="did not improve on its start") as info:
         _fit(small_data)
+    # a message for the user: no "best cost inf", no Python attribute names
+    assert "no iteration finished" in str(info.value)
+    assert "inf" not in str(info.value) and "exc.result" not in str(info.value)
+    assert info.value.result is not None
+
+
+def test_the_cli_shows_clutchlab_warnings_on_one_line(monkeypatch, capsys):
+    import warnings
+
+    from clutchlab import cli
+
+    monkeypatch.setattr(warnings, "showwarning", warnings.showwarning)
+    cli._clean_warnings("evaluate")
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        warnings.warn("the fit stopped at a limit", FitWarning, stacklevel=1)
+    assert capsys.readouterr().err == "clutchlab evaluate: warning: the fit stopped at a limit\n"
 
 
 def test_multiple_shooting_reaches_the_single_shooting_optimum(small_data):

@@ -347,9 +347,13 @@ class PhysicsFitter:
             wall = time.perf_counter() - t_start
             if settings.strict or not improved:
                 why = "" if improved else " and did not improve on its start"
+                best_text = (
+                    f"best cost {best['cost']:.6g}"
+                    if math.isfinite(best["cost"])
+                    else "no iteration finished, so the start is the best iterate"
+                )
                 err = FitError(
-                    f"the fit did not converge ({status}){why} after {wall:.1f} s; best "
-                    f"cost {best['cost']:.6g} kept in exc.result"
+                    f"the fit did not converge ({status}){why} after {wall:.1f} s; {best_text}"
                 )
                 err.result = result
                 raise err
