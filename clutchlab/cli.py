@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from . import __version__
+from .cli_types import nonnegative_int
 from .errors import ClutchlabError, OutputError
 
 if TYPE_CHECKING:
@@ -35,6 +36,10 @@ def _list_plants() -> int:
     return 0
 
 
+#: Longest ramp ``clutchlab stand --ramps`` accepts, s (each of up and down; slow is 40).
+MAX_RAMP_S = 3600.0
+
+
 def _ramps(text: str | None):
     """``--ramps fast=2.5,r5=5,...`` as RampProfiles (the stand's three when None)."""
     from .physics.stand.scenarios import RAMPS, RampProfile
@@ -48,8 +53,8 @@ def _ramps(text: str | None):
             seconds = float(value) if sep else float("nan")
         except ValueError:
             seconds = float("nan")
-        if not label or not seconds > 0:
-            problems.append(f"{item!r} (want LABEL=SECONDS with SECONDS > 0)")
+        if not label or not 0 < seconds <= MAX_RAMP_S:
+            problems.append(f"{item!r} (want LABEL=SECONDS with 0 < SECONDS <= {MAX_RAMP_S:g})")
         else:
             out.append(RampProfile(label.strip(), seconds))
     labels = [r.label for r in out]
@@ -231,7 +236,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--seed",
-        type=int,
+        type=nonnegative_int,
         default=0,
         help="seed of noise and wander (and, for a zoo plant, of its as-built unit)",
     )

@@ -6,6 +6,8 @@ import argparse
 import shlex
 import sys
 
+from .cli_types import positive_float
+
 __all__ = ["register"]
 
 
@@ -86,7 +88,9 @@ def register(sub) -> None:
         "--alpha", type=float, default=0.01, help="family-wise significance level (0.01)"
     )
     p.add_argument("--max-iter", type=int, default=50, help="solver iterations per fit (50)")
-    p.add_argument("--time-limit", type=float, default=900.0, help="wall limit per fit (s)")
+    p.add_argument(
+        "--time-limit", type=positive_float, default=900.0, help="wall limit per fit (s)"
+    )
     p.add_argument(
         "--substeps",
         type=int,

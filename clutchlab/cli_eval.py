@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from .budgets import FIT_BUDGET_S
+from .cli_types import positive_float
 
 __all__ = ["command_line", "register", "run_demo_command"]
 
@@ -132,7 +133,7 @@ def register(sub) -> None:
     p.add_argument("--effects", default="", help="effects of the fitted physics model")
     p.add_argument(
         "--fit-time-limit",
-        type=float,
+        type=positive_float,
         default=FIT_BUDGET_S,
         help=f"physics fit wall limit, s ({FIT_BUDGET_S:g}, the fit budget; the best iterate by "
         "then is the "
@@ -167,7 +168,7 @@ def register(sub) -> None:
     )
     p.add_argument(
         "--fmu-timeout",
-        type=float,
+        type=positive_float,
         default=600.0,
         help="wall-time limit of one experiment's FMU simulation, s (600)",
     )

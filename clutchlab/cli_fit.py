@@ -8,6 +8,7 @@ import warnings
 from pathlib import Path
 
 from .budgets import FIT_BUDGET_S
+from .cli_types import positive_float
 
 __all__ = ["register"]
 
@@ -165,7 +166,7 @@ def register(sub) -> None:
     )
     p.add_argument(
         "--time-limit",
-        type=float,
+        type=positive_float,
         default=FIT_BUDGET_S,
         help=f"wall limit of the whole fit (s; default {FIT_BUDGET_S:g}, the fit budget); the "
         "best iterate "

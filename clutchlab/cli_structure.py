@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from .cli_types import positive_float
+
 __all__ = ["register"]
 
 
@@ -63,7 +65,7 @@ def register(sub) -> None:
     p.add_argument("--effects", default="", help="library effects on in every candidate")
     p.add_argument("--train", default="fast,slow", help="training ramp labels (fast,slow)")
     p.add_argument(
-        "--time-limit", type=float, default=900.0, help="wall limit per candidate fit (s)"
+        "--time-limit", type=positive_float, default=900.0, help="wall limit per candidate fit (s)"
     )
     p.add_argument("--out", help="write the chosen structure's fitted model (JSON) here")
     p.add_argument("--json", help="write the choice with every candidate's training score here")
