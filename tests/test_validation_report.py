@@ -396,3 +396,18 @@ def test_the_report_says_where_each_variants_error_lies(report):
     html = (report.folder / "report.html").read_text(encoding="utf-8")
     assert "<h3>Where the error lies</h3>" in html
     assert "% of the samples" in md and "latch window: within 0.15 s" in md
+
+
+def test_the_report_gives_the_true_reason_for_a_missing_classifier_figure(report, evaluation):
+    """It said the installation provides no comparison whenever the figure was missing."""
+    md = report.markdown.read_text(encoding="utf-8")
+    assert (
+        "figure `classifier_comparison` not drawn: the comparison was not run: no "
+        "paper-pipeline (ML) variant was evaluated" in md
+    )
+    failed = dataclasses.replace(
+        evaluation, failed={**evaluation.failed, "classifier_comparison": "ValueError: boom"}
+    )
+    from clutchlab.validation.figures import report_figures
+
+    assert "failed (ValueError: boom)" in report_figures(failed)[1]["classifier_comparison"]

@@ -492,8 +492,15 @@ def evaluate(
         t0 = time.perf_counter()
         ev.curves = _band_curves(ev, progress)
         ev.timings["hysteresis_bands_s"] = time.perf_counter() - t0
-    if classifiers is None:
+    chosen = classifiers is None
+    if chosen:
         classifiers = any(ev.specs[n].layer == "residual_ml" for n in ev.scores)
+    if not classifiers:
+        ev.extra["classifier_comparison_skipped"] = (
+            "no paper-pipeline (ML) variant was evaluated"
+            if chosen
+            else "not asked for (classifiers=False; --no-classifiers)"
+        )
     if classifiers:
         t0 = time.perf_counter()
         try:

@@ -325,6 +325,16 @@ def plot_discovery_residuals(ev: Evaluation) -> Figure | None:
     return None if it is None else plot_residuals(it)
 
 
+def _classifier_comparison_missing(ev: Evaluation) -> str:
+    """Why the evaluation holds no latch-classifier comparison."""
+    if "classifier_comparison" in ev.failed:
+        return f"the comparison failed ({ev.failed['classifier_comparison']})"
+    skipped = ev.extra.get("classifier_comparison_skipped")
+    if skipped:
+        return f"the comparison was not run: {skipped}"
+    return "clutchlab.residual_ml provides no classifier comparison in this installation"
+
+
 def report_figures(ev: Evaluation) -> tuple[list[FigureSpec], dict[str, str]]:
     """Every report figure that the evaluation can draw, and why the others are missing.
 
@@ -341,7 +351,7 @@ def report_figures(ev: Evaluation) -> tuple[list[FigureSpec], dict[str, str]]:
             "Accuracy of the six latch classifiers, leave-one-experiment-out on the training "
             "experiments, and their decision regions.",
             plot_classifier_comparison,
-            "clutchlab.residual_ml provides no classifier comparison in this installation",
+            _classifier_comparison_missing(ev),
         ),
         (
             "prediction_vs_time",
