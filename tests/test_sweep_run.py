@@ -184,3 +184,36 @@ def test_sweep_killed_midway_and_restarted_has_every_point_once(tmp_path):
 @pytest.mark.slow
 def test_sweep_with_worker_processes_killed_and_restarted(tmp_path):
     _kill_midway_then_restart(tmp_path, workers=2, n=60)
+
+
+def test_one_level_variable_gives_an_undefined_sensitivity_without_numpy_warnings(tmp_path):
+    """Issue 17: ``values = [12.0]`` printed 6 RuntimeWarnings and wrote n = 0 for 1 ok point."""
+    import warnings
+
+    doc = dict(SHORT) | {
+        "name": "one_level",
+        "sampling": {"method": "grid"},
+        "variables": [{"name": "reg_k", "values": [12.0]}],
+    }
+    spec = SweepSpec.from_dict(doc)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        res = run_sweep(spec, tmp_path / "one.parquet", workers=1, progress=False)
+    assert res.n_failed == 0 and len(res.table) == 1
+    sens = pd.read_csv(tmp_path / "one.parquet.figures" / "sensitivity.csv")
+    gain = sens[sens["metric"] == "regulated_gain_bar_per_A"].iloc[0]
+    assert gain["n"] == 1  # the one ok point, not 0
+    assert np.isnan(gain["effect"]) and "one level (12): no range" in gain["note"]
+    # Next to a variable with a range, the one-level one is left out of the fit.
+    two = SweepSpec.from_dict(
+        doc | {"variables": [*doc["variables"], {"name": "vfs_d_orf", "values": [0.35, 0.45, 0.6]}]}
+    )
+    from clutchlab.physics.design import sensitivity_table
+
+    table = pd.DataFrame(evaluate_batch(two, design_points(two)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        s = sensitivity_table(table, two, ("regulated_gain_bar_per_A",)).set_index("variable")
+    assert np.isnan(s.loc["reg_k", "effect"]) and s.loc["reg_k", "note"].startswith("one level")
+    assert np.isfinite(s.loc["vfs_d_orf", "effect"]) and s.loc["vfs_d_orf", "note"] == ""
+    assert (s["n"] == 3).all()

@@ -14,7 +14,7 @@ import pandas as pd
 from ...data import write_file_atomic
 from .evaluate import STATUS_FAILED, STATUS_OK
 from .metrics import METRIC_UNITS, metric_names
-from .sensitivity import sensitivity_table
+from .sensitivity import sensitivity_table, tornado_labels
 from .spec import SweepSpec
 
 if TYPE_CHECKING:  # matplotlib is imported on use: sweep workers import this package
@@ -63,14 +63,15 @@ def plot_tornado(table: pd.DataFrame, spec: SweepSpec) -> Figure:
         s["mag"] = s["effect"].abs().fillna(-1.0)
         s = s.sort_values("mag")
         colors = ["tab:red" if e > 0 else "tab:blue" for e in s["effect"].fillna(0.0)]
-        ax.barh(s["variable"], s["effect"].fillna(0.0), color=colors)
+        labels, message = tornado_labels(s)
+        ax.barh(labels, s["effect"].fillna(0.0), color=colors)
         ax.axvline(0.0, color="0.3", lw=0.8)
         r2 = s["r2"].iloc[0] if len(s) else np.nan
         n = int(s["n"].iloc[0]) if len(s) else 0
         title = f"{name}  (R² {r2:.2f}, n {n})" if np.isfinite(r2) else f"{name}  (n {n})"
         ax.set_title(title, fontsize=9)
-        if not s["effect"].notna().any():
-            ax.text(0.5, 0.5, "too few finite points", transform=ax.transAxes, ha="center")
+        if message:
+            ax.text(0.5, 0.5, message, transform=ax.transAxes, ha="center")
         ax.set_xlabel(f"change low → high ({metric_unit(name)})", fontsize=8)
         ax.tick_params(labelsize=8)
         ax.grid(axis="x", alpha=0.3)

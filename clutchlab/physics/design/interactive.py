@@ -18,7 +18,7 @@ import pandas as pd
 from ..._plotly import MARKER_SCRIPT, f32, figure_div, plotlyjs_script, thin
 from .evaluate import STATUS_FAILED, STATUS_OK
 from .figures import _metrics, metric_unit
-from .sensitivity import sensitivity_table
+from .sensitivity import sensitivity_table, tornado_labels
 from .spec import SweepSpec
 
 if TYPE_CHECKING:
@@ -73,11 +73,12 @@ def iplot_tornado(table: pd.DataFrame, spec: SweepSpec) -> go.Figure:
         s["mag"] = s["effect"].abs().fillna(-1.0)
         s = s.sort_values("mag")
         effect = s["effect"].to_numpy(dtype=float)
+        labels, message = tornado_labels(s)
         unit = html.escape(metric_unit(name))
         fig.add_trace(
             go.Bar(
                 x=np.nan_to_num(effect),
-                y=list(s["variable"]),
+                y=labels,
                 orientation="h",
                 marker_color=[_POS if e > 0 else _NEG for e in np.nan_to_num(effect)],
                 customdata=np.c_[s["std_coef"].to_numpy(dtype=float), effect],
@@ -89,9 +90,9 @@ def iplot_tornado(table: pd.DataFrame, spec: SweepSpec) -> go.Figure:
             row=k // ncols + 1,
             col=k % ncols + 1,
         )
-        if not np.isfinite(effect).any():
+        if message:
             fig.add_annotation(
-                text="too few finite points",
+                text=message,
                 x=0.5,
                 y=0.5,
                 xref=f"x{k + 1 if k else ''} domain",
