@@ -4,9 +4,32 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 
 __all__ = ["register"]
+
+
+def _workers(text: str) -> int:
+    """``--workers``: an integer ≥ 1 (an argparse error, exit 2, before any work)."""
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer ≥ 1, not {text!r}") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be ≥ 1 (worker processes), not {n}")
+    return n
+
+
+def _flush_s(text: str) -> float:
+    """``--flush-s``: seconds ≥ 0 (0: after every batch), finite."""
+    try:
+        s = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number of seconds, not {text!r}") from None
+    if not (math.isfinite(s) and s >= 0):
+        raise argparse.ArgumentTypeError(f"must be ≥ 0 s and finite, not {text}")
+    return s
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
@@ -64,17 +87,21 @@ def register(sub) -> None:
     p.add_argument("--out", required=True, help="results file (.parquet); parts and figures beside")
     p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786): run there")
     p.add_argument(
-        "--workers", type=int, default=None, help="local worker processes (default: CPU count)"
+        "--workers",
+        type=_workers,
+        default=None,
+        help="local worker processes, ≥ 1 (default: CPU count; 1 = in this process)",
     )
     p.add_argument("--overwrite", action="store_true", help="discard existing results first")
     p.add_argument("--retry-failed", action="store_true", help="run failed points again")
     p.add_argument("--no-figures", action="store_true", help="no tornado / scatter figures")
     p.add_argument(
         "--flush-s",
-        type=float,
+        type=_flush_s,
         default=5.0,
         metavar="S",
-        help="write finished points to disk at least every S seconds (default 5)",
+        help="write finished points to disk at least every S seconds, ≥ 0 (default 5; 0: after "
+        "every batch)",
     )
     p.add_argument("--dry-run", action="store_true", help="validate the spec, count the points")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

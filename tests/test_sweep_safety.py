@@ -146,3 +146,34 @@ def test_a_killed_sweep_leaves_no_process(tmp_path):
     proc.wait()
     _, alive = psutil.wait_procs(descendants, timeout=10)
     assert not alive, [p.cmdline() for p in alive]
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["--workers", "0"], "argument --workers: must be ≥ 1"),
+        (["--workers", "-1"], "argument --workers: must be ≥ 1"),
+        (["--flush-s", "-1"], "argument --flush-s: must be ≥ 0 s"),
+        (["--flush-s", "nan"], "argument --flush-s: must be ≥ 0 s"),
+    ],
+    ids=["workers_0", "workers_-1", "flush_-1", "flush_nan"],
+)
+def test_out_of_range_workers_and_flush_are_refused_before_any_work(tmp_path, args, needle):
+    """Issue 17: ``--workers 0 / -1`` and ``--flush-s -1`` were silently accepted."""
+    out = tmp_path / "r.parquet"
+    res = sweep(tiny_spec(tmp_path), "--out", out, "--quiet", *args, timeout=60)
+    assert res.returncode == 2 and needle in res.stderr, res.stderr
+    assert "Traceback" not in res.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["tiny.toml"]  # nothing created
+
+
+def test_run_sweep_refuses_out_of_range_settings_before_any_work(tmp_path):
+    from clutchlab.physics.design import load_spec, run_sweep
+
+    spec = load_spec(tiny_spec(tmp_path))
+    out = tmp_path / "r.parquet"
+    with pytest.raises(ValueError, match=r"workers must be an integer ≥ 1, not 0.*flush_s"):
+        run_sweep(spec, out, workers=0, flush_s=-1.0, progress=False)
+    with pytest.raises(ValueError, match="batch_size must be an integer ≥ 1"):
+        run_sweep(spec, out, workers=1, batch_size=0, progress=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["tiny.toml"]

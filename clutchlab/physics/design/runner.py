@@ -153,7 +153,8 @@ def run_sweep(
         Consolidated results file (Parquet); part files go to ``<out>.parts/``, figures to
         ``<out>.figures/``.
     workers : int, optional
-        Local worker processes (default: CPU count); ignored with ``scheduler``.
+        Local worker processes, ≥ 1 (default: CPU count; 1: in this process); ignored with
+        ``scheduler``.
     scheduler : str or distributed.Client, optional
         Run on this Dask cluster (address such as ``tcp://10.0.0.5:8786``, or a client).
     progress : bool
@@ -165,9 +166,9 @@ def run_sweep(
     figures : bool
         Write the tornado and metric-vs-variable figures.
     batch_size : int, optional
-        Points per task (default: 1–8, so that each worker gets ≥ 16 tasks).
+        Points per task, ≥ 1 (default: 1–8, so that each worker gets ≥ 16 tasks).
     flush_s : float
-        Write finished rows to a new part file at least this often (s); 0: after every
+        Write finished rows to a new part file at least this often (s, ≥ 0); 0: after every
         batch. A killed sweep loses at most the rows of the last ``flush_s``.
 
     Returns
@@ -176,9 +177,12 @@ def run_sweep(
 
     Raises
     ------
+    ValueError
+        ``workers``, ``batch_size`` or ``flush_s`` out of range (before anything is done).
     SpecError
         If ``out`` holds results of a spec with another core and ``overwrite`` is false.
     """
+    _check_run_arguments(workers, batch_size, flush_s)
     t0 = time.perf_counter()
     out = check_sweep_output(out, overwrite)
     with output_lock(out):
@@ -186,6 +190,22 @@ def run_sweep(
             spec, out, t0, workers, scheduler, progress, overwrite, retry_failed, figures,
             batch_size, flush_s,
         )  # fmt: skip
+
+
+def _check_run_arguments(workers: Any, batch_size: Any, flush_s: Any) -> None:
+    """Range checks of :func:`run_sweep`'s settings, every problem at once (``ValueError``)."""
+    problems = []
+    for name, value in (("workers", workers), ("batch_size", batch_size)):
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            problems.append(f"{name} must be an integer ≥ 1, not {value!r}")
+    if isinstance(flush_s, bool) or not isinstance(flush_s, int | float):
+        problems.append(f"flush_s must be a number of seconds ≥ 0, not {flush_s!r}")
+    elif not (math.isfinite(flush_s) and flush_s >= 0):
+        problems.append(f"flush_s must be ≥ 0 s and finite, not {flush_s!r}")
+    if problems:
+        raise ValueError("run_sweep: " + "; ".join(problems))
 
 
 def check_sweep_output(out: str | Path, overwrite: bool = False) -> Path:
