@@ -95,8 +95,14 @@ def test_local_sweep_writes_results_figures_and_skips_finished_points(tmp_path):
         "sensitivity.csv",
         "sweep.html",
     }
-    # each written atomically under a temporary name: real PNGs, no temporary file left
-    assert {f.name for f in res.figures[0].parent.iterdir()} == {f.name for f in res.figures}
+    # written atomically as one folder with clutchlab's ownership record; no temporary left
+    names = {f.name for f in res.figures} | {".clutchlab-owned.json"}
+    assert {f.name for f in res.figures[0].parent.iterdir()} == names
+    assert {f.name for f in tmp_path.iterdir()} == {
+        "res.parquet",
+        "res.parquet.parts",
+        "res.parquet.figures",
+    }
     assert all(f.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for f in res.figures[:2])
     # The same numbers as evaluating the points directly.
     direct = pd.DataFrame(evaluate_batch(spec, design_points(spec)))[df.columns]

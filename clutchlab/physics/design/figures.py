@@ -11,7 +11,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
-from ...data import write_file_atomic
+from ...data.output import OWNED_NAME, owned_files, write_folder_atomic
+from ...errors import OutputError
 from .evaluate import STATUS_FAILED, STATUS_OK
 from .metrics import METRIC_UNITS, metric_names
 from .sensitivity import sensitivity_table, tornado_labels
@@ -20,7 +21,17 @@ from .spec import SweepSpec
 if TYPE_CHECKING:  # matplotlib is imported on use: sweep workers import this package
     from matplotlib.figure import Figure
 
-__all__ = ["metric_unit", "plot_metrics_vs_variables", "plot_tornado", "write_figures"]
+__all__ = [
+    "FIGURE_FILES",
+    "check_figures_folder",
+    "metric_unit",
+    "plot_metrics_vs_variables",
+    "plot_tornado",
+    "write_figures",
+]
+
+#: The files :func:`write_figures` writes.
+FIGURE_FILES = ("tornado.png", "metrics_vs_variables.png", "sensitivity.csv", "sweep.html")
 
 
 def metric_unit(name: str) -> str:
@@ -129,12 +140,52 @@ def plot_metrics_vs_variables(table: pd.DataFrame, spec: SweepSpec) -> Figure:
     return fig
 
 
+def check_figures_folder(folder: str | Path, what: str = "figures") -> Path:
+    """Refuse a figures folder clutchlab may not write (``OutputError``), before any work.
+
+    Missing or empty: fine. A folder clutchlab wrote (its ``.clutchlab-owned.json``) is
+    written again: its figures are replaced, every other file is kept, but a user's file where
+    a figure would go (a ``tornado.png`` clutchlab did not write) is refused by name. A
+    non-empty folder without the record is not clutchlab's and is refused as a whole.
+    """
+    folder = Path(folder)
+    if folder.is_symlink() or (folder.exists() and not folder.is_dir()):
+        raise OutputError(f"{what} {folder}: exists and is not a folder clutchlab wrote")
+    if not folder.is_dir() or not any(folder.iterdir()):
+        return folder
+    if not (folder / OWNED_NAME).is_file():
+        mine = sorted(n for n in FIGURE_FILES if (folder / n).exists() or (folder / n).is_symlink())
+        named = f" (its {', '.join(mine)} would be replaced)" if mine else ""
+        raise OutputError(
+            f"{what} {folder}: folder exists and clutchlab did not create it (no "
+            f"{OWNED_NAME}){named}; move it away or choose another --out (figures of a "
+            "clutchlab older than this record carry none: delete them to have them drawn again)"
+        )
+    owned = owned_files(folder)
+    clash = sorted(
+        n
+        for n in FIGURE_FILES
+        if n not in owned and ((folder / n).exists() or (folder / n).is_symlink())
+    )
+    if clash:
+        raise OutputError(
+            f"{what} {folder}: clutchlab did not write these files and would replace them; "
+            "move them away or choose another --out: " + ", ".join(clash)
+        )
+    return folder
+
+
 def write_figures(table: pd.DataFrame, spec: SweepSpec, folder: str | Path) -> tuple[Path, ...]:
     """Write ``tornado.png``, ``metrics_vs_variables.png``, ``sensitivity.csv`` and ``sweep.html``.
 
     ``sweep.html`` holds the two figures interactive (zoom, hover for each point's id and
     values, finished / failed points toggled from the legend; plotly.js embedded, so it works
     offline): :func:`~clutchlab.physics.design.interactive.sweep_html`.
+
+    The folder is written atomically with an ownership record
+    (:func:`clutchlab.data.output.write_folder_atomic`): the figures of an earlier run are
+    replaced, a user's other files in it are kept, and a folder clutchlab did not create, or a
+    user's file where a figure would go, is refused (:func:`check_figures_folder`).
 
     Parameters
     ----------
@@ -149,26 +200,22 @@ def write_figures(table: pd.DataFrame, spec: SweepSpec, folder: str | Path) -> t
     -------
     tuple of Path
         Files written.
+
+    Raises
+    ------
+    OutputError
+        The folder is not clutchlab's, or a user's file stands where a figure would go.
     """
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    paths = (
-        folder / "tornado.png",
-        folder / "metrics_vs_variables.png",
-        folder / "sensitivity.csv",
-        folder / "sweep.html",
-    )
+    folder = check_figures_folder(folder)
     from .interactive import sweep_html
 
-    # each file atomically: an interrupted sweep leaves the previous figures, never half a file
-    for path, fig, dpi in (
-        (paths[0], plot_tornado(table, spec), 110),
-        (paths[1], plot_metrics_vs_variables(table, spec), 90),
-    ):
-        write_file_atomic(
-            path, lambda tmp, f=fig, d=dpi: f.savefig(tmp, dpi=d, format="png"), overwrite=True
-        )
+    tornado, scatter = plot_tornado(table, spec), plot_metrics_vs_variables(table, spec)
     csv = sensitivity_table(table, spec, _metrics(spec)).to_csv(index=False)
-    write_file_atomic(paths[2], csv.encode("utf-8"), overwrite=True)
-    write_file_atomic(paths[3], sweep_html(table, spec).encode("utf-8"), overwrite=True)
-    return paths
+    files = {
+        FIGURE_FILES[0]: lambda tmp: tornado.savefig(tmp, dpi=110, format="png"),
+        FIGURE_FILES[1]: lambda tmp: scatter.savefig(tmp, dpi=90, format="png"),
+        FIGURE_FILES[2]: csv.encode("utf-8"),
+        FIGURE_FILES[3]: sweep_html(table, spec).encode("utf-8"),
+    }
+    write_folder_atomic(folder, files, overwrite=True, what="figures")
+    return tuple(folder / n for n in FIGURE_FILES)

@@ -3,19 +3,27 @@
 Layout for ``--out results.parquet``::
 
     results.parquet          consolidated table (written at the end, atomically)
-    results.parquet.parts/   spec.json + part-<ns>-<pid>-<seq>.parquet, one per flush
+    results.parquet.parts/   .clutchlab-owned.json + spec.json
+                             + part-<ns>-<pid>-<seq>.parquet, one per flush
 
 A part file is written to a temporary name, flushed to disk and renamed into place, so a
-killed sweep leaves only complete part files (and perhaps a stray ``*.tmp``, removed on the
-next start). A restarted sweep reads the parts, skips the points already there and appends
-new parts; consolidation keeps one row per point id (the newest).
+killed sweep leaves only complete part files (and perhaps a stray temporary file, removed on
+the next start). A restarted sweep reads the parts, skips the points already there and
+appends new parts; consolidation keeps one row per point id (the newest).
+
+Only what clutchlab wrote is touched (:mod:`clutchlab.data.output`): the parts folder carries
+the ownership record ``.clutchlab-owned.json``, and within it clutchlab reads, replaces and
+deletes only ``spec.json``, part files named exactly ``part-<20 digits>-<pid>-<6 digits>.parquet``
+and their temporary files. A folder without the record (and without the ``spec.json`` of an
+earlier clutchlab version) that holds anything is refused; a user's file in a clutchlab
+folder (``notes.txt``) is kept, also by ``overwrite``.
 """
 
 from __future__ import annotations
 
 import json
 import os
-import shutil
+import re
 import time
 from pathlib import Path
 from typing import Any
@@ -24,17 +32,81 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from ...data.output import OWNED_NAME, write_file_atomic
+from ...errors import OutputError
 from .spec import SpecError
 
-__all__ = ["ResultStore", "read_results"]
+__all__ = ["ResultStore", "check_parts_folder", "read_results"]
+
+#: Part files clutchlab writes (``part-<time ns>-<pid>-<seq>.parquet``), and their temporaries.
+_PART = re.compile(r"part-\d{20}-\d+-\d{6}\.parquet")
+_PART_TMP = re.compile(r"part-\d{20}-\d+-\d{6}\.parquet\.\d+\.tmp")
+#: Temporaries of spec.json and of the record (``write_file_atomic``; an older ``spec.json.tmp``).
+_META_TMP = re.compile(
+    r"(\.spec\.json\..+\.tmp|\.\.clutchlab-owned\.json\..+\.tmp|spec\.json\.tmp)"
+)
+
+
+def _is_ours(parts: Path) -> bool:
+    """Whether ``parts`` is a parts folder clutchlab wrote: its record, or an older spec.json."""
+    record = parts / OWNED_NAME
+    if record.is_file() and not record.is_symlink():
+        try:
+            return json.loads(record.read_text(encoding="utf-8")).get("written_by") == "clutchlab"
+        except (OSError, ValueError, AttributeError):
+            return False
+    meta = parts / "spec.json"  # written by clutchlab before the record existed
+    if meta.is_file() and not meta.is_symlink():
+        try:
+            return "core_hash" in json.loads(meta.read_text(encoding="utf-8"))
+        except (OSError, ValueError, TypeError):
+            return False
+    return False
+
+
+def check_parts_folder(parts: str | Path, what: str = "--out") -> bool:
+    """Refuse a ``<out>.parts`` that is not clutchlab's (``OutputError``); True if it is ours.
+
+    Missing or an empty folder: fine (False). A file there, or a non-empty folder without
+    clutchlab's ownership record, is refused, naming it: nothing in it is read or touched.
+    """
+    parts = Path(parts)
+    if parts.is_symlink() or (parts.exists() and not parts.is_dir()):
+        raise OutputError(
+            f"{what}: {parts} exists and is not a folder clutchlab wrote; move it away or "
+            "choose another --out"
+        )
+    if not parts.exists():
+        return False
+    if _is_ours(parts):
+        return True
+    content = sorted(p.name for p in parts.iterdir())
+    if content:
+        shown = ", ".join(content[:5]) + (
+            f" and {len(content) - 5} more" if len(content) > 5 else ""
+        )
+        raise OutputError(
+            f"{what}: {parts} exists and clutchlab did not create it (no {OWNED_NAME}; it "
+            f"holds {shown}); clutchlab keeps a sweep's part files there: move it away or "
+            "choose another --out"
+        )
+    return False
+
+
+def _write_table_synced(table: pa.Table, path: Path) -> None:
+    pq.write_table(table, path)
+    with open(path, "rb") as fh:
+        os.fsync(fh.fileno())
 
 
 def _atomic_write_table(table: pa.Table, path: Path) -> None:
     tmp = path.with_name(path.name + f".{os.getpid()}.tmp")
-    pq.write_table(table, tmp)
-    with open(tmp, "rb") as fh:
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
+    try:
+        _write_table_synced(table, tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 class ResultStore:
@@ -49,10 +121,13 @@ class ResultStore:
     spec_doc : dict
         JSON-ready description of the spec, written once to ``spec.json``.
     overwrite : bool
-        Delete existing results and parts first.
+        Delete existing results and the part files clutchlab wrote first (a user's file in the
+        parts folder is kept).
 
     Raises
     ------
+    OutputError
+        If ``<out>.parts`` exists and is not clutchlab's (:func:`check_parts_folder`).
     SpecError
         If the parts folder belongs to a spec with a different core (model, scenario,
         simulation or metric settings) and ``overwrite`` is false.
@@ -63,15 +138,33 @@ class ResultStore:
     ) -> None:
         self.out = Path(out)
         self.parts = self.out.with_name(self.out.name + ".parts")
-        if overwrite:
-            shutil.rmtree(self.parts, ignore_errors=True)
-            self.out.unlink(missing_ok=True)
+        check_parts_folder(self.parts)
         self.parts.mkdir(parents=True, exist_ok=True)
-        for stray in self.parts.glob("*.tmp"):
-            stray.unlink(missing_ok=True)
         meta = self.parts / "spec.json"
+        if overwrite:
+            self._remove_ours(meta)
+            self.out.unlink(missing_ok=True)
+        for stray in self.parts.iterdir():
+            if _PART_TMP.fullmatch(stray.name) or _META_TMP.fullmatch(stray.name):
+                stray.unlink(missing_ok=True)
+        record = {
+            "written_by": "clutchlab",
+            "files": ["spec.json"],
+            "part_files": "part-<time ns>-<pid>-<seq>.parquet (and their .tmp while written)",
+        }
+        write_file_atomic(
+            self.parts / OWNED_NAME,
+            (json.dumps(record, indent=1) + "\n").encode("utf-8"),
+            overwrite=True,
+        )
         if meta.exists():
-            old = json.loads(meta.read_text(encoding="utf-8")).get("core_hash")
+            try:
+                old = json.loads(meta.read_text(encoding="utf-8")).get("core_hash")
+            except (OSError, ValueError, AttributeError) as exc:
+                raise OutputError(
+                    f"--out {self.out}: {meta} cannot be read ({exc}); use --overwrite to "
+                    "start these results again"
+                ) from exc
             if old != core_hash:
                 raise SpecError(
                     [
@@ -83,14 +176,31 @@ class ResultStore:
                 )
         else:
             doc = {"core_hash": core_hash} | spec_doc
-            tmp = meta.with_suffix(".json.tmp")
-            tmp.write_text(json.dumps(doc, indent=2, default=list) + "\n", encoding="utf-8")
-            os.replace(tmp, meta)
+            text = json.dumps(doc, indent=2, default=list) + "\n"
+            write_file_atomic(meta, text.encode("utf-8"))
         self._seq = 0
+
+    def _remove_ours(self, meta: Path) -> None:
+        """Delete the part files and spec.json clutchlab wrote; every other file stays."""
+        for f in self.parts.iterdir():
+            if _PART.fullmatch(f.name) or _PART_TMP.fullmatch(f.name):
+                f.unlink(missing_ok=True)
+        meta.unlink(missing_ok=True)
+
+    @staticmethod
+    def stored_ids(out: str | Path) -> list[str]:
+        """Point ids with a row in ``<out>.parts`` (read only; nothing is created)."""
+        out = Path(out)
+        parts = out.with_name(out.name + ".parts")
+        files = sorted(f for f in parts.glob("part-*.parquet") if _PART.fullmatch(f.name))
+        ids: list[str] = []
+        for f in files:
+            ids += pq.read_table(f, columns=["point_id"]).column(0).to_pylist()
+        return ids
 
     def part_files(self) -> list[Path]:
         """Complete part files, oldest first."""
-        return sorted(self.parts.glob("part-*.parquet"))
+        return sorted(f for f in self.parts.glob("part-*.parquet") if _PART.fullmatch(f.name))
 
     def read(self) -> pd.DataFrame:
         """Every row of every part (duplicates kept, oldest first)."""
@@ -128,7 +238,8 @@ class ResultStore:
         df = df[df["point_id"].isin(order)].copy()
         df["index"] = df["point_id"].map(order).astype("int64")
         df = df.sort_values("index").reset_index(drop=True)
-        _atomic_write_table(pa.Table.from_pandas(df, preserve_index=False), self.out)
+        table = pa.Table.from_pandas(df, preserve_index=False)
+        write_file_atomic(self.out, lambda tmp: _write_table_synced(table, tmp), overwrite=True)
         return df
 
 
@@ -150,7 +261,7 @@ def read_results(path: str | Path) -> pd.DataFrame:
     if path.exists():
         return pd.read_parquet(path)
     parts = path.with_name(path.name + ".parts")
-    files = sorted(parts.glob("part-*.parquet"))
+    files = sorted(f for f in parts.glob("part-*.parquet") if _PART.fullmatch(f.name))
     if not files:
         raise FileNotFoundError(f"no results at {path} (nor parts in {parts})")
     df = pd.concat([pd.read_parquet(f) for f in files], ignore_index=True)
