@@ -7,6 +7,7 @@ order. A batch whose task itself fails (a worker process killed, a lost Dask wor
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
 import uuid
@@ -54,8 +55,10 @@ def run_local(
     Worker processes are forked from a fork server that has imported the evaluator once
     (``forkserver`` start method; ``spawn`` where there is none, e.g. Windows): no state is
     inherited from the parent, and the workers skip the ~1–2 s import of clutchlab and its
-    dependencies that dominated short sweeps. At most ``2 · workers`` batches are queued, so
-    an interrupted sweep leaves little running.
+    dependencies that dominated short sweeps. At most ``2 · workers`` batches are queued.
+    Workers ignore Ctrl-C; when the consumer stops early (Ctrl-C, an error, ``close()``) the
+    queued batches are cancelled and the workers are killed at once rather than waited for
+    (their batches in progress are lost; what was yielded is the consumer's).
 
     Yields
     ------
@@ -69,29 +72,45 @@ def run_local(
     ctx = _worker_context()
     pending: dict[Future, Batch] = {}
     todo = iter(batches)
-    with ProcessPoolExecutor(
-        max_workers=workers, mp_context=ctx, initializer=lifetime.die_with_parent
-    ) as pool:
-        try:
-            while True:
-                while len(pending) < 2 * workers:
-                    batch = next(todo, None)
-                    if batch is None:
-                        break
-                    pending[pool.submit(evaluate_batch, spec, batch)] = batch
-                if not pending:
-                    return
-                done, _ = wait(pending, return_when=FIRST_COMPLETED)
-                for fut in done:
-                    batch = pending.pop(fut)
-                    try:
-                        rows = fut.result()
-                    except Exception as exc:
-                        rows = _failed_rows(batch, exc)
-                    yield batch, rows
-        finally:
-            for fut in pending:
-                fut.cancel()
+    pool = ProcessPoolExecutor(
+        max_workers=workers, mp_context=ctx, initializer=lifetime.init_worker
+    )
+    finished = False
+    try:
+        while True:
+            while len(pending) < 2 * workers:
+                batch = next(todo, None)
+                if batch is None:
+                    break
+                pending[pool.submit(evaluate_batch, spec, batch)] = batch
+            if not pending:
+                finished = True
+                return
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                batch = pending.pop(fut)
+                try:
+                    rows = fut.result()
+                except Exception as exc:
+                    rows = _failed_rows(batch, exc)
+                yield batch, rows
+    finally:
+        if finished:
+            pool.shutdown(wait=True)
+        else:
+            _stop_now(pool)
+
+
+def _stop_now(pool: ProcessPoolExecutor) -> None:
+    """Cancel what is queued and kill the workers, without waiting for running batches."""
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for proc in procs:
+        with contextlib.suppress(OSError, ValueError, AttributeError):
+            proc.kill()
+    for proc in procs:
+        with contextlib.suppress(OSError, ValueError, AttributeError):
+            proc.join(timeout=5)
 
 
 def run_dask(

@@ -1,4 +1,4 @@
-"""Worker processes that die with the sweep that started them.
+"""Worker processes that die with the sweep that started them, and leave Ctrl-C to it.
 
 On Linux every local worker, and the fork server they are forked from, asks the kernel for
 SIGKILL when its parent dies (``prctl(PR_SET_PDEATHSIG)``): a sweep killed with SIGKILL
@@ -12,7 +12,7 @@ import os
 import signal
 import sys
 
-__all__ = ["FORKSERVER_ENV", "die_with_parent"]
+__all__ = ["FORKSERVER_ENV", "die_with_parent", "init_worker"]
 
 #: Set to the sweep's PID while its fork server starts; the server, whose parent that is,
 #: then arranges to die with it when it imports this module (its preload).
@@ -35,3 +35,13 @@ def die_with_parent() -> None:
 
 if os.environ.get(FORKSERVER_ENV) == str(os.getppid()):
     die_with_parent()  # this process is the fork server of that sweep
+
+
+def init_worker() -> None:
+    """Initializer of a local worker process: die with the sweep, leave Ctrl-C to it.
+
+    Ctrl-C in a terminal sends SIGINT to every process of the foreground group; a worker
+    ignores it (no traceback per worker), and the sweep stops its workers itself.
+    """
+    die_with_parent()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
