@@ -6,6 +6,7 @@ import argparse
 import json
 import math
 import sys
+import warnings
 
 __all__ = ["register"]
 
@@ -33,12 +34,35 @@ def _flush_s(text: str) -> float:
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
+    from .physics.design.runner import SweepInterrupted, SweepNote
+
+    def note(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, SweepNote):
+            print(f"note: {message}", file=sys.stderr)
+        else:
+            shown(message, category, filename, lineno, file, line)
+
+    with warnings.catch_warnings():
+        shown = warnings.showwarning
+        warnings.simplefilter("always", SweepNote)
+        warnings.showwarning = note
+        try:
+            return _run(args)
+        except SweepInterrupted as exc:
+            print(f"clutchlab sweep: {exc}", file=sys.stderr)
+            return 130  # 128 + SIGINT, what a shell reports for a tool stopped by Ctrl-C
+        except KeyboardInterrupt:
+            print("clutchlab sweep: interrupted", file=sys.stderr)
+            return 130
+
+
+def _run(args: argparse.Namespace) -> int:
     from .physics.design import design_points, load_spec, run_sweep
     from .physics.design.runner import check_sweep_output
 
     spec = load_spec(args.spec)
-    if not args.dry_run:
-        check_sweep_output(args.out, args.overwrite)  # before any work
+    if not args.dry_run:  # before any work
+        check_sweep_output(args.out, args.overwrite, figures=not args.no_figures)
     if args.scheduler and args.workers is not None:
         raise SystemExit("clutchlab sweep: --workers is for local runs; a Dask cluster has its own")
     if args.dry_run:

@@ -39,6 +39,34 @@ def tiny_spec(tmp_path, n=2, extra=""):
     return path
 
 
+def short_spec(tmp_path, n=4):
+    """A spec whose point takes ~0.05 s (0.6 s ramp, no step)."""
+    path = tmp_path / "short.toml"
+    path.write_text(
+        f"""name = "short"
+[scenario]
+ramps = [{{label = "short", ramp_s = 0.6, hold_s = 0.2}}]
+step = false
+[simulation]
+settle_s = 0.2
+[sampling]
+method = "lhs"
+n = {n}
+seed = 5
+[[variables]]
+name = "vfs_d_orf"
+low = 0.35
+high = 0.6
+[[variables]]
+name = "reg_k"
+low = 10.0
+high = 20.0
+""",
+        encoding="utf-8",
+    )
+    return path
+
+
 def base_doc(**over):
     doc = {
         "name": "x",
@@ -177,3 +205,130 @@ def test_run_sweep_refuses_out_of_range_settings_before_any_work(tmp_path):
     with pytest.raises(ValueError, match="batch_size must be an integer ≥ 1"):
         run_sweep(spec, out, workers=1, batch_size=0, progress=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["tiny.toml"]
+
+
+def test_user_files_beside_the_results_are_never_replaced_or_deleted(tmp_path):
+    """Issue 4: a user's ``tornado.png`` in ``X.parquet.figures/`` was overwritten, and
+    ``--overwrite`` deleted ``data.csv`` in ``X.parquet.parts/`` (and ``mine.txt`` in a
+    sweep's own parts folder)."""
+    spec = short_spec(tmp_path)
+    out = tmp_path / "mine.parquet"
+    parts, figs = tmp_path / "mine.parquet.parts", tmp_path / "mine.parquet.figures"
+    parts.mkdir()
+    figs.mkdir()
+    (parts / "data.csv").write_text("precious")
+    (figs / "tornado.png").write_text("precious")
+    for extra in ([], ["--overwrite"]):
+        res = sweep(spec, "--out", out, "--quiet", "--workers", "1", *extra, timeout=120)
+        assert res.returncode == 2, res.stderr
+        assert f"{parts} exists and clutchlab did not create it" in res.stderr
+        assert "data.csv" in res.stderr and "Traceback" not in res.stderr
+    (parts / "data.csv").unlink()  # an empty folder is fine; the figures folder is not
+    res = sweep(spec, "--out", out, "--quiet", "--workers", "1", "--overwrite", timeout=120)
+    assert res.returncode == 2 and "its tornado.png would be replaced" in res.stderr
+    assert (figs / "tornado.png").read_text() == "precious"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "mine.parquet.figures",
+        "mine.parquet.parts",
+        "short.toml",
+    ]  # refused before any work: no lock, no results
+    assert not any(parts.iterdir())
+    (figs / "tornado.png").rename(tmp_path / "tornado.png")
+
+    # In clutchlab's own folders a user's other files are kept, also by --overwrite.
+    res = sweep(spec, "--out", out, "--quiet", "--workers", "1", timeout=120)
+    assert res.returncode == 0, res.stderr
+    (parts / "mine.txt").write_text("precious")
+    (figs / "notes.txt").write_text("precious")
+    res = sweep(spec, "--out", out, "--quiet", "--workers", "1", "--overwrite", timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert (parts / "mine.txt").read_text() == "precious"
+    assert (figs / "notes.txt").read_text() == "precious"
+    assert (figs / "tornado.png").read_bytes()[:4] == b"\x89PNG"
+
+    # A user's file where the lock goes is refused, not truncated and deleted.
+    lock = tmp_path / "mine.parquet.lock"
+    lock.write_text("my notes about this sweep")
+    res = sweep(spec, "--out", out, "--quiet", "--workers", "1", "--overwrite", timeout=120)
+    assert res.returncode == 2 and "is not a clutchlab lock file" in res.stderr
+    assert lock.read_text() == "my notes about this sweep"
+
+
+@pytest.mark.parametrize(
+    ("address", "needle"),
+    [
+        ("bogus", "--scheduler 'bogus': not a scheduler address (missing port number"),
+        ("tcp://127.0.0.1:1", "--scheduler tcp://127.0.0.1:1: cannot connect to a Dask scheduler"),
+    ],
+    ids=["no_port", "nobody_listening"],
+)
+def test_bad_scheduler_is_one_line_error_and_leaves_nothing(tmp_path, address, needle):
+    """Issue 12: a raw ValueError / OSError traceback (after 30 s), and a lock and
+    ``X.parquet.parts/spec.json`` left behind."""
+    out = tmp_path / "x.parquet"
+    env = os.environ | {"DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT": "2s"}
+    res = subprocess.run(
+        [sys.executable, "-m", "clutchlab.cli", "sweep", str(short_spec(tmp_path)), "--out",
+         str(out), "--scheduler", address, "--quiet"],
+        capture_output=True, text=True, timeout=120, env=env,
+    )  # fmt: skip
+    assert res.returncode == 2, res.stderr
+    assert res.stderr.startswith("clutchlab sweep: error: " + needle), res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1, res.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["short.toml"]
+
+
+def test_ctrl_c_keeps_finished_points_with_a_message_and_no_lock(tmp_path):
+    """Issue 15: Ctrl-C gave a KeyboardInterrupt traceback, was slow to exit, left a lock."""
+    spec = short_spec(tmp_path, n=200)
+    out = tmp_path / "r.parquet"
+    cmd = [sys.executable, "-m", "clutchlab.cli", "sweep", str(spec), "--out", str(out)]
+    cmd += ["--workers", "2", "--flush-s", "0", "--quiet", "--no-figures"]
+    proc = subprocess.Popen(
+        cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True
+    )
+    parts = out.with_name(out.name + ".parts")
+    deadline = time.monotonic() + 120
+    try:
+        while len(list(parts.glob("part-*.parquet"))) < 2:
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "no results within 120 s"
+            time.sleep(0.05)
+        workers = psutil.Process(proc.pid).children(recursive=True)
+        t0 = time.monotonic()
+        os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C in a terminal does: the whole group
+        _, err = proc.communicate(timeout=60)
+        took = time.monotonic() - t0
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
+    m = re.fullmatch(
+        rf"clutchlab sweep: interrupted; (\d+) of 200 points kept in {re.escape(str(parts))}; "
+        r"run the same command to continue\n",
+        err,
+    )
+    assert m, err
+    assert took < 5, f"{took:.1f} s to stop"
+    assert not out.with_name(out.name + ".lock").exists()
+    _, alive = psutil.wait_procs(workers, timeout=5)
+    assert not alive
+    kept = int(m.group(1))
+    assert 0 < kept < 200
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert f"{200 - kept} run, {kept} already done" in res.stdout
+
+
+def test_a_stale_lock_of_a_killed_sweep_is_taken_over_with_a_note(tmp_path):
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    out = tmp_path / "r.parquet"
+    lock = tmp_path / "r.parquet.lock"
+    lock.write_text(str(dead.pid))  # what a SIGKILLed sweep leaves
+    res = sweep(short_spec(tmp_path), "--out", out, "--quiet", "--workers", "1", "--no-figures")
+    assert res.returncode == 0, res.stderr
+    assert f"note: {lock} was left by sweep PID {dead.pid}" in res.stderr
+    assert "taken over" in res.stderr and "Traceback" not in res.stderr
+    assert not lock.exists()

@@ -5,7 +5,9 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import re
 import time
+import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -14,15 +16,51 @@ import pandas as pd
 from tqdm.auto import tqdm
 
 from ...data.output import check_output
-from ...errors import OutputError
+from ...errors import ClutchlabError, OutputError
 from .evaluate import STATUS_FAILED, STATUS_OK
 from .executors import run_dask, run_local
 from .metrics import metric_names
 from .sampling import DesignPoint, design_points
 from .spec import SpecError, SweepSpec
-from .store import ResultStore
+from .store import ResultStore, check_parts_folder
 
-__all__ = ["SweepResult", "run_sweep"]
+__all__ = ["SchedulerError", "SweepInterrupted", "SweepNote", "SweepResult", "run_sweep"]
+
+
+class SchedulerError(ClutchlabError, ConnectionError):
+    """``scheduler`` is not a Dask scheduler address, or none answers there.
+
+    Raised before any output (lock, parts folder) is created.
+    """
+
+
+class SweepNote(UserWarning):
+    """Something the user should know that does not stop the sweep (a stale lock taken over)."""
+
+
+class SweepInterrupted(KeyboardInterrupt):
+    """A sweep stopped by Ctrl-C (``KeyboardInterrupt``): what finished is kept.
+
+    Attributes
+    ----------
+    out : Path
+        The results file of the sweep.
+    parts : Path
+        The folder that keeps the finished points.
+    n_kept : int
+        Points of this design finished (ok or failed) and kept in ``parts``.
+    n_points : int
+        Points in the design.
+    """
+
+    def __init__(self, out: Path, n_kept: int, n_points: int) -> None:
+        self.out = Path(out)
+        self.parts = self.out.with_name(self.out.name + ".parts")
+        self.n_kept, self.n_points = n_kept, n_points
+        super().__init__(
+            f"interrupted; {n_kept} of {n_points} points kept in {self.parts}; run the same "
+            "command to continue"
+        )
 
 
 @dataclass(frozen=True)
@@ -179,17 +217,74 @@ def run_sweep(
     ------
     ValueError
         ``workers``, ``batch_size`` or ``flush_s`` out of range (before anything is done).
+    OutputError
+        ``out``, ``<out>.parts/`` or ``<out>.figures/`` holds something clutchlab did not write
+        where it would write (before anything is done, see :func:`check_sweep_output`).
+    SchedulerError
+        ``scheduler`` is not an address or no scheduler answers there (before any output is
+        created).
     SpecError
         If ``out`` holds results of a spec with another core and ``overwrite`` is false.
+    SweepInterrupted
+        Ctrl-C (a ``KeyboardInterrupt``): the finished points are kept in ``<out>.parts/``,
+        the lock is released, and the same call continues the sweep.
     """
     _check_run_arguments(workers, batch_size, flush_s)
     t0 = time.perf_counter()
-    out = check_sweep_output(out, overwrite)
-    with output_lock(out):
-        return _run_locked(
-            spec, out, t0, workers, scheduler, progress, overwrite, retry_failed, figures,
-            batch_size, flush_s,
-        )  # fmt: skip
+    out = check_sweep_output(out, overwrite, figures=figures)
+    client, own_client = _connect(scheduler)  # before the lock and the parts folder exist
+    try:
+        with output_lock(out):
+            try:
+                return _run_locked(
+                    spec, out, t0, workers, client, progress, overwrite, retry_failed,
+                    figures, batch_size, flush_s,
+                )  # fmt: skip
+            except KeyboardInterrupt:
+                raise SweepInterrupted(out, _n_kept(spec, out), len(design_points(spec))) from None
+    finally:
+        if own_client:
+            with contextlib.suppress(Exception):
+                client.close()
+
+
+def _n_kept(spec: SweepSpec, out: Path) -> int:
+    """Points of ``spec``'s design with a row in ``<out>.parts`` (0 if it cannot be read)."""
+    try:
+        ids = set(ResultStore.stored_ids(out))
+    except Exception:  # only for the message: never hide the interrupt behind another error
+        return 0
+    return sum(p.point_id in ids for p in design_points(spec))
+
+
+def _connect(scheduler: Any) -> tuple[Any, bool]:
+    """``(client, own_client)`` for ``scheduler`` (None: no client), or ``SchedulerError``."""
+    if scheduler is None:
+        return None, False
+    from distributed import Client
+
+    if isinstance(scheduler, Client):
+        return scheduler, False
+    if isinstance(scheduler, str):
+        from distributed.comm import parse_address
+        from distributed.comm.addressing import parse_host_port
+
+        try:
+            scheme, location = parse_address(scheduler)
+            if scheme in ("tcp", "tls", "ws", "wss"):
+                parse_host_port(location)
+        except ValueError as exc:
+            raise SchedulerError(
+                f"--scheduler {scheduler!r}: not a scheduler address ({exc}); expected "
+                "tcp://HOST:PORT, e.g. tcp://10.0.0.5:8786"
+            ) from None
+    try:
+        return Client(scheduler), True
+    except (OSError, ValueError, TypeError) as exc:
+        reason = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        raise SchedulerError(
+            f"--scheduler {scheduler}: cannot connect to a Dask scheduler ({reason})"
+        ) from None
 
 
 def _check_run_arguments(workers: Any, batch_size: Any, flush_s: Any) -> None:
@@ -208,27 +303,61 @@ def _check_run_arguments(workers: Any, batch_size: Any, flush_s: Any) -> None:
         raise ValueError("run_sweep: " + "; ".join(problems))
 
 
-def check_sweep_output(out: str | Path, overwrite: bool = False) -> Path:
-    """Check a sweep's results file before any work (``SpecError`` / ``OutputError``).
+def check_sweep_output(out: str | Path, overwrite: bool = False, *, figures: bool = True) -> Path:
+    """Check everything a sweep writes before any work (``SpecError`` / ``OutputError``).
 
-    It must be named ``*.parquet``; an existing file is replaced only with ``overwrite``,
-    unless it is this kind of sweep's own results (``<out>.parts/spec.json`` beside it),
-    which a restart continues.
+    The results file must be named ``*.parquet``; an existing one is replaced only with
+    ``overwrite``, unless it is this kind of sweep's own results (clutchlab's
+    ``<out>.parts/`` beside it), which a restart continues. ``<out>.parts/`` and (with
+    ``figures``) ``<out>.figures/`` must be missing, empty or clutchlab's, and no user's file
+    may stand where clutchlab writes one (:func:`~.store.check_parts_folder`,
+    :func:`~.figures.check_figures_folder`); ``<out>.lock`` must be missing or a lock file
+    (a PID).
     """
     out = Path(out)
     if out.suffix.lower() != ".parquet":
         raise SpecError(
             [f"--out {out}: results are written as Parquet; name the file *.parquet"], str(out)
         )
-    ours = (out.with_name(out.name + ".parts") / "spec.json").is_file()
+    _check_lock_file(out.with_name(out.name + ".lock"))
+    ours = check_parts_folder(out.with_name(out.name + ".parts"))
+    if figures:
+        from .figures import check_figures_folder
+
+        check_figures_folder(out.with_name(out.name + ".figures"), what="--out: figures")
     return check_output(out, kind="file", overwrite=overwrite or ours, what="--out")
+
+
+_LOCK_TEXT = re.compile(rb"\s*\d*\s*")
+
+
+def _check_lock_file(lock: Path) -> None:
+    """A ``<out>.lock`` that exists must be a lock file (empty or a PID), never a user's file."""
+    if not (lock.exists() or lock.is_symlink()):
+        return
+    if lock.is_symlink() or not lock.is_file():
+        raise OutputError(f"--out: {lock} exists and is not a clutchlab lock file; move it away")
+    try:
+        with open(lock, "rb") as fh:
+            head = fh.read(64)
+    except OSError as exc:
+        raise OutputError(f"--out: {lock} cannot be read ({exc.strerror or exc})") from exc
+    if not _LOCK_TEXT.fullmatch(head):
+        raise OutputError(
+            f"--out: {lock} exists and is not a clutchlab lock file (it holds more than a "
+            "process id); clutchlab would replace it: move it away or choose another --out"
+        )
 
 
 @contextlib.contextmanager
 def output_lock(out: Path):
     """Hold an exclusive lock on ``<out>.lock`` for the whole run (POSIX ``flock``).
 
-    A second sweep on the same ``--out`` fails at once, naming the process that holds it.
+    A second sweep on the same ``--out`` fails at once, naming the process that holds it. The
+    lock file holds the holder's PID and is removed when the run ends, also by an error or
+    Ctrl-C. The lock itself is the kernel's ``flock``, released when its process dies: the
+    file a killed sweep leaves behind blocks nothing, and the next sweep takes it over with a
+    :class:`SweepNote` naming the PID it held.
     """
     try:
         import fcntl
@@ -236,26 +365,50 @@ def output_lock(out: Path):
         yield
         return
     lock = out.with_name(out.name + ".lock")
-    fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
-    try:
+    _check_lock_file(lock)
+    while True:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o644)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "another process"
+            os.close(fd)
             raise OutputError(
                 f"--out {out}: another sweep (PID {holder}) is writing these results; wait "
                 "for it or choose another --out"
             ) from None
+        except BaseException:
+            os.close(fd)
+            raise
+        # A sweep ending just now removes the file it locked: lock the file at the path.
+        try:
+            here = os.stat(lock, follow_symlinks=False)
+            mine = os.fstat(fd)
+            if (here.st_dev, here.st_ino) == (mine.st_dev, mine.st_ino):
+                break
+        except FileNotFoundError:
+            pass
+        os.close(fd)
+    try:
+        stale = os.pread(fd, 32, 0).decode(errors="replace").strip()
+        if stale.isdigit() and int(stale) != os.getpid():
+            warnings.warn(
+                f"{lock} was left by sweep PID {stale}, which stopped without removing it "
+                "(it no longer holds the lock); taken over",
+                SweepNote,
+                stacklevel=3,
+            )
         os.ftruncate(fd, 0)
         os.pwrite(fd, str(os.getpid()).encode(), 0)
         yield
-        lock.unlink(missing_ok=True)
     finally:
+        with contextlib.suppress(OSError):
+            lock.unlink()  # while still holding it: a waiting sweep then re-opens the path
         os.close(fd)
 
 
 def _run_locked(
-    spec, out, t0, workers, scheduler, progress, overwrite, retry_failed, figures, batch_size,
+    spec, out, t0, workers, client, progress, overwrite, retry_failed, figures, batch_size,
     flush_s,
 ) -> SweepResult:  # fmt: skip
     points = design_points(spec)
@@ -270,12 +423,7 @@ def _run_locked(
     sc = spec.scenario
     columns += [*metric_names(tuple(r.label for r in sc.ramps), sc.step is not None)]
     columns += ["wall_s", "cpu_s"]
-    client, own_client = None, False
-    if scheduler is not None:
-        from distributed import Client
-
-        own_client = not isinstance(scheduler, Client)
-        client = Client(scheduler) if own_client else scheduler
+    if client is not None:
         backend, n_workers = "dask", len(client.nthreads())
     else:
         backend, n_workers = "local", max(1, workers or os.cpu_count() or 1)
@@ -299,11 +447,9 @@ def _run_locked(
                 store.append(buffer)
                 buffer, last_flush = [], time.perf_counter()
     finally:
-        stream.close()  # stop the workers' queue (on Ctrl-C or an error)
+        stream.close()  # stop the workers (on Ctrl-C or an error)
         store.append(buffer)  # also on Ctrl-C: keep what finished
         bar.close()
-        if own_client:
-            client.close()
     table = store.consolidate([p.point_id for p in points])
     wall = time.perf_counter() - t0
     n_failed = int((table["status"] == STATUS_FAILED).sum()) if len(table) else 0
@@ -311,7 +457,14 @@ def _run_locked(
     if figures and len(table):
         from .figures import write_figures
 
-        written = write_figures(table, spec, store.out.with_name(store.out.name + ".figures"))
+        try:
+            written = write_figures(table, spec, store.out.with_name(store.out.name + ".figures"))
+        except OutputError as exc:  # e.g. a user's file put there during the run
+            warnings.warn(
+                f"figures not written: {exc}; the results are complete in {store.out}",
+                SweepNote,
+                stacklevel=3,
+            )
     return SweepResult(
         spec, table, store.out, len(points), len(todo), n_failed, wall, backend, n_workers, written
     )
