@@ -20,9 +20,17 @@ def _is_ml_model(path: str) -> bool:
 
 
 def _export(args: argparse.Namespace) -> Path:
-    from .physics.fmu import build_fmu, export_physics_fmu
+    from .physics.fmu import FmuError, build_fmu, export_physics_fmu
+    from .physics.fmu.physics import check_export_options
 
+    check_export_options(args.substeps, args.step, args.stop_time)  # before any work
     if _is_ml_model(args.model):
+        if args.substeps is not None:
+            raise FmuError(
+                f"{args.model}: --substeps sets the ROS2 steps of a fitted physics model; "
+                "an ML model has none to set (a hybrid's physics keeps the substeps it was "
+                "trained with)"
+            )
         from .physics.fmu.adapters import ml_program_from, std_terms_not_exported
         from .residual_ml import check_model, load_model
 
@@ -99,9 +107,20 @@ def register(sub) -> None:
         choices=["command", "measured"],
         help="inputs: nominal current + dither (command, default) or measured current",
     )
-    p.add_argument("--substeps", type=int, default=None, help="ROS2 steps per step (default 4)")
+    p.add_argument(
+        "--substeps",
+        type=int,
+        default=None,
+        help="physics models: ROS2 steps per internal step of at most 1 ms, 1..16 (default 4)",
+    )
     p.add_argument("--name", default=None, help="model identifier (default clutch_circuit_DRIVE)")
-    p.add_argument("--step", type=float, default=1e-3, help="communication step, s (1e-3)")
+    p.add_argument(
+        "--step",
+        type=float,
+        default=1e-3,
+        help="communication step of the FMU's default experiment, s (1e-3); the FMU "
+        "integrates in internal steps of at most 1 ms at any communication step",
+    )
     p.add_argument("--stop-time", type=float, default=23.0, help="default experiment stop, s")
     p.add_argument(
         "--no-std", action="store_true", help="ML models: no predictive-std output (faster)"

@@ -10,7 +10,7 @@ from ..parameters import ParameterSet
 from ..settings import SimulationSettings
 from .build import build_fmu
 from .errors import FmuError
-from .physics import physics_program
+from .physics import check_export_options, physics_program
 
 __all__ = ["export_physics_fmu", "physics_source"]
 
@@ -83,11 +83,14 @@ def export_physics_fmu(
         or the measured coil current (``measured``, replaying logs); see
         :func:`~clutchlab.physics.fmu.physics.physics_program`.
     substeps : int, optional
-        ROS2 steps per ``step_s`` (default: the simulator's, 4).
+        ROS2 steps per internal step (1 … 16; default: the simulator's, 4). The internal
+        step is at most 1 ms (:data:`~clutchlab.physics.fmu.physics.INTERNAL_STEP_S`),
+        whatever the communication step.
     name : str, optional
         Model identifier (default ``clutch_circuit_<drive>``).
     step_s : float
-        Nominal communication step (s), 1 ms for a 1 kHz loop.
+        Communication step of the default experiment (s), 1 ms for a 1 kHz loop. Only the
+        default experiment: a longer step (e.g. 10 ms) is split into internal steps.
     stop_time_s : float
         Default experiment stop time (s).
     settings : SimulationSettings, optional
@@ -97,7 +100,14 @@ def export_physics_fmu(
     -------
     Path
         The FMU written.
+
+    Raises
+    ------
+    FmuError
+        ``source`` is not a fitted model, or ``substeps`` / ``step_s`` / ``stop_time_s``
+        are out of range (checked first, before the model is read or anything compiled).
     """
+    check_export_options(substeps, step_s, stop_time_s)
     model, params = physics_source(source)
     program = physics_program(
         model, params, drive, substeps, settings, name, step_s=step_s, stop_time_s=stop_time_s

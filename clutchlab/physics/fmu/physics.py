@@ -9,6 +9,8 @@ the simulator does on a trace. Initialization repeats the simulator's settling r
 
 from __future__ import annotations
 
+import math
+
 import casadi as ca
 
 from ...errors import ModelError
@@ -17,11 +19,29 @@ from ..integrator import sample_step_function
 from ..model import CircuitModel
 from ..parameters import ParameterSet
 from ..settings import SimulationSettings
+from .errors import FmuError
 from .program import FmuProgram, FmuVariable
 
-__all__ = ["DRIVES", "FMU_INPUTS", "physics_program"]
+__all__ = [
+    "DRIVES",
+    "FMU_INPUTS",
+    "INTERNAL_STEP_S",
+    "SUBSTEPS_RANGE",
+    "check_export_options",
+    "physics_program",
+]
 
 DRIVES = ("command", "measured")
+
+#: Longest internal step of a physics FMU (s): the simulator's sample step on 1 kHz data, at
+#: which models are fitted and checked (``substeps`` ROS2 steps inside it, 0.25 ms at the
+#: default 4). A longer communication step is split into internal steps of at most this;
+#: the FMU refuses a ``max_step_s`` parameter above it (at 10 ms, ROS2 with 4 substeps
+#: diverges on a 0→1100 mA ramp; at 1 s the clutch pressure reaches 240 bar).
+INTERNAL_STEP_S = 1e-3
+
+#: Allowed ROS2 substeps per internal step (as ``clutchlab fit-physics --substeps``).
+SUBSTEPS_RANGE = (1, 16)
 
 #: FMU inputs per drive: canonical signal name, unit, description, start value.
 FMU_INPUTS: dict[str, tuple[tuple[str, str, str, float], ...]] = {
@@ -64,6 +84,48 @@ def _model_inputs(drive: str, v: ca.SX, dv: ca.SX, phase: ca.SX, waves: ca.SX) -
     return ca.vertcat(*u)
 
 
+def check_export_options(
+    substeps: int | None = None, step_s: float = 1e-3, stop_time_s: float = 23.0
+) -> None:
+    """Refuse export options that would build a wrong FMU, before any work is done.
+
+    Parameters
+    ----------
+    substeps : int, optional
+        ROS2 steps per internal step: an integer in :data:`SUBSTEPS_RANGE` (1 … 16), or
+        None (the default).
+    step_s : float
+        Default experiment communication step (s): finite and > 0.
+    stop_time_s : float
+        Default experiment stop time (s): finite and > ``step_s``.
+
+    Raises
+    ------
+    FmuError
+        Every problem found, one per line.
+    """
+    lo, hi = SUBSTEPS_RANGE
+    problems = []
+    if substeps is not None and (
+        isinstance(substeps, bool) or int(substeps) != substeps or not lo <= substeps <= hi
+    ):
+        problems.append(
+            f"substeps must be {lo}..{hi} (ROS2 steps per internal step of "
+            f"{INTERNAL_STEP_S * 1e3:g} ms), not {substeps!r}"
+        )
+    if not (isinstance(step_s, int | float) and math.isfinite(step_s) and step_s > 0):
+        problems.append(f"step must be a positive number of seconds, not {step_s!r}")
+    elif not (
+        isinstance(stop_time_s, int | float) and math.isfinite(stop_time_s) and stop_time_s > step_s
+    ):
+        problems.append(
+            f"stop time must be a number of seconds above the step ({step_s:g} s), "
+            f"not {stop_time_s!r}"
+        )
+    if problems:
+        raise FmuError("invalid FMU export options", problems)
+
+
 def physics_program(
     model: CircuitModel,
     params: ParameterSet,
@@ -90,24 +152,37 @@ def physics_program(
         the measured coil current (mA, dither included) — replaying stand logs; its slope
         over a step comes from the input derivative (set it, or the current is held).
     substeps : int, optional
-        ROS2 steps per communication step of ``step_s``; default ``settings.substeps``.
+        ROS2 steps per internal step of :data:`INTERNAL_STEP_S` (1 ms), 1 … 16; default
+        ``settings.substeps`` (4).
     settings : SimulationSettings, optional
         Settling time and waveform defaults (the simulator's defaults otherwise).
     name : str, optional
         Model identifier; default ``<model.name>_<drive>``.
     step_s : float
-        Nominal communication step (s); longer steps are split into pieces of at most this.
+        Communication step of the default experiment (s), > 0. It does not change what
+        the FMU computes: whatever step the master takes, the FMU integrates in internal
+        steps of at most ``max_step_s`` (parameter; start and upper bound
+        :data:`INTERNAL_STEP_S`).
     stop_time_s : float
-        Default experiment stop time (s).
+        Default experiment stop time (s), > ``step_s``.
 
     Returns
     -------
     FmuProgram
+
+    Raises
+    ------
+    FmuError
+        ``substeps`` outside 1 … 16, or a step or stop time that is not a positive number
+        (checked before anything is built).
+    ModelError
+        An unknown ``drive``.
     """
     if drive not in DRIVES:
         raise ModelError(f"drive must be one of {DRIVES}, not {drive!r}")
+    check_export_options(substeps, step_s, stop_time_s)
     settings = settings or SimulationSettings()
-    substeps = substeps or settings.substeps
+    substeps = settings.substeps if substeps is None else int(substeps)
     fns = model.functions(drive)
     nx_m, npar_m = fns.nx, len(fns.parameters)
     spec = FMU_INPUTS[drive] + _COMMON_INPUTS
@@ -137,13 +212,15 @@ def physics_program(
         FmuVariable(
             "settle_s", "s", "settling run at the initial inputs before t = 0", settings.settle_s
         ),
-        FmuVariable("settle_step_s", "s", "step of the settling run", step_s),
+        FmuVariable("settle_step_s", "s", "step of the settling run", INTERNAL_STEP_S),
         FmuVariable(
             "max_step_s",
             "s",
             f"longest internal step ({substeps} ROS2 substeps each); longer communication "
-            "steps are split",
-            step_s,
+            f"steps are split; at most {INTERNAL_STEP_S:g} s (refused above)",
+            INTERNAL_STEP_S,
+            None,
+            INTERNAL_STEP_S,
         ),
     )
     parameters = model_pars + extra
@@ -188,7 +265,8 @@ def physics_program(
         name=ident,
         description=(
             f"clutchlab physics model of the clutch control circuit ({drive} drive; "
-            f"effects: {effects}); ROS2, {substeps} substeps per {step_s * 1e3:g} ms step"
+            f"effects: {effects}); ROS2, {substeps} substeps per internal step of at most "
+            f"{INTERNAL_STEP_S * 1e3:g} ms"
         ),
         kind="physics",
         inputs=inputs,
@@ -201,6 +279,7 @@ def physics_program(
         output=output,
         step_s=step_s,
         stop_time_s=stop_time_s,
+        max_step_s=INTERNAL_STEP_S,
         annotations={
             "kind": "physics",
             "drive": drive,

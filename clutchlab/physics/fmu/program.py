@@ -90,9 +90,15 @@ class FmuProgram:
     start, settle, step, output : casadi.Function
         See the module docstring; ``settle`` may be None.
     step_s : float
-        Nominal communication step (s), the default experiment's step size.
+        Communication step of the default experiment (s): its ``stepSize`` only; it does
+        not change what the FMU computes.
     stop_time_s : float
         Default experiment stop time (s).
+    max_step_s : float
+        Longest internal step the model is accurate at (s). ``fmi2DoStep`` splits a longer
+        communication step into equal internal steps of at most this (of at most the
+        ``max_step_s`` parameter, when the program declares one: that parameter must be
+        ``> 0`` and ``≤`` this, else ``fmi2ExitInitializationMode`` refuses it).
     annotations : dict
         Extra ``key → value`` strings written into the clutchlab vendor annotation.
     constants : tuple of ndarray
@@ -113,6 +119,7 @@ class FmuProgram:
     output: ca.Function
     step_s: float = 1e-3
     stop_time_s: float = 10.0
+    max_step_s: float = 1e-3
     annotations: dict[str, str] = field(default_factory=dict)
     constants: tuple[np.ndarray, ...] = ()
 
@@ -146,6 +153,14 @@ class FmuProgram:
                 )
         if not 0 < self.step_s < self.stop_time_s:
             problems.append(f"step_s {self.step_s} must be in (0, stop_time_s)")
+        if not (np.isfinite(self.max_step_s) and self.max_step_s > 0):
+            problems.append(f"max_step_s {self.max_step_s} must be finite and > 0")
+        k = self.parameter_index("max_step_s")
+        if k >= 0 and not 0 < self.parameters[k].start <= self.max_step_s:
+            problems.append(
+                f"parameter max_step_s starts at {self.parameters[k].start}, outside "
+                f"(0, {self.max_step_s}] (max_step_s)"
+            )
         if problems:
             raise ModelError("invalid FMU program:\n  - " + "\n  - ".join(problems))
 
