@@ -46,6 +46,8 @@ def _export(args: argparse.Namespace) -> Path:
             with_std=not args.no_std,
             approximate_didt=args.approximate_didt,
             name=args.name,
+            step_s=args.step,
+            stop_time_s=args.stop_time,
         )
         return build_fmu(program, args.out)
     return export_physics_fmu(

@@ -191,3 +191,48 @@ def test_train_causal_cli_then_export_fmu(tmp_path):
     )
     assert res.returncode == 0, res.stderr
     assert "fmpy.validation: no problems" in res.stdout
+
+
+def _resampled(trace, step_s: float):
+    """``trace`` on a grid of ``step_s`` (every signal linear between its samples)."""
+    t = np.asarray(trace.time_s, dtype=float)
+    grid = t[0] + step_s * np.arange(round((t[-1] - t[0]) / step_s) + 1)
+    signals = {k: np.interp(grid, t, np.asarray(v, dtype=float)) for k, v in trace.signals.items()}
+    signals["time_s"] = grid
+    return type(trace)(trace.name, signals, trace.meta), grid
+
+
+def test_causal_model_is_exact_at_any_communication_step():
+    """The causal dI/dt used to assume 1 ms between FMU steps (``DidtSpec.sample_s``): at
+    0.1 ms steps it was 10× too steep over a 10× too short window (5.3 bar from the model
+    on the medium ramp). The FMU now resamples the current to 1 ms by its own clock: at
+    0.1 ms and at 10 ms steps (inputs linear over a step, as ``FmuPhysics`` sets them) it
+    gives the in-process model's values at the 1 ms sample instants."""
+    model = _model("gp_didt")
+    model.set_params(knot_tol=0.0)
+    fmu = build_fmu(ml_program_from(model, with_std=False, name="any_step"), TMP / "any.fmu")
+    trace = _stand()[1][0]
+    t = np.asarray(trace.time_s, dtype=float)
+    ref = model.predict(trace)
+    for step_s, every in ((1e-4, 10), (1e-2, 1)):
+        fine, grid = _resampled(trace, step_s)
+        y = FmuPhysics(fmu, isolate=False).predict(fine)
+        on = slice(None, None, every)  # the grid points on 1 ms instants
+        err = np.abs(y[on] - np.interp(grid[on], t, ref))
+        print(f"{step_s * 1e3:g} ms: max |FMU - in-process| at 1 ms instants {err.max():.2e} bar")
+        assert err.max() <= SAME_BAR
+
+
+def test_ml_export_step_sets_the_default_experiment_and_bounds_the_internal_step(tmp_path):
+    """``export-fmu --step`` was ignored for ML models (1 ms default experiment); the
+    internal step of an ML FMU is at most the 1 ms of its causal features."""
+    import fmpy
+
+    program = ml_program_from(_model("gp_didt"), with_std=False, step_s=0.01, stop_time_s=5.0)
+    assert (program.step_s, program.stop_time_s, program.max_step_s) == (0.01, 5.0, 1e-3)
+    k = program.parameter_index("max_step_s")
+    assert program.parameters[k].start == 1e-3 and program.parameters[k].max == 1e-3
+    fmu = build_fmu(program, tmp_path / "m.fmu")
+    assert fmpy.read_model_description(str(fmu)).defaultExperiment.stepSize == "0.01"
+    with pytest.raises(Exception, match="fmi2ExitInitializationMode"):
+        fmpy.simulate_fmu(str(fmu), stop_time=0.1, start_values={"max_step_s": 0.01})

@@ -236,6 +236,8 @@ def ml_program_from(
     with_std: bool = True,
     approximate_didt: bool = False,
     name: str | None = None,
+    step_s: float = 1e-3,
+    stop_time_s: float = 23.0,
 ) -> FmuProgram:
     """The FMU program of a fitted ``GPBaseline`` / ``GPWithDerivative`` /
     ``SVCPartitionedGP`` / ``HybridModel``.
@@ -260,6 +262,12 @@ def ml_program_from(
         FMU then differs from the model at ramp reversals (approximate export).
     name : str, optional
         Model identifier (default ``clutch_<class name>``).
+    step_s : float
+        Communication step of the FMU's default experiment (s). The FMU is correct at any
+        communication step: its causal dI/dt resamples the current to the 1 ms samples of
+        the features (:class:`~.ml.DidtSpec`) and a longer step is split internally.
+    stop_time_s : float
+        Default experiment stop time (s).
 
     Raises
     ------
@@ -311,4 +319,6 @@ def ml_program_from(
         name=ident,
         lag=lag,
         latched_line=getattr(est, "latched_reference_", "none") == "line",
+        step_s=step_s,
+        stop_time_s=stop_time_s,
     )

@@ -6,6 +6,15 @@ latch classifier, a :class:`DidtSpec` for the causal dI/dt and direction feature
 :func:`ml_program` turns them into an :class:`~clutchlab.physics.fmu.program.FmuProgram` —
 standalone, or on top of a physics program (hybrid: physics pressure + residual GP).
 
+The causal dI/dt and direction are defined on samples 1 ms apart (``DidtSpec.sample_s``, the
+rate the feature builder computes them at on 1 kHz data), and so is the lagged current
+(``LagSpec.sample_s``). The FMU resamples its current input to that rate by time, whatever
+the communication step: a sample clock in the state puts the input's value at each instant
+``t₀ + k · sample_s`` into the slope buffer and the lag (inputs linear over a step, with the
+derivative the master sets; held otherwise); between instants the slope, direction and lag
+are those of the newest sample. A communication step longer than ``sample_s`` is split into
+internal steps of at most it (:attr:`FmuProgram.max_step_s`).
+
 Per step the FMU evaluates the features at the step's end, the decision (> 0: latched,
 then only the latched GP is evaluated) and the GP: ``n·d`` kernel terms for the mean and,
 for the standard deviation (``with_std``), ``m·d`` kernel terms on the GP's std points and a
@@ -444,6 +453,10 @@ class DidtSpec:
     """Causal dI/dt of the nominal current (least-squares slope over the last N samples)
     and the direction of travel it implies.
 
+    The samples are ``sample_s`` apart in time (1 ms: the rate the model's features were
+    computed at on 1 kHz data); the FMU resamples its input to them by its own sample
+    clock, so the slope does not depend on the communication step (module docstring).
+
     ``N = causal_window(periods · fs / f)`` with ``fs = 1 / sample_s`` and ``f`` the dither
     frequency input: the window of :func:`clutchlab.data.causal_didt` as the feature builder
     uses it (``didt_causal_mA_s``), at most ``max_samples`` (255: 5 periods down to 19.7 Hz
@@ -483,7 +496,8 @@ class LagSpec:
 
     ``y ← a·y + (1 − a)·I`` per sample, ``a = exp(−1 / (tau_s · fs))``, ``fs = 1 /
     sample_s``, starting at the initial current: the exact discretization
-    :func:`clutchlab.data.first_order_lag` uses offline.
+    :func:`clutchlab.data.first_order_lag` uses offline. The FMU updates it at its sample
+    instants, ``sample_s`` apart in time whatever the communication step (module docstring).
     """
 
     tau_s: float
@@ -533,6 +547,8 @@ def ml_program(
     description: str = "",
     lag: LagSpec | None = None,
     latched_line: bool = False,
+    step_s: float | None = None,
+    stop_time_s: float | None = None,
 ) -> FmuProgram:
     """The FMU program of a GP model (one GP, or one per latch state with a decision).
 
@@ -559,6 +575,11 @@ def ml_program(
     latched_line : bool
         The latched GP predicts the offset below line pressure: the latched output is the
         ``line_pressure_bar`` input plus its mean (standalone models with a decision only).
+    step_s : float, optional
+        Communication step of the default experiment (s); default the physics program's,
+        else 1 ms. What the FMU computes does not depend on it (module docstring).
+    stop_time_s : float, optional
+        Default experiment stop time (s); default the physics program's, else 23 s.
 
     Returns
     -------
@@ -596,18 +617,40 @@ def ml_program(
     nb = didt.max_samples if use_didt else 0
     nd = 1 if "direction_causal" in features else 0  # the held direction of travel
     nl = 1 if "current_lag_mA" in features else 0  # the lagged current
+    # The sample clock of the sampled features: time since the last sample instant (s).
+    clocks = {didt.sample_s} if use_didt else set()
+    clocks |= {lag.sample_s} if nl else set()
+    if len(clocks) > 1:
+        raise ModelError(
+            f"the causal dI/dt and the lag are sampled at {didt.sample_s} s and "
+            f"{lag.sample_s} s: the FMU resamples its input to one rate"
+        )
+    ts = clocks.pop() if clocks else None
+    nt = 1 if ts is not None else 0
     npx = physics.nx if physics is not None else 0
+    # Internal steps of at most one sample: a step then reaches at most one sample instant.
+    max_step = min(physics.max_step_s if physics is not None else 1e-3, ts or math.inf)
     pars = physics.parameters if physics is not None else ()
     if physics is None:
-        step_s = didt.sample_s if didt is not None else 1e-3
-        pars = (FmuVariable("max_step_s", "s", "longest internal step", step_s),)
+        pars = (
+            FmuVariable(
+                "max_step_s",
+                "s",
+                f"longest internal step; longer communication steps are split; at most "
+                f"{max_step:g} s (refused above)",
+                max_step,
+                None,
+                max_step,
+            ),
+        )
     npar = len(pars)
     const = _Constants()
-    nx = max(npx + nb + nd + nl, 1)
+    nx = max(npx + nb + nd + nl + nt, 1)
     x = ca.MX.sym("x", nx)
     v, dv, h, p = ca.MX.sym("v", nv), ca.MX.sym("dv", nv), ca.MX.sym("h"), ca.MX.sym("p", npar)
     xp, buf, dir0 = _rows(x, 0, npx), _rows(x, npx, npx + nb), _rows(x, npx + nb, npx + nb + nd)
     lag0 = _rows(x, npx + nb + nd, npx + nb + nd + nl)
+    tau0 = _rows(x, npx + nb + nd + nl, npx + nb + nd + nl + nt)
 
     def features_at(
         vv: ca.MX, buffer: ca.MX, previous: ca.MX, lagged: ca.MX, phys_bar: ca.MX | None
@@ -657,20 +700,38 @@ def ml_program(
         return ca.vertcat(*out), direction
 
     v1 = v + h * dv
-    buf1 = ca.vertcat(v1[0], _rows(buf, 0, nb - 1)) if nb else buf
+    buf1, lag1, tau1 = buf, lag0, tau0
+    if nt:
+        # The sample clock: a step (h ≤ ts, the wrapper splits longer ones) reaches the
+        # next sample instant when h ≥ ts − tau; the current there (inputs linear over the
+        # step: held when the master sets no derivative) is the new sample of the slope
+        # buffer and of the lag, as the feature builder computes them on samples ts apart.
+        due = ts - tau0[0]
+        push = h >= due - 1e-9 * ts
+        v_at = v[0] + ca.fmin(ca.fmax(due, 0.0), h) * dv[0]
+        tau1 = ca.if_else(push, ca.fmax(h - due, 0.0), tau0[0] + h)
+        if nb:
+            buf1 = ca.if_else(push, ca.vertcat(v_at, _rows(buf, 0, nb - 1)), buf)
+        if nl:
+            a = lag.pole
+            lag1 = ca.if_else(push, a * lag0 + (1.0 - a) * v_at, lag0)
     if physics is not None:
         xp1, yp1 = physics.step(xp, v, dv, h, p)
     else:
         xp1, yp1 = xp, None
-    a = lag.pole if nl else 0.0
-    lag1 = a * lag0 + (1.0 - a) * v1[0] if nl else lag0
     y_step, dir1 = outputs(yp1, v1, buf1, dir0, lag1)
-    x1 = ca.vertcat(xp1, buf1, dir1 if nd else dir0, lag1)
+    x1 = ca.vertcat(xp1, buf1, dir1 if nd else dir0, lag1, tau1)
     yp0 = physics.output(xp, v, p) if physics is not None else None
     y_out, _ = outputs(yp0, v, buf, dir0, lag0)
     t_pre = ca.MX.sym("t_pre")
-    pad = ca.MX.zeros(nx - npx - nb - nd - nl, 1)
-    rest = ca.vertcat(ca.repmat(v[0], nb, 1), ca.MX.zeros(nd, 1), ca.repmat(v[0], nl, 1), pad)
+    pad = ca.MX.zeros(nx - npx - nb - nd - nl - nt, 1)
+    rest = ca.vertcat(
+        ca.repmat(v[0], nb, 1),
+        ca.MX.zeros(nd, 1),
+        ca.repmat(v[0], nl, 1),
+        ca.MX.zeros(nt, 1),
+        pad,
+    )
     if x1.shape[0] < nx:
         x1 = ca.vertcat(x1, pad)
     cs = const.symbols
@@ -729,8 +790,11 @@ def ml_program(
         settle=settle,
         step=step,
         output=output,
-        step_s=physics.step_s if physics is not None else 1e-3,
-        stop_time_s=physics.stop_time_s if physics is not None else 23.0,
+        step_s=step_s if step_s is not None else (physics.step_s if physics else 1e-3),
+        stop_time_s=stop_time_s
+        if stop_time_s is not None
+        else (physics.stop_time_s if physics is not None else 23.0),
+        max_step_s=max_step,
         annotations={
             **(physics.annotations if physics is not None else {}),
             "kind": kind,
