@@ -14,7 +14,7 @@ from fmu_support import exported, fit_json
 from clutchlab.data import load_dataset, save_dataset
 from clutchlab.errors import ClutchlabError
 from clutchlab.physics.fit import PhysicsFitter
-from clutchlab.physics.fmu import FmuPhysics
+from clutchlab.physics.fmu import FmuError, FmuPhysics
 from clutchlab.residual_ml import HybridModel, PhysicsPredictor
 from clutchlab.validation import Protocol
 from clutchlab.validation.evaluate import resolve_variants
@@ -91,3 +91,55 @@ def test_physics_fmu_variants_replace_the_fitted_physics_under_the_hybrid():
     assert both == ["physics_fitted", FMU_VARIANT, "hybrid"]
     assert FMU_VARIANT in resolve_variants(None, specs)
     assert fmu.label in specs[FMU_VARIANT].description
+
+
+def test_fmu_parameter_outside_its_declared_range_is_refused():
+    """``--fmu-param vfs_K_m=-5`` was accepted although the FMU declares min 5, max 30
+    (RMSE 10 bar); now every bad value is named with its bounds, before any run."""
+    fmu = exported("measured")
+    with pytest.raises(FmuError) as exc:
+        FmuPhysics(fmu, parameters={"vfs_K_m": -5.0, "reg_F0": float("nan")})
+    text = str(exc.value)
+    assert "vfs_K_m = -5 N/A: outside the FMU's declared range [5, 30] N/A" in text
+    assert "reg_F0 = nan: not a finite number" in text
+    with pytest.raises(FmuError, match=r"vfs_K_m = 31 N/A: outside .* \[5, 30\]"):
+        FmuPhysics(fmu, start_values={"vfs_K_m": 31.0})
+    FmuPhysics(fmu, parameters={"vfs_K_m": 30.0})  # the bound itself is inside
+
+
+def test_fmu_parameters_set_and_left_at_start_value_are_reported():
+    """``evaluate --help`` promised the parameters left at the FMU's start value in the
+    report; neither report.md nor metrics.json named any parameter. Now metrics.json's
+    ``physics_fmu`` lists those set, set from each experiment and left at start value, and
+    the variant's description (report and metrics.json) names them."""
+    from clutchlab.data import Dataset
+    from clutchlab.physics.stand import RAMPS, DitherSetting, StandConfig, run_stand
+    from clutchlab.validation.evaluate import evaluate
+
+    config = StandConfig(
+        settings=(DitherSetting(50.0, "B", "sine"),),
+        ramps=(RAMPS["fast"], RAMPS["medium"]),
+        seed=5,
+    )
+    data = Dataset(list(run_stand(config, progress=False).dataset))
+    fmu = FmuPhysics(exported("measured"), parameters={"vfs_K_m": 14.0}, isolate=False)
+    ev = evaluate(
+        data,
+        variants=[FMU_VARIANT],
+        train=("fast",),
+        test=("medium",),
+        physics_fmu=fmu,
+        progress=False,
+        classifiers=False,
+        bands=False,
+    )
+    doc = json.loads(json.dumps(ev.to_dict(), default=str))
+    info = doc["physics_fmu"]
+    assert info["parameters_set"] == {"vfs_K_m": 14.0}
+    assert "dither_wave_sine" in info["parameters_from_trace"]
+    left = info["parameters_at_start_value"]
+    assert "vfs_K_m" not in left and left["reg_F_c"] == pytest.approx(1.08)
+    description = doc["details"][FMU_VARIANT]["description"]
+    assert "parameters set: vfs_K_m = 14" in description
+    assert f"left at the FMU's start value ({len(left)}): " in description
+    assert "reg_F_c" in description

@@ -154,8 +154,11 @@ def test_fmu_state_get_set_and_serialize_restore_the_step():
 
 
 def test_diverging_parameters_give_an_error_from_the_fmu():
-    """A NaN parameter: initialization fails and the FMU's own message is in the error."""
-    physics = FmuPhysics(exported("command"), start_values={"reg_m": float("nan")})
+    """A dither waveform weight of 1e200 (a parameter without declared bounds):
+    initialization fails and the FMU's own message is in the error. (A NaN parameter is
+    refused before the FMU runs: ``test_fmu_parameter_outside_its_declared_range_is_refused``.)
+    """
+    physics = FmuPhysics(exported("command"), start_values={"dither_wave_sine": 1e200})
     with pytest.raises(SimulationError, match=r"settling run .* diverged"):
         physics.predict(medium_trace())
 

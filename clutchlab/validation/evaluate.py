@@ -458,6 +458,13 @@ def evaluate(
             "label": str(getattr(physics_fmu, "label", "")),
             "timeout_s": getattr(physics_fmu, "timeout_s", None),
         }
+        if hasattr(physics_fmu, "parameter_summary"):
+            summary = physics_fmu.parameter_summary()
+            ev.extra["physics_fmu"] |= {
+                "parameters_set": summary["set"],
+                "parameters_from_trace": sorted(summary["from_trace"]),
+                "parameters_at_start_value": summary["start_value"],
+            }
     total_fit: dict[str, float] = {}
     bar = tqdm(names, desc="variants", unit="variant", disable=not progress)
     for name in bar:

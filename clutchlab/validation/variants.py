@@ -497,12 +497,30 @@ for _name, _cls in _ML_CLASSES.items():
 FMU_VARIANT = "physics_fmu"
 
 
+def _fmu_parameter_text(fmu: Any) -> str:
+    """The FMU's parameters for the variant's description: those set, those set from each
+    experiment, those left at the FMU's start value (empty without ``parameter_summary``)."""
+    if not hasattr(fmu, "parameter_summary"):
+        return ""
+    summary = fmu.parameter_summary()
+    given = ", ".join(f"{k} = {v:g}" for k, v in summary["set"].items())
+    parts = [f"parameters set: {given or 'none'}"]
+    if summary["from_trace"]:
+        parts.append("set from each experiment: " + ", ".join(summary["from_trace"]))
+    left = summary["start_value"]
+    if left:
+        parts.append(f"left at the FMU's start value ({len(left)}): " + ", ".join(left))
+    return "; " + "; ".join(parts)
+
+
 def fmu_variants(fmu: Any) -> dict[str, VariantSpec]:
     """Variant specs that use an FMU as the physics model, overriding the registry.
 
     ``physics_fmu`` scores the FMU itself (nothing is fitted; scored like
     ``physics_fitted``); ``hybrid`` trains its residual model on top of the FMU instead of
-    the fitted in-process physics.
+    the fitted in-process physics. The description of ``physics_fmu`` (in the report and
+    ``metrics.json``) lists the FMU's parameters set, set from each experiment and left at
+    the FMU's start value.
 
     Parameters
     ----------
@@ -519,7 +537,8 @@ def fmu_variants(fmu: Any) -> dict[str, VariantSpec]:
     specs = {
         FMU_VARIANT: VariantSpec(
             FMU_VARIANT,
-            f"physics model from the FMU {label} (FMI 2.0, simulated with FMPy), not fitted",
+            f"physics model from the FMU {label} (FMI 2.0, simulated with FMPy), not fitted"
+            + _fmu_parameter_text(fmu),
             lambda ctx: fmu,
             layer="physics (FMU)",
         )

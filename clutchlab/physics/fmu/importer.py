@@ -119,8 +119,10 @@ class FmuPhysics(BaseEstimator):
         FMU parameter name → value (in the FMU's unit), set before initialization.
     parameters : dict, optional
         The same as ``start_values`` (the name vendor tools use); both may be given, a
-        parameter in both with two values is an error. Every parameter left at the FMU's
-        own start value is listed in each simulation's messages.
+        parameter in both with two values is an error. A value must be a finite number
+        inside the parameter's declared ``min`` / ``max``. Every parameter left at the
+        FMU's own start value is listed in each simulation's messages and in
+        :meth:`parameter_summary`.
     timeout_s : float
         Wall-time limit of one trace's simulation (s).
     isolate : bool
@@ -137,7 +139,8 @@ class FmuPhysics(BaseEstimator):
     ------
     FmuError
         At construction, when the file is not a usable FMI 2.0 co-simulation FMU or its
-        interface does not fit (every problem listed).
+        interface does not fit, or a parameter value is unknown, not finite or outside
+        the FMU's declared range (every problem listed).
 
     Examples
     --------
@@ -175,6 +178,51 @@ class FmuPhysics(BaseEstimator):
                 f"{fmu}: start_values for unknown parameter(s) {', '.join(unknown)}; "
                 f"its parameters: {', '.join(self.interface_.parameters) or 'none'}"
             )
+        bad = _out_of_range(self._declared(), given)
+        if bad:
+            raise FmuError(f"{fmu}: parameter value(s) the FMU does not accept", bad)
+
+    def _declared(self) -> dict[str, tuple[float | None, float | None, float | None, str]]:
+        """Every parameter: name → (start, min, max, unit) as declared (None: absent)."""
+        out = {}
+        for v in self.interface_.model_description.modelVariables:
+            if v.causality == "parameter":
+                out[v.name] = (
+                    _number(v.start),
+                    _number(v.min),
+                    _number(v.max),
+                    str(v.unit or getattr(v.declaredType, "unit", None) or ""),
+                )
+        return out
+
+    def parameter_summary(self) -> dict[str, dict[str, float | None]]:
+        """Which parameters the simulations set, and which keep the FMU's start value.
+
+        Returns
+        -------
+        dict
+            ``"set"``: name → value given (``parameters`` / ``start_values``, in the FMU's
+            unit); ``"from_trace"``: name → None for a clutchlab FMU's trace-dependent
+            parameters, set from each trace (dither waveform weights, settling step) unless
+            given; ``"start_value"``: name → the FMU's declared start value of every other
+            parameter.
+        """
+        given = self._given_parameters()
+        itf = self.interface_
+        from_trace = set()
+        if itf.clutchlab:
+            from_trace = {f"dither_wave_{w}" for w in _WAVES} | {"settle_step_s"}
+            from_trace &= set(itf.parameters)
+        declared = self._declared()
+        return {
+            "set": {k: float(v) for k, v in given.items()},
+            "from_trace": {k: None for k in itf.parameters if k in from_trace and k not in given},
+            "start_value": {
+                k: declared.get(k, (None,))[0]
+                for k in itf.parameters
+                if k not in given and k not in from_trace
+            },
+        }
 
     def _given_parameters(self) -> dict[str, float]:
         """``start_values`` and ``parameters`` merged; a clash of values is an error."""
@@ -291,6 +339,38 @@ class FmuPhysics(BaseEstimator):
             fmu=str(self.fmu),
             messages=messages,
         )
+
+
+def _number(text) -> float | None:
+    """A declared attribute (FMPy keeps it as text) as a float; None when absent."""
+    if text is None or text == "":
+        return None
+    try:
+        return float(text)
+    except (TypeError, ValueError):
+        return None
+
+
+def _out_of_range(declared: dict, given: dict[str, float]) -> list[str]:
+    """Problems of ``given`` parameter values against the declared ``min`` / ``max``."""
+    problems = []
+    for name, value in given.items():
+        _, lo, hi, unit = declared.get(name, (None, None, None, ""))
+        unit = f" {unit}" if unit else ""
+        try:
+            x = float(value)
+        except (TypeError, ValueError):
+            problems.append(f"{name} = {value!r}: not a number")
+            continue
+        if not np.isfinite(x):
+            problems.append(f"{name} = {value!r}: not a finite number")
+        elif (lo is not None and x < lo) or (hi is not None and x > hi):
+            span = f"[{'-inf' if lo is None else f'{lo:g}'}, {'inf' if hi is None else f'{hi:g}'}]"
+            problems.append(
+                f"{name} = {x:g}{unit}: outside the FMU's declared range {span}{unit} "
+                "(min / max in modelDescription.xml)"
+            )
+    return problems
 
 
 def _extracted(path: Path) -> Path:
