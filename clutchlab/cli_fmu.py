@@ -135,4 +135,4 @@ def register(sub) -> None:
         "reversals (retrain with --causal for an exact FMU)",
     )
     p.add_argument("--json", help="write a summary as JSON here")
-    p.set_defaults(func=_cmd_export_fmu)
+    p.set_defaults(func=_cmd_export_fmu, file_out="fmu")

@@ -39,6 +39,20 @@ def test_export_fmu_cli_writes_a_valid_fmu_and_json(tmp_path):
     assert doc["validation_problems"] == []
 
 
+def test_export_fmu_out_never_replaces_a_users_file_or_the_input(tmp_path):
+    """An earlier FMU is replaced; a user's file of another kind, or the fit itself, never."""
+    from clutchlab.cli import main
+
+    fit = fit_json()
+    mine = tmp_path / "own.fmu"
+    mine.write_text("my notes, not an FMU")
+    assert main(["export-fmu", str(fit), "--out", str(mine)]) == 2
+    assert mine.read_text() == "my notes, not an FMU"
+    before = fit.read_bytes()
+    assert main(["export-fmu", str(fit), "--out", str(fit)]) == 2
+    assert fit.read_bytes() == before
+
+
 def test_export_fmu_cli_names_a_file_that_is_not_a_fit(tmp_path):
     bad = tmp_path / "params.json"
     bad.write_text('{"vfs_K_m": 14.0}')
