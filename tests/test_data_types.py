@@ -261,3 +261,38 @@ def test_dataset_rejects_duplicates_and_builds_manifest():
     }
     with pytest.raises(DataError, match=r"'noramp'.*no ramp label"):
         Dataset([make_trace("noramp", ramp=None)]).manifest()
+
+
+# ---- argument checks of the derived-signal helpers (a new-user session's API findings) -----
+
+
+def test_pressure_metrics_needs_equal_shapes_before_broadcasting():
+    from clutchlab.data import pressure_metrics
+
+    y = np.linspace(0.0, 10.0, 100)
+    for predicted in (5.0, [5.0], y[:50]):  # a scalar broadcast to a "fit" before
+        with pytest.raises(ValueError, match="same shape"):
+            pressure_metrics(y, predicted)
+
+
+def test_first_order_lag_refuses_bad_arguments():
+    from clutchlab.data import first_order_lag
+
+    x = np.linspace(0.0, 1.0, 50)
+    for tau, fs in ((float("nan"), 1000.0), (-0.1, 1000.0), (0.1, 0.0), (0.1, -1000.0)):
+        with pytest.raises(DataError):
+            first_order_lag(x, tau, fs)
+    with pytest.raises(DataError, match="non-finite value at row 3"):
+        first_order_lag(np.array([0.0, 1.0, np.nan]), 0.1, 1000.0)
+    np.testing.assert_array_equal(first_order_lag(x, 0.0, 1000.0), x)
+
+
+def test_window_and_crossing_lengths_are_checked():
+    from clutchlab.data import dither_period_mean, first_crossing
+
+    with pytest.raises(DataError, match="one value or one per sample"):
+        dither_period_mean(np.zeros(10), np.full(3, 2.0))
+    with pytest.raises(DataError, match="same length"):
+        first_crossing(np.arange(3.0), np.array([-1.0, -0.5, 0.5, 1.0]), True)
+    with pytest.raises(DataError, match="same length"):
+        first_crossing(np.arange(5.0), np.array([-1.0, 1.0]), True)

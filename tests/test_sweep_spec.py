@@ -153,3 +153,17 @@ def test_cli_dry_run_and_spec_error(tmp_path, capsys):
     assert "clutchlab sweep: error:" in err and "unknown parameter 'vfs_dorf'" in err
     assert "vfs_d_orf" in err
     assert not (tmp_path / "r.parquet.parts").exists()  # nothing written for a bad spec
+
+
+def test_a_step_spec_built_in_code_is_checked_too():
+    """load_spec checked the step; StepSpec(...) and ramp_trace(rate 0) failed deep inside."""
+    from clutchlab.errors import ModelError
+    from clutchlab.physics.design.scenario import ramp_trace
+    from clutchlab.physics.design.spec import ScenarioSpec, SpecError, StepSpec
+
+    for kw in ({"duration_s": -0.2}, {"from_mA": -300.0}, {"hold_s": float("nan")}):
+        with pytest.raises(SpecError, match=r"\[scenario\.step\]"):
+            StepSpec(**kw)
+    scenario = ScenarioSpec()
+    with pytest.raises(ModelError, match="sample_rate_Hz must be > 0"):
+        ramp_trace(scenario.ramps[0], None, scenario, 0.0)

@@ -10,6 +10,8 @@ its log was irregular or multi-rate).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -60,11 +62,17 @@ def dither_period_mean(x: ArrayLike, n: float | ArrayLike) -> np.ndarray:
     Raises
     ------
     DataError
-        If ``x`` is not 1-D or has non-finite values, or ``n`` is not positive and finite.
+        If ``x`` is not 1-D or has non-finite values, or ``n`` is not positive and finite, or
+        is neither one value nor one per sample.
     """
     arr = _finite_1d(x, "x")
     size = arr.size
-    width = np.broadcast_to(np.asarray(n, dtype=np.float64), (size,))
+    n_arr = np.asarray(n, dtype=np.float64)
+    if n_arr.ndim > 1 or (n_arr.ndim == 1 and n_arr.size not in (1, size)):
+        raise DataError(
+            f"window length n must be one value or one per sample ({size}), got shape {n_arr.shape}"
+        )
+    width = np.broadcast_to(n_arr, (size,))
     if size == 0:
         return arr.copy()
     if not np.isfinite(width).all() or (width <= 0).any():
@@ -215,11 +223,21 @@ def first_order_lag(x: np.ndarray, tau_s: float, sample_rate_Hz: float) -> np.nd
     -------
     numpy.ndarray
         The lagged signal, in the units of ``x``.
+
+    Raises
+    ------
+    DataError
+        If ``x`` is not 1-D or not finite, ``tau_s`` is negative or not finite, or
+        ``sample_rate_Hz`` is not positive and finite.
     """
     from scipy.signal import lfilter
 
-    x = np.asarray(x, dtype=float)
-    if tau_s <= 0 or x.size == 0:
+    x = _finite_1d(x, "x")
+    if not (math.isfinite(tau_s) and tau_s >= 0):
+        raise DataError(f"time constant tau_s must be finite and >= 0 s, got {tau_s!r}")
+    if not (math.isfinite(sample_rate_Hz) and sample_rate_Hz > 0):
+        raise DataError(f"sample_rate_Hz must be finite and > 0, got {sample_rate_Hz!r}")
+    if tau_s == 0 or x.size == 0:
         return x.copy()
     a = np.exp(-1.0 / (tau_s * sample_rate_Hz))
     y, _ = lfilter([1.0 - a], [1.0, -a], x, zi=[a * x[0]])
@@ -259,9 +277,16 @@ def first_crossing(x: ArrayLike, g: ArrayLike, upward: bool) -> float:
     -------
     float
         ``x`` at the crossing (unit of ``x``); NaN when ``g`` never crosses that way.
+
+    Raises
+    ------
+    DataError
+        If ``x`` and ``g`` are not 1-D arrays of the same length.
     """
     i = np.asarray(x, dtype=float)
     g = np.asarray(g, dtype=float)
+    if i.ndim != 1 or i.shape != g.shape:
+        raise DataError(f"x {i.shape} and g {g.shape} must be 1-D and of the same length")
     above = g >= 0
     hit = (above[1:] & ~above[:-1]) if upward else (~above[1:] & above[:-1])
     k = np.flatnonzero(hit)

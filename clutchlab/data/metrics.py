@@ -20,9 +20,12 @@ def pressure_metrics(measured: np.ndarray, predicted: np.ndarray) -> dict[str, f
     dict with ``rmse_bar``, ``mae_bar``, ``max_abs_bar``, ``fit_pct``.
     """
     y = np.asarray(measured, dtype=float)
-    e = np.asarray(predicted, dtype=float) - y
-    if y.shape != e.shape or y.size == 0:
-        raise ValueError(f"measured {y.shape} and predicted {e.shape} must be equal, non-empty")
+    p = np.asarray(predicted, dtype=float)
+    if y.shape != p.shape or y.size == 0:  # checked before any broadcasting
+        raise ValueError(
+            f"measured {y.shape} and predicted {p.shape} must have the same shape, non-empty"
+        )
+    e = p - y
     return {
         "rmse_bar": float(np.sqrt(np.mean(e * e))),
         "mae_bar": float(np.mean(np.abs(e))),

@@ -9,11 +9,13 @@ a design point's numbers depend on its design vector only.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from ...data import Trace
+from ...errors import ModelError
 from ..stand.scenarios import RampProfile, dither_amplitude
 from .spec import ScenarioSpec, StepSpec
 
@@ -65,6 +67,15 @@ def _trace(
     return Trace(name, signals, meta=meta)
 
 
+def _sample_step(sample_rate_Hz: float) -> float:
+    """The sample interval (s) of a positive, finite rate (Hz)."""
+    if not (isinstance(sample_rate_Hz, int | float) and math.isfinite(sample_rate_Hz)):
+        raise ModelError(f"sample_rate_Hz must be a finite number, got {sample_rate_Hz!r}")
+    if sample_rate_Hz <= 0:
+        raise ModelError(f"sample_rate_Hz must be > 0, got {sample_rate_Hz!r}")
+    return 1.0 / sample_rate_Hz
+
+
 def ramp_trace(
     ramp: RampProfile, dither: DitherChoice, scenario: ScenarioSpec, sample_rate_Hz: float
 ) -> Trace:
@@ -77,7 +88,7 @@ def ramp_trace(
         line / prime pressure (bar) and oil temperature (°C); clutch pressure zero (a
         placeholder: the simulation supplies it).
     """
-    dt = 1.0 / sample_rate_Hz
+    dt = _sample_step(sample_rate_Hz)
     t = np.arange(0.0, ramp.duration_s + 0.5 * dt, dt)
     return _trace(f"ramp_{ramp.label}", t, ramp.current(t), dither, scenario, "ramp")
 
@@ -94,7 +105,7 @@ def step_trace(
     t_step_s : float
         Time of the step (s).
     """
-    dt = 1.0 / sample_rate_Hz
+    dt = _sample_step(sample_rate_Hz)
     t = np.arange(0.0, step.hold_s + step.duration_s + 0.5 * dt, dt)
     i = np.where(t < step.hold_s, step.from_mA, step.to_mA)
     return _trace("step", t, i, dither, scenario, "step"), float(t[t >= step.hold_s][0])

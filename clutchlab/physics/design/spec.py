@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import tomllib
 from dataclasses import asdict, dataclass, field
 from functools import lru_cache
@@ -113,6 +114,22 @@ class StepSpec:
     to_mA: float = 700.0
     hold_s: float = 0.3
     duration_s: float = 0.5
+
+    def problems(self) -> list[str]:
+        """What is wrong with this step (empty when nothing is), each naming its key."""
+        out = []
+        values = (self.from_mA, self.to_mA, self.hold_s, self.duration_s)
+        if not all(isinstance(v, int | float) and math.isfinite(v) for v in values):
+            return [f"[scenario.step] needs finite numbers, got {values}"]
+        if not (0 <= self.from_mA <= 1100 and 0 <= self.to_mA <= 1100):
+            out.append("[scenario.step] from_mA and to_mA must be in 0–1100 mA")
+        if self.from_mA == self.to_mA or self.hold_s <= 0 or self.duration_s <= 0:
+            out.append("[scenario.step] needs from_mA ≠ to_mA, hold_s > 0, duration_s > 0")
+        return out
+
+    def __post_init__(self) -> None:
+        if problems := self.problems():
+            raise SpecError(problems, "StepSpec")
 
 
 @dataclass(frozen=True)

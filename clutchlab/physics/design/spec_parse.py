@@ -206,13 +206,12 @@ def _parse_scenario(doc: dict, problems: list[str]) -> ScenarioSpec:
     if tab.get("step", {}) is not False:
         st = _table(tab, "step", {"from_mA", "to_mA", "hold_s", "duration_s"}, problems)
         d = StepSpec()
-        step = StepSpec(
-            *(_number(st, k, "[scenario.step]", getattr(d, k), problems) for k in asdict(d))
-        )
-        if not (0 <= step.from_mA <= 1100 and 0 <= step.to_mA <= 1100):
-            problems.append("[scenario.step] from_mA and to_mA must be in 0–1100 mA")
-        if step.from_mA == step.to_mA or step.hold_s <= 0 or step.duration_s <= 0:
-            problems.append("[scenario.step] needs from_mA ≠ to_mA, hold_s > 0, duration_s > 0")
+        values = [_number(st, k, "[scenario.step]", getattr(d, k), problems) for k in asdict(d)]
+        try:
+            step = StepSpec(*values)
+        except SpecError as exc:  # every problem of the spec is listed together
+            problems.extend(exc.problems)
+            step = d
     d = ScenarioSpec()
     return ScenarioSpec(
         ramps=tuple(ramps) or d.ramps,
