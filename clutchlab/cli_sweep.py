@@ -4,33 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import warnings
 
+from .cli_types import nonnegative_float, positive_int
+
 __all__ = ["register"]
-
-
-def _workers(text: str) -> int:
-    """``--workers``: an integer ≥ 1 (an argparse error, exit 2, before any work)."""
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be an integer ≥ 1, not {text!r}") from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"must be ≥ 1 (worker processes), not {n}")
-    return n
-
-
-def _flush_s(text: str) -> float:
-    """``--flush-s``: seconds ≥ 0 (0: after every batch), finite."""
-    try:
-        s = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a number of seconds, not {text!r}") from None
-    if not (math.isfinite(s) and s >= 0):
-        raise argparse.ArgumentTypeError(f"must be ≥ 0 s and finite, not {text}")
-    return s
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
@@ -112,7 +91,7 @@ def register(sub) -> None:
     p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786): run there")
     p.add_argument(
         "--workers",
-        type=_workers,
+        type=positive_int,
         default=None,
         help="local worker processes, ≥ 1 (default: CPU count; 1 = in this process)",
     )
@@ -121,7 +100,7 @@ def register(sub) -> None:
     p.add_argument("--no-figures", action="store_true", help="no tornado / scatter figures")
     p.add_argument(
         "--flush-s",
-        type=_flush_s,
+        type=nonnegative_float,
         default=5.0,
         metavar="S",
         help="write finished points to disk at least every S seconds, ≥ 0 (default 5; 0: after "
