@@ -47,9 +47,10 @@ def _spec(n=4, seed=0, **extra) -> SweepSpec:
     return SweepSpec.from_dict(doc | extra)
 
 
-def _write_toml(path: Path, n: int) -> Path:
+def _write_toml(path: Path, n: int, name: str = "kill") -> Path:
+    """A spec whose point takes ~0.05 s (0.6 s ramp, no step), ``n`` LHS points."""
     path.write_text(
-        f"""name = "kill"
+        f"""name = "{name}"
 [scenario]
 ramps = [{{label = "short", ramp_s = 0.6, hold_s = 0.2}}]
 step = false

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import psutil
 import pytest
+from test_sweep_run import _write_toml
 
 from clutchlab.errors import OutputError
 from clutchlab.physics.design.runner import output_lock
@@ -41,30 +42,7 @@ def tiny_spec(tmp_path, n=2, extra=""):
 
 def short_spec(tmp_path, n=4):
     """A spec whose point takes ~0.05 s (0.6 s ramp, no step)."""
-    path = tmp_path / "short.toml"
-    path.write_text(
-        f"""name = "short"
-[scenario]
-ramps = [{{label = "short", ramp_s = 0.6, hold_s = 0.2}}]
-step = false
-[simulation]
-settle_s = 0.2
-[sampling]
-method = "lhs"
-n = {n}
-seed = 5
-[[variables]]
-name = "vfs_d_orf"
-low = 0.35
-high = 0.6
-[[variables]]
-name = "reg_k"
-low = 10.0
-high = 20.0
-""",
-        encoding="utf-8",
-    )
-    return path
+    return _write_toml(tmp_path / "short.toml", n, name="short")
 
 
 def base_doc(**over):
