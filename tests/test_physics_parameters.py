@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import casadi as ca
@@ -93,3 +94,67 @@ def test_orifice_flow_is_odd_and_follows_the_pressure_drop(dp, area):
     if abs(dp) > 1e6:  # turbulent limit: Cd·A·sqrt(2|Δp|/ρ) within 0.01 %
         exact = 0.65 * area * math.sqrt(2 * abs(dp) / 850.0)
         assert abs(q) == pytest.approx(exact, rel=1e-4)
+
+
+def test_parameter_values_are_read_only_and_still_save_and_pickle(tmp_path):
+    """``values`` of the immutable, bounds-checked set cannot be changed in place (a
+    written ``q.values["reg_F_c"] = -50.0`` reached the simulation unchecked); saving,
+    pickling, copying and ``replace`` still work."""
+    import copy
+    import pickle
+
+    q = CircuitModel().default_params()
+    with pytest.raises(TypeError):
+        q.values["reg_F_c"] = -50.0
+    with pytest.raises(TypeError):
+        del q.values["reg_F_c"]
+    assert q["reg_F_c"] == q.spec("reg_F_c").default
+    assert pickle.loads(pickle.dumps(q)) == q
+    assert copy.deepcopy(q) == q
+    new = q.replace(reg_F_c=0.8)
+    assert new["reg_F_c"] == 0.8 and dict(new.values) != dict(q.values)
+    back = ParameterSet.from_json(q.parameters, new.to_json(tmp_path / "p.json"))
+    assert back == new
+
+
+def test_parameter_json_problems_are_all_listed():
+    """A misspelt top-level key gave the defaults silently; malformed entries a KeyError
+    or AttributeError; a JSON list was taken for a file name."""
+    params = CircuitModel().parameters
+    unit = {p.name: p.unit for p in params}
+    with pytest.raises(ModelError) as err:
+        ParameterSet.from_json(params, '{"parameter": {"reg_k": {"value": 20, "unit": "N/mm"}}}')
+    text = str(err.value)
+    assert "unknown top-level key 'parameter' (did you mean 'parameters'?)" in text
+    assert "'parameters' is missing" in text
+    doc = {
+        "parameters": {
+            "reg_k": {"unit": unit["reg_k"]},
+            "reg_F0": [1.0],
+            "reg_F_c": {"value": "1.0", "unit": unit["reg_F_c"]},
+            "vfs_K_m": {"value": 1.0, "unit": "furlong"},
+            "latch_k": {"value": 1e9, "unit": unit["latch_k"]},
+            "reg_kk": {"value": 1.0, "unit": unit["reg_k"]},
+        }
+    }
+    with pytest.raises(ModelError) as err:
+        ParameterSet.from_json(params, json.dumps(doc))
+    text = str(err.value)
+    for part in (
+        "reg_k: 'value' is missing",
+        'reg_F0: must be {"value": ..., "unit": ...}, not a list',
+        "reg_F_c: value '1.0' is not a number",
+        "vfs_K_m: unit 'furlong'",
+        "latch_k = 1000000000.0",
+        "reg_kk: unknown parameter (did you mean 'reg_k'?)",
+    ):
+        assert part in text
+    for source in ("[1]", " [1, 2]"):
+        with pytest.raises(ModelError, match="top level must be an object"):
+            ParameterSet.from_json(params, source)
+    with pytest.raises(ModelError, match="'parameters' must be an object, not a list"):
+        ParameterSet.from_json(params, '{"parameters": []}')
+    with pytest.raises(ModelError, match="not JSON"):
+        ParameterSet.from_json(params, '{"parameters": ')
+    with pytest.raises(ModelError, match="cannot read parameter file"):
+        ParameterSet.from_json(params, "no/such/file.json")

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import difflib
 import json
 import math
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import MappingProxyType
 from typing import Literal
 
 import numpy as np
@@ -118,6 +120,13 @@ class ParameterSet(Mapping[str, float]):
         The model's parameters, in model order.
     values : dict, optional
         Overrides of the defaults, ``name -> value`` in each parameter's unit.
+
+    Attributes
+    ----------
+    values : mapping
+        Every parameter's value (engineering units), read-only
+        (:class:`types.MappingProxyType`): a value is changed with :meth:`replace`,
+        which checks its bounds.
     """
 
     parameters: tuple[Parameter, ...]
@@ -136,7 +145,12 @@ class ParameterSet(Mapping[str, float]):
             full[p.name] = v
         if problems:
             raise ModelError("invalid parameter values:\n  - " + "\n  - ".join(problems))
-        object.__setattr__(self, "values", full)
+        object.__setattr__(self, "values", MappingProxyType(full))
+
+    def __reduce__(self):
+        # a mappingproxy does not pickle (nor deep-copy): rebuild from a plain dict, which
+        # also checks the values again
+        return (type(self), (self.parameters, dict(self.values)))
 
     def __getitem__(self, name: str) -> float:
         try:
@@ -194,25 +208,108 @@ class ParameterSet(Mapping[str, float]):
 
     @classmethod
     def from_json(cls, parameters: Iterable[Parameter], source: str | Path) -> ParameterSet:
-        """Read values written by :meth:`to_json` (a path or JSON text); units are checked."""
+        """Read values written by :meth:`to_json` (a path or JSON text); units are checked.
+
+        Parameters
+        ----------
+        parameters : iterable of Parameter
+            The model's parameters.
+        source : str or Path
+            A file, or JSON text (starting with ``{`` or ``[``):
+            ``{"parameters": {name: {"value": v, "unit": u}}}``, values in ``u``, which must be
+            the parameter's unit. Parameters not listed keep their defaults.
+
+        Returns
+        -------
+        ParameterSet
+
+        Raises
+        ------
+        ModelError
+            If the file cannot be read or is not JSON, or listing every problem of the
+            content: a missing or misspelt top-level key, an entry that is not
+            ``{"value": number, "unit": str}``, an unknown parameter, a wrong unit, a value
+            not finite or outside its bounds.
+        """
         parameters = tuple(parameters)
-        text = Path(source).read_text(encoding="utf-8") if _is_path(source) else str(source)
-        doc = json.loads(text)
-        specs = {p.name: p for p in parameters}
-        values, problems = {}, []
-        for name, entry in doc.get("parameters", {}).items():
-            if name in specs and entry.get("unit") != specs[name].unit:
-                problems.append(
-                    f"{name}: unit {entry.get('unit')!r}, expected {specs[name].unit!r}"
-                )
-            values[name] = entry["value"]
+        where = "parameter JSON text"
+        if _is_path(source):
+            where = f"parameter file {source}"
+            try:
+                text = Path(source).read_text(encoding="utf-8")
+            except (OSError, ValueError) as exc:
+                raise ModelError(f"cannot read {where}: {exc}") from exc
+        else:
+            text = str(source)
+        try:
+            doc = json.loads(text)
+        except (json.JSONDecodeError, RecursionError) as exc:
+            raise ModelError(f"{where} is not JSON: {exc}") from exc
+        values, problems = _read_values(doc, {p.name: p for p in parameters})
         if problems:
-            raise ModelError("parameter file has wrong units:\n  - " + "\n  - ".join(problems))
+            raise ModelError(f"invalid {where}:\n  - " + "\n  - ".join(problems))
         return cls(parameters, values)
 
 
+def _read_values(doc, specs: dict[str, Parameter]) -> tuple[dict[str, float], list[str]]:
+    """Values and every problem of a :meth:`ParameterSet.to_json` document."""
+    if not isinstance(doc, dict):
+        return {}, [f'the top level must be an object {{"parameters": ...}}, not {_kind(doc)}']
+    problems = []
+    for key in doc:
+        if key != "parameters":
+            close = difflib.get_close_matches(str(key), ["parameters"], n=1)
+            hint = " (did you mean 'parameters'?)" if close else ""
+            problems.append(f"unknown top-level key {key!r}{hint}")
+    if "parameters" not in doc:
+        problems.append("the top-level key 'parameters' is missing")
+        return {}, problems
+    entries = doc["parameters"]
+    if not isinstance(entries, dict):
+        return {}, [*problems, f"'parameters' must be an object, not {_kind(entries)}"]
+    values = {}
+    for name, entry in entries.items():
+        spec = specs.get(name)
+        if spec is None:
+            close = difflib.get_close_matches(str(name), list(specs), n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            problems.append(f"{name}: unknown parameter{hint}")
+            continue
+        if not isinstance(entry, dict):
+            problems.append(f'{name}: must be {{"value": ..., "unit": ...}}, not {_kind(entry)}')
+            continue
+        for key in entry:
+            if key not in ("value", "unit"):
+                problems.append(f"{name}: unknown key {key!r} (an entry has 'value' and 'unit')")
+        unit_ok = entry.get("unit") == spec.unit
+        if "unit" not in entry:
+            problems.append(f"{name}: 'unit' is missing (expected {spec.unit!r})")
+        elif not unit_ok:
+            problems.append(f"{name}: unit {entry['unit']!r}, expected {spec.unit!r}")
+        value = entry.get("value")
+        if "value" not in entry:
+            problems.append(f"{name}: 'value' is missing")
+        elif not isinstance(value, int | float) or isinstance(value, bool):
+            problems.append(f"{name}: value {value!r} is not a number")
+        else:
+            msg = spec.check(float(value)) if unit_ok else None  # bounds are in spec.unit
+            if msg:
+                problems.append(msg)
+            values[name] = float(value)
+    return values, problems
+
+
+def _kind(value) -> str:
+    """A JSON value's kind, for messages (``a list``, ``a string``)."""
+    kinds = {dict: "an object", list: "a list", str: "a string", bool: "a boolean"}
+    if value is None:
+        return "null"
+    return kinds.get(type(value), "a number")
+
+
 def _is_path(source) -> bool:
+    """A file name, not JSON text (which starts with an object or a list)."""
     if isinstance(source, Path):
         return True
     s = str(source)
-    return not s.lstrip().startswith("{") and len(s) < 4096
+    return not s.lstrip().startswith(("{", "[")) and len(s) < 4096
