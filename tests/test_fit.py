@@ -523,3 +523,16 @@ def test_ctrl_c_during_a_solve_interrupts_the_fit(small_data, monkeypatch):
         _fit(small_data, staged_start=False, max_iter=50)
     assert 3 <= calls["n"] < 12  # it stopped at the next iteration, not at the limit
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_a_start_of_another_model_is_a_fit_error(small_data):
+    """A start built for the base model, fitted with ``sensor_lag`` on, gave a bare
+    ``KeyError: "unknown parameter 'slag_tau'"``."""
+    model = CircuitModel()
+    fitter = PhysicsFitter(
+        model.with_effects("sensor_lag"),
+        FitSettings(progress=False, train_ramps=("fast",)),
+        start=model.default_params(),
+    )
+    with pytest.raises(FitError, match=r"start: .*\n.*missing \(the model has them\): slag_kappa"):
+        fitter.fit(small_data)

@@ -158,3 +158,20 @@ def test_parameter_json_problems_are_all_listed():
         ParameterSet.from_json(params, '{"parameters": ')
     with pytest.raises(ModelError, match="cannot read parameter file"):
         ParameterSet.from_json(params, "no/such/file.json")
+
+
+def test_a_parameter_set_of_another_model_is_refused_by_name():
+    """A set is read by position; one of another model with as many parameters was
+    simulated silently with shifted values."""
+    m = CircuitModel()
+    lag, delay = m.with_effects("sensor_lag"), m.with_effects("transport_delay")
+    with pytest.raises(ModelError) as err:
+        lag.default_params().for_model(delay.parameters)
+    assert "missing (the model has them): delay_d, delay_d0" in str(err.value)
+    assert "extra (the model does not have them): slag_kappa, slag_tau" in str(err.value)
+    ps = m.default_params()
+    assert ps.for_model(m.parameters) is ps
+    # same names in another order: rebuilt in the model's order
+    reordered = ParameterSet(tuple(reversed(m.parameters)), {"reg_k": 20.0})
+    again = reordered.for_model(m.parameters)
+    assert again.parameters == m.parameters and again["reg_k"] == 20.0

@@ -206,6 +206,53 @@ class ParameterSet(Mapping[str, float]):
             write_file_atomic(path, (text + "\n").encode("utf-8"), overwrite=True)
         return text
 
+    def for_model(
+        self, parameters: Iterable[Parameter], model_name: str = "the model"
+    ) -> ParameterSet:
+        """This set, checked to belong to a model whose parameters are ``parameters``.
+
+        A model's functions take the values as a vector in model order, so a set built
+        for another model (other effects, another latch law) would be read by position.
+
+        Parameters
+        ----------
+        parameters : iterable of Parameter
+            The model's parameters, in model order.
+        model_name : str
+            The model's name, for the message.
+
+        Returns
+        -------
+        ParameterSet
+            ``self`` when built for these parameters; a set rebuilt in the model's order
+            and checked against its bounds when the names are the same.
+
+        Raises
+        ------
+        ModelError
+            If the parameter names differ: lists the model's parameters missing from the
+            set and the set's parameters the model does not have.
+        """
+        parameters = tuple(parameters)
+        if parameters is self.parameters or parameters == self.parameters:
+            return self
+        mine = [p.name for p in self.parameters]
+        theirs = [p.name for p in parameters]
+        missing = [n for n in theirs if n not in frozenset(mine)]
+        extra = [n for n in mine if n not in frozenset(theirs)]
+        if missing or extra:
+            problems = []
+            if missing:
+                problems.append(f"missing (the model has them): {', '.join(missing)}")
+            if extra:
+                problems.append(f"extra (the model does not have them): {', '.join(extra)}")
+            raise ModelError(
+                f"the parameter set was built for another model, not for {model_name} "
+                f"(the set has {len(mine)} parameters, the model {len(theirs)}); build it "
+                "with model.default_params() or model.params(...):\n  - " + "\n  - ".join(problems)
+            )
+        return ParameterSet(parameters, dict(self.values))
+
     @classmethod
     def from_json(cls, parameters: Iterable[Parameter], source: str | Path) -> ParameterSet:
         """Read values written by :meth:`to_json` (a path or JSON text); units are checked.

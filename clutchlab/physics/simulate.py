@@ -7,7 +7,7 @@ import time
 import numpy as np
 
 from ..data import Trace
-from ..errors import SimulationError
+from ..errors import ModelError, SimulationError
 from .assembly import MODEL_INPUTS
 from .dense_call import DenseCall
 from .inputs import choose_drive, input_matrix, interval_inputs
@@ -17,7 +17,7 @@ from .parameters import ParameterSet
 from .result import SimulationResult
 from .settings import SimulationSettings
 
-__all__ = ["simulate", "simulate_inputs"]
+__all__ = ["model_params", "simulate", "simulate_inputs"]
 
 
 def simulate(
@@ -46,11 +46,14 @@ def simulate(
 
     Raises
     ------
+    ModelError
+        If ``params`` is not a :class:`ParameterSet` of ``model`` (built for another
+        model: the message lists the missing and extra parameter names).
     SimulationError
         If the state becomes non-finite (the message names the time).
     """
     settings = settings or SimulationSettings()
-    params = params if params is not None else model.default_params()
+    params = model_params(model, params)
     drive = choose_drive(trace, settings)
     u = input_matrix(trace, drive, settings)
     t0 = time.perf_counter()
@@ -70,6 +73,38 @@ def simulate(
         wall_s=wall,
         inputs={s.name: u[:, k] for k, s in enumerate(MODEL_INPUTS)},
     )
+
+
+def model_params(model: CircuitModel, params: ParameterSet | None) -> ParameterSet:
+    """``params`` checked to be a parameter set of ``model`` (its defaults for None).
+
+    Parameters
+    ----------
+    model : CircuitModel
+        The model to simulate.
+    params : ParameterSet or None
+        Values in engineering units.
+
+    Returns
+    -------
+    ParameterSet
+        In ``model``'s parameter order (what its functions take by position).
+
+    Raises
+    ------
+    ModelError
+        If ``params`` is not a ParameterSet, or was built for a model with other
+        parameters (the message lists the missing and extra names).
+    """
+    if params is None:
+        return model.default_params()
+    if not isinstance(params, ParameterSet):
+        raise ModelError(
+            f"params must be a ParameterSet (model.params(name=value, ...)), "
+            f"not {type(params).__name__}"
+        )
+    effects = "effects " + ", ".join(model.effect_names) if model.effects else "no effects"
+    return params.for_model(model.parameters, f"model {model.name!r} ({effects})")
 
 
 def initial_state(fns: ModelFunctions, u0: np.ndarray) -> np.ndarray:
@@ -96,7 +131,7 @@ def simulate_inputs(
     running) precedes the trace unless ``x0`` is given.
     """
     fns = model.functions(drive)
-    p = params.vector()
+    p = model_params(model, params).vector()
     t = np.asarray(t, dtype=float)
     if x0 is None:
         x0 = initial_state(fns, u[0])

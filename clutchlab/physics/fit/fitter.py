@@ -111,7 +111,10 @@ class PhysicsFitter:
     settings : FitSettings, optional
         Free parameters, method, objective, limits.
     start : ParameterSet, optional
-        Starting values (and fixed values); the datasheet defaults by default.
+        Starting values (and fixed values), engineering units; the datasheet defaults by
+        default. It must be a set of ``model``'s parameters (``model.params(...)``): one
+        built for another model makes :meth:`fit` raise ``FitError`` naming the missing
+        and extra parameters.
 
     Notes
     -----
@@ -168,6 +171,19 @@ class PhysicsFitter:
             raise FitError("cannot fit:\n  - " + "\n  - ".join(problems))
         return traces
 
+    def _own_start(self, model: CircuitModel) -> ParameterSet:
+        """The user's start, checked to be a parameter set of ``model`` (ModelError if not)."""
+        if not isinstance(self.start, ParameterSet):
+            raise ModelError(
+                f"start must be a ParameterSet (model.params(name=value, ...)), "
+                f"not {type(self.start).__name__}"
+            )
+        effects = "effects " + ", ".join(model.effect_names) if model.effects else "no effects"
+        try:
+            return self.start.for_model(model.parameters, f"model {model.name!r} ({effects})")
+        except ModelError as exc:
+            raise ModelError(f"start: {exc}") from None
+
     @staticmethod
     def _check_bounds(model: CircuitModel, free, settings: FitSettings, start: ParameterSet):
         specs = {p.name: p for p in model.parameters}
@@ -206,7 +222,7 @@ class PhysicsFitter:
         model = self.model or CircuitModel()
         settings = self.settings or FitSettings()
         try:
-            start = self.start or model.default_params()
+            start = model.default_params() if self.start is None else self._own_start(model)
         except ModelError as exc:
             raise FitError(str(exc)) from exc
         traces = at_fit_rate(self._training(data), settings.fit_rate_Hz)
