@@ -536,3 +536,31 @@ def test_a_start_of_another_model_is_a_fit_error(small_data):
     )
     with pytest.raises(FitError, match=r"start: .*\n.*missing \(the model has them\): slag_kappa"):
         fitter.fit(small_data)
+
+
+def test_every_bad_fit_setting_is_listed_at_construction():
+    """NaN and infinite time limits, zero workers, negative counts and tolerances, NaN
+    segment lengths and non-integer counts were accepted."""
+    nan = float("nan")
+    bad = {
+        "time_limit_s": nan,
+        "workers": 0,
+        "multistart": -3,
+        "tol": -1.0,
+        "segment_s": nan,
+        "settle_s": -1.0,
+        "decimate": 2.5,
+        "substeps": 2.5,
+        "max_iter": nan,
+        "refine_max_iter": -1,
+        "prefit_samples": -1,
+    }
+    with pytest.raises(FitError) as err:
+        FitSettings(**bad)
+    text = str(err.value)
+    for name, value in bad.items():
+        assert f"{name} must be" in text and f"not {value!r}" in text, name
+    for kw in ({"time_limit_s": math.inf}, {"settle_s": 1e6}, {"workers": 1.0}):
+        with pytest.raises(FitError, match=next(iter(kw))):
+            FitSettings(**kw)
+    assert FitSettings(prefit_samples=0).prefit_samples == 0  # 0: no pre-fit, as None

@@ -136,3 +136,24 @@ def test_a_parameter_set_of_another_model_is_an_error(fast_ramp_trace):
         simulate(lag, PARAMS, tr)
     with pytest.raises(ModelError, match="must be a ParameterSet"):
         simulate(MODEL, {"reg_F_c": 1.2}, tr)
+
+
+def test_every_bad_simulation_setting_is_listed_at_construction():
+    """``settle_s`` NaN skipped the settling silently, 1e6 s asked for 89 GiB; a float
+    ``substeps`` / ``chunk`` and a negative Radau ``rtol`` failed deep inside."""
+    nan = float("nan")
+    with pytest.raises(ModelError) as err:
+        SimulationSettings(substeps=2.5, chunk=10.5, settle_s=nan, rtol=-1.0, atol=nan)
+    text = str(err.value)
+    for name in ("substeps 2.5", "chunk 10.5", "settle_s nan", "rtol -1.0", "atol nan"):
+        assert name in text
+    for kw in (
+        {"settle_s": 1e6},
+        {"settle_s": -1.0},
+        {"substeps": True},
+        {"oil_temp_C": nan},
+        {"method": "radau", "rtol": 2.0},
+    ):
+        with pytest.raises(ModelError, match=next(iter(kw.keys() - {"method"}))):
+            SimulationSettings(**kw)
+    SimulationSettings(substeps=np.int64(8), settle_s=60.0, chunk=1)  # the limits pass

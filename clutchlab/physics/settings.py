@@ -2,12 +2,25 @@
 
 from __future__ import annotations
 
+import math
+import numbers
 from dataclasses import dataclass
 from typing import Literal
 
+from ..data.signals import SIGNALS
 from ..errors import ModelError
 
-__all__ = ["SimulationSettings"]
+__all__ = ["MAX_CHUNK", "MAX_SETTLE_S", "MAX_SUBSTEPS", "SimulationSettings"]
+
+#: Longest settling run (s): the circuit's lags are below 0.1 s, and the run holds one
+#: state row per sample interval (10⁶ s at 1 kHz asked for 89 GiB).
+MAX_SETTLE_S = 60.0
+
+#: Most ROS2 substeps per sample interval (the generated code grows with the count).
+MAX_SUBSTEPS = 64
+
+#: Most samples per call of the compiled loop (its code and buffers grow with the count).
+MAX_CHUNK = 100_000
 
 
 @dataclass(frozen=True)
@@ -30,18 +43,27 @@ class SimulationSettings:
         the current loop. ``auto``: measured when ``current_mA`` is present.
     settle_s : float
         Duration (s) of a run at the first sample's inputs before the trace starts,
-        so that the initial state is the operating point, not a guess.
+        so that the initial state is the operating point, not a guess; 0 to
+        :data:`MAX_SETTLE_S` (60 s).
     compile : {"auto", "always", "never"}
         Generate and compile C for the ROS2 loop (cached on disk). ``auto``
         compiles when a C compiler is found, else interprets (slower, same result).
     chunk : int
-        Samples per call of the compiled loop.
+        Samples per call of the compiled loop, 1 to :data:`MAX_CHUNK`.
     rtol, atol : float
-        Tolerances of the ``radau`` method (relative; absolute in scaled state units).
+        Tolerances of the ``radau`` method (relative, in (0, 1); absolute in scaled state
+        units, > 0).
     dither_waveform : {"sine", "triangle", "square"}
         Waveform when the trace's metadata does not name one (``dither_waveform``).
     oil_temp_C : float
-        Oil temperature (°C) when the trace has no ``oil_temp_C`` signal.
+        Oil temperature (°C) when the trace has no ``oil_temp_C`` signal; within the
+        signal's plausible range (−40 to 180 °C).
+
+    Raises
+    ------
+    ModelError
+        Listing every invalid setting (a value of the wrong type, not finite or out of
+        its range).
     """
 
     method: Literal["ros2", "radau"] = "ros2"
@@ -59,17 +81,43 @@ class SimulationSettings:
         problems = []
         if self.method not in ("ros2", "radau"):
             problems.append(f"method {self.method!r} is not 'ros2' or 'radau'")
-        if not (1 <= self.substeps <= 64):
-            problems.append(f"substeps {self.substeps} not in 1..64")
+        if not _is_int(self.substeps) or not 1 <= self.substeps <= MAX_SUBSTEPS:
+            problems.append(f"substeps {self.substeps!r} is not an integer in 1..{MAX_SUBSTEPS}")
         if self.drive not in ("auto", "command", "measured"):
             problems.append(f"drive {self.drive!r} is not auto, command or measured")
         if self.compile not in ("auto", "always", "never"):
             problems.append(f"compile {self.compile!r} is not auto, always or never")
-        if self.settle_s < 0:
-            problems.append("settle_s must be ≥ 0")
-        if self.chunk < 1:
-            problems.append("chunk must be ≥ 1")
+        if not _is_real(self.settle_s) or not 0 <= self.settle_s <= MAX_SETTLE_S:
+            problems.append(f"settle_s {self.settle_s!r} is not a number in 0..{MAX_SETTLE_S:g} s")
+        if not _is_int(self.chunk) or not 1 <= self.chunk <= MAX_CHUNK:
+            problems.append(f"chunk {self.chunk!r} is not an integer in 1..{MAX_CHUNK}")
+        if not _is_real(self.rtol) or not 0 < self.rtol < 1:
+            problems.append(f"rtol {self.rtol!r} is not a number in (0, 1)")
+        if not _is_real(self.atol) or not self.atol > 0:
+            problems.append(f"atol {self.atol!r} is not a finite number > 0")
         if self.dither_waveform not in ("sine", "triangle", "square"):
             problems.append(f"dither_waveform {self.dither_waveform!r} unknown")
+        oil = SIGNALS["oil_temp_C"]
+        if not _is_real(self.oil_temp_C) or not (
+            oil.plausible_min <= self.oil_temp_C <= oil.plausible_max
+        ):
+            problems.append(
+                f"oil_temp_C {self.oil_temp_C!r} is not a number in "
+                f"{oil.plausible_min:g}..{oil.plausible_max:g} °C"
+            )
         if problems:
             raise ModelError("invalid simulation settings: " + "; ".join(problems))
+
+
+def _is_int(value) -> bool:
+    """An integer (a Python or NumPy one), not a bool."""
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+
+def _is_real(value) -> bool:
+    """A finite real number, not a bool."""
+    return (
+        isinstance(value, numbers.Real)
+        and not isinstance(value, bool)
+        and math.isfinite(float(value))
+    )

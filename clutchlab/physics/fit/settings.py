@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import math
+import numbers
 from dataclasses import dataclass, field
 from typing import Literal
 
 from ...budgets import FIT_BUDGET_S
 from ...errors import FitError
+from ..settings import MAX_SETTLE_S
 
 __all__ = ["DEFAULT_FREE", "FIT_BUDGET_S", "FitSettings"]
 
@@ -87,7 +90,7 @@ class FitSettings:
     prefit_samples : int or None
         When the training data hold more samples, first fit on a subset of about
         this many (experiments round-robin over the ramp labels), then refine on
-        all of them for at most ``refine_max_iter`` iterations. None: one stage.
+        all of them for at most ``refine_max_iter`` iterations. None or 0: one stage.
     refine_max_iter : int
         Iteration limit of the refinement on all training experiments.
     prefit_obj_change_tol : float
@@ -106,7 +109,7 @@ class FitSettings:
     tol : float
         IPOPT convergence tolerance.
     time_limit_s : float
-        Wall-clock limit of the whole fit (s): staged start, solver and result; the
+        Wall-clock limit of the whole fit (s, finite and > 0): staged start, solver and result; the
         solver stops at 88 % of it (the rest is kept for the result's per-experiment
         errors and uncertainty pass), starts no iteration that the previous ones say it
         cannot finish by then, and skips a refinement that cannot take its first
@@ -116,7 +119,8 @@ class FitSettings:
     seed : int
         Seed of the multistart draws.
     settle_s : float
-        Settling time (s) before each experiment, at its first inputs.
+        Settling time (s) before each experiment, at its first inputs; 0 to 60 s
+        (:data:`~clutchlab.physics.settings.MAX_SETTLE_S`).
     min_current_span_mA, min_pressure_span_bar : float
         An experiment whose current or pressure spans less carries no excitation.
     progress : bool
@@ -159,6 +163,14 @@ class FitSettings:
         iterate in ``exc.result``). Default False: the best iterate *is* the model, marked
         not converged (``result_.success`` False, its status) with a ``FitWarning``; only a
         fit that did not improve on its start raises.
+
+    Raises
+    ------
+    FitError
+        At construction, listing every invalid setting: a count that is not an integer in
+        its range (``substeps`` 1..16; ``decimate``, ``max_iter``, ``refine_max_iter``,
+        ``workers``, ``static_max_iter`` ≥ 1; ``multistart``, ``prefit_samples``, the
+        plateau counts ≥ 0), a time, tolerance or span that is not finite or out of range.
     """
 
     free: tuple[str, ...] | None = None
@@ -203,25 +215,70 @@ class FitSettings:
             problems.append(f"method {self.method!r} is not multiple_shooting or single_shooting")
         if self.objective not in ("period_mean", "raw"):
             problems.append(f"objective {self.objective!r} is not period_mean or raw")
-        if self.segment_s <= 0:
-            problems.append("segment_s must be > 0")
-        if not 1 <= self.substeps <= 16:
-            problems.append("substeps must be 1..16")
-        if self.decimate < 1:
-            problems.append("decimate must be ≥ 1")
+        if self.drive not in ("auto", "command", "measured"):
+            problems.append(f"drive {self.drive!r} is not auto, command or measured")
+        # integers: (name, smallest, largest or None)
+        for name, lo, hi in (
+            ("substeps", 1, 16),
+            ("decimate", 1, None),
+            ("max_iter", 1, None),
+            ("refine_max_iter", 1, None),
+            ("multistart", 0, None),
+            ("workers", 1, None),
+            ("prefit_plateau_iter", 0, None),
+            ("plateau_iter", 0, None),
+            ("static_max_iter", 1, None),
+        ):
+            value = getattr(self, name)
+            if not _is_int(value) or value < lo or (hi is not None and value > hi):
+                what = f"{lo}..{hi}" if hi is not None else f"≥ {lo}"
+                problems.append(f"{name} must be {what} (an integer), not {value!r}")
+        if not _is_int(self.seed):
+            problems.append(f"seed must be an integer, not {self.seed!r}")
+        if self.prefit_samples is not None and (
+            not _is_int(self.prefit_samples) or self.prefit_samples < 0
+        ):
+            problems.append(
+                "prefit_samples must be None or ≥ 0 (an integer; 0 or None: no pre-fit), "
+                f"not {self.prefit_samples!r}"
+            )
+        # finite reals: (name, condition, what it must be)
+        for name, ok, what in (
+            ("segment_s", lambda v: v > 0, "> 0 s"),
+            ("time_limit_s", lambda v: v > 0, "> 0 s"),
+            ("tol", lambda v: v > 0, "> 0"),
+            ("settle_s", lambda v: 0 <= v <= MAX_SETTLE_S, f"in 0..{MAX_SETTLE_S:g} s"),
+            ("snap_rate_bar_s", lambda v: v > 0, "> 0 bar/s"),
+            ("snap_guard_s", lambda v: v >= 0, "≥ 0 s"),
+            ("min_current_span_mA", lambda v: v >= 0, "≥ 0 mA"),
+            ("min_pressure_span_bar", lambda v: v >= 0, "≥ 0 bar"),
+            ("prefit_obj_change_tol", lambda v: v > 0, "> 0"),
+            ("static_time_fraction", lambda v: 0 < v < 1, "in (0, 1)"),
+        ):
+            value = getattr(self, name)
+            if not _is_real(value) or not ok(value):
+                problems.append(f"{name} must be {what} (a finite number), not {value!r}")
         if self.fit_rate_Hz is not None and not (
-            isinstance(self.fit_rate_Hz, (int, float)) and 0 < self.fit_rate_Hz < float("inf")
+            _is_real(self.fit_rate_Hz) and self.fit_rate_Hz > 0
         ):
             problems.append(f"fit_rate_Hz must be > 0 Hz or None, not {self.fit_rate_Hz!r}")
         if self.latch_law not in ("auto", "datasheet"):
             problems.append(f"latch_law {self.latch_law!r} is not auto or datasheet")
         if self.regulator_lag not in ("auto", "off"):
             problems.append(f"regulator_lag {self.regulator_lag!r} is not auto or off")
-        if not 0 < self.static_time_fraction < 1:
-            problems.append("static_time_fraction must be in (0, 1)")
-        if self.prefit_plateau_iter < 0 or self.plateau_iter < 0:
-            problems.append("prefit_plateau_iter and plateau_iter must be ≥ 0")
-        if self.max_iter < 1 or self.time_limit_s <= 0:
-            problems.append("max_iter and time_limit_s must be positive")
         if problems:
             raise FitError("invalid fit settings: " + "; ".join(problems))
+
+
+def _is_int(value) -> bool:
+    """An integer (a Python or NumPy one), not a bool."""
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+
+def _is_real(value) -> bool:
+    """A finite real number, not a bool."""
+    return (
+        isinstance(value, numbers.Real)
+        and not isinstance(value, bool)
+        and math.isfinite(float(value))
+    )
