@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from clutchlab.errors import DataError, ModelError
+from clutchlab.errors import DataError, ModelError, SimulationError
 from clutchlab.physics import CircuitModel, SimulationSettings, simulate, simulate_inputs
 from clutchlab.physics.inputs import input_matrix
 
@@ -157,3 +157,39 @@ def test_every_bad_simulation_setting_is_listed_at_construction():
         with pytest.raises(ModelError, match=next(iter(kw.keys() - {"method"}))):
             SimulationSettings(**kw)
     SimulationSettings(substeps=np.int64(8), settle_s=60.0, chunk=1)  # the limits pass
+
+
+def test_bad_inputs_are_named_before_anything_is_integrated(fast_ramp_trace):
+    """A 1-sample trace gave a numpy broadcast error; NaN in a current or dither frequency
+    and inf in the line pressure a SimulationError blaming the parameters ("the integrator
+    diverged"); a non-numeric metadata dither frequency a raw ValueError."""
+    from clutchlab.data import Trace
+
+    tr = fast_ramp_trace.slice_time(0, 0.2)
+    with pytest.raises(DataError, match="at least 2 samples"):
+        simulate(MODEL, PARAMS, tr.slice_time(0, 0))
+    cmd = np.array(tr.get("current_cmd_mA"))
+    cmd[50] = np.nan
+    line = np.array(tr.get("line_pressure_bar"))
+    line[70:80] = np.inf
+    with pytest.raises(DataError) as err:
+        simulate(MODEL, PARAMS, tr.with_signals(current_cmd_mA=cmd, line_pressure_bar=line))
+    text = str(err.value)
+    assert "signal 'current_cmd_mA' is nan at t = 0.05 s (sample 50" in text
+    assert "signal 'line_pressure_bar' is inf at t = 0.07 s (sample 70" in text
+    assert "9 more" in text and "diverged" not in text
+    measured = tr.with_signals(current_mA=cmd)
+    with pytest.raises(DataError, match=r"'current_mA' is nan at t = 0.05 s"):
+        simulate(MODEL, PARAMS, measured)
+    signals = {k: v for k, v in tr.signals.items() if k != "dither_freq_Hz"}
+    for value in ("abc", float("nan"), None):
+        bare = Trace("bare", signals, meta={"dither_freq_Hz": value})
+        with pytest.raises(DataError, match=r"metadata dither_freq_Hz = .* is not a finite"):
+            simulate(MODEL, PARAMS, bare)
+    # the core loop names the input column and sample, too
+    u = input_matrix(tr, "command", SimulationSettings())
+    u[10, 0] = np.nan
+    with pytest.raises(SimulationError, match=r"input \w+ is nan at t = 0.01 s \(sample 10\)"):
+        simulate_inputs(MODEL, PARAMS, tr.time_s, u, "command", SimulationSettings())
+    with pytest.raises(SimulationError, match="u N × "):
+        simulate_inputs(MODEL, PARAMS, tr.time_s, u[:, :3], "command", SimulationSettings())

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..data import Trace
@@ -26,11 +28,33 @@ def choose_drive(trace: Trace, settings: SimulationSettings) -> str:
     return settings.drive
 
 
-def _signal_or_meta(trace: Trace, name: str, fallback: float) -> np.ndarray:
+def _signal_or_meta(trace: Trace, name: str, fallback: float, problems: list[str]) -> np.ndarray:
+    """The signal ``name``, else the trace's metadata value of that key, else ``fallback``."""
     if trace.has(name):
         return np.asarray(trace.get(name), dtype=float)
     value = trace.meta.get(name, fallback)
-    return np.full(len(trace), float(value))
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        number = math.nan
+    if not math.isfinite(number):
+        problems.append(
+            f"metadata {name} = {value!r} is not a finite number (it stands for the "
+            f"absent {name} signal)"
+        )
+    return np.full(len(trace), number)
+
+
+def _check_finite(trace: Trace, name: str, values: np.ndarray, problems: list[str]) -> None:
+    """Add a problem naming the first sample (and time) where input ``name`` is not finite."""
+    bad = np.flatnonzero(~np.isfinite(values))
+    if bad.size:
+        k = int(bad[0])
+        more = f" and {bad.size - 1} more sample(s)" if bad.size > 1 else ""
+        problems.append(
+            f"signal {name!r} is {values[k]} at t = {trace.time_s[k]:.6g} s "
+            f"(sample {k}, row {k + 1}){more}"
+        )
 
 
 def input_matrix(trace: Trace, drive: str, settings: SimulationSettings) -> np.ndarray:
@@ -38,32 +62,59 @@ def input_matrix(trace: Trace, drive: str, settings: SimulationSettings) -> np.n
 
     The dither phase is the trapezoidal integral of the dither frequency; the
     waveform comes from ``trace.meta["dither_waveform"]`` or the settings.
+
+    Raises
+    ------
+    DataError
+        If the trace has fewer than 2 samples (the sample interval sets the integration
+        step), or listing every input signal that is not finite (with its first sample and
+        time) and every metadata value standing for an absent signal that is not a finite
+        number — found before anything is integrated.
     """
     t = trace.time_s
     n = len(trace)
+    if n < 2:
+        raise DataError(
+            f"{trace.name}: a simulation needs at least 2 samples (the sample interval sets "
+            f"the integration step); the trace has {n}"
+        )
+    problems: list[str] = []
     u = np.zeros((n, len(MODEL_INPUTS)))
     if trace.has("current_cmd_mA"):
         u[:, _IDX["current_nom_mA"]] = trace.get("current_cmd_mA")
+        _check_finite(trace, "current_cmd_mA", u[:, _IDX["current_nom_mA"]], problems)
     elif drive == "command":
         raise DataError(f"{trace.name}: no current_cmd_mA to build the command from")
-    freq = _signal_or_meta(trace, "dither_freq_Hz", 0.0)
-    u[:, _IDX["dither_amp_mA"]] = _signal_or_meta(trace, "dither_amp_mA", 0.0)
+    freq = _signal_or_meta(trace, "dither_freq_Hz", 0.0, problems)
+    amp = _signal_or_meta(trace, "dither_amp_mA", 0.0, problems)
+    for name, values in (("dither_freq_Hz", freq), ("dither_amp_mA", amp)):
+        if trace.has(name):
+            _check_finite(trace, name, values, problems)
+    u[:, _IDX["dither_amp_mA"]] = amp
     u[:, _IDX["dither_freq_Hz"]] = freq
     u[:, _IDX["dither_phase"]] = np.concatenate(
         [[0.0], np.cumsum(0.5 * (freq[1:] + freq[:-1]) * np.diff(t))]
     )
     wave = str(trace.meta.get("dither_waveform", settings.dither_waveform))
     if wave not in WAVEFORMS:
-        raise DataError(f"{trace.name}: dither_waveform {wave!r} is not one of {WAVEFORMS}")
-    u[:, _IDX[f"wave_{wave}"]] = 1.0
+        problems.append(f"metadata dither_waveform {wave!r} is not one of {WAVEFORMS}")
+    else:
+        u[:, _IDX[f"wave_{wave}"]] = 1.0
     if trace.has("current_mA"):
         i_meas = np.asarray(trace.get("current_mA"), dtype=float)
+        _check_finite(trace, "current_mA", i_meas, problems)
         u[:, _IDX["current_meas_mA"]] = i_meas
         rate = np.diff(i_meas) / np.diff(t)
         u[:, _IDX["current_meas_rate_mA_s"]] = np.concatenate([rate, rate[-1:]])
-    u[:, _IDX["line_pressure_bar"]] = trace.get("line_pressure_bar")
-    u[:, _IDX["prime_pressure_bar"]] = trace.get("prime_pressure_bar")
-    u[:, _IDX["oil_temp_C"]] = _signal_or_meta(trace, "oil_temp_C", settings.oil_temp_C)
+    for name in ("line_pressure_bar", "prime_pressure_bar"):
+        u[:, _IDX[name]] = trace.get(name)
+        _check_finite(trace, name, u[:, _IDX[name]], problems)
+    oil = _signal_or_meta(trace, "oil_temp_C", settings.oil_temp_C, problems)
+    if trace.has("oil_temp_C"):
+        _check_finite(trace, "oil_temp_C", oil, problems)
+    u[:, _IDX["oil_temp_C"]] = oil
+    if problems:
+        raise DataError(f"{trace.name}: cannot simulate, bad inputs", problems)
     return u
 
 

@@ -49,6 +49,10 @@ def simulate(
     ModelError
         If ``params`` is not a :class:`ParameterSet` of ``model`` (built for another
         model: the message lists the missing and extra parameter names).
+    DataError
+        If the trace has fewer than 2 samples, an input signal that is not finite (the
+        message names it and its first bad sample) or metadata standing for an absent
+        signal that is not a finite number — before anything is integrated.
     SimulationError
         If the state becomes non-finite (the message names the time).
     """
@@ -129,10 +133,43 @@ def simulate_inputs(
 
     A settling run of ``settings.settle_s`` at the first sample's inputs (dither
     running) precedes the trace unless ``x0`` is given.
+
+    Parameters
+    ----------
+    model : CircuitModel
+        The frozen model.
+    params : ParameterSet
+        Values of ``model``'s parameters (engineering units).
+    t : numpy.ndarray
+        Sample times (s), N, non-decreasing.
+    u : numpy.ndarray
+        Inputs (N × nu) in :data:`~clutchlab.physics.assembly.MODEL_INPUTS` order and
+        units (:func:`~clutchlab.physics.inputs.input_matrix`).
+    drive : {"command", "measured"}
+        Coil excitation.
+    settings : SimulationSettings
+        Integrator, substeps, settling time.
+    x0 : numpy.ndarray, optional
+        Initial state (scaled state units, nx); settled from a guess when None.
+
+    Returns
+    -------
+    (numpy.ndarray, numpy.ndarray)
+        States (N × nx) and outputs (N × ny) at the samples.
+
+    Raises
+    ------
+    ModelError
+        If ``params`` is not a parameter set of ``model``.
+    SimulationError
+        If ``t`` or ``u`` has the wrong shape or a non-finite value (named by input and
+        sample, before anything is integrated), or the state becomes non-finite.
     """
     fns = model.functions(drive)
     p = model_params(model, params).vector()
     t = np.asarray(t, dtype=float)
+    u = np.asarray(u, dtype=float)
+    _check_inputs(t, u)
     if x0 is None:
         x0 = initial_state(fns, u[0])
         if settings.settle_s > 0:
@@ -152,6 +189,28 @@ def simulate_inputs(
             "the integrator diverged for these parameters"
         )
     return x, y
+
+
+def _check_inputs(t: np.ndarray, u: np.ndarray) -> None:
+    """SimulationError naming the first non-finite input (column and sample) or a bad shape."""
+    names = [s.name for s in MODEL_INPUTS]
+    if t.ndim != 1 or t.size == 0 or u.shape != (t.size, len(names)):
+        raise SimulationError(
+            f"inputs: t must be 1-D with N ≥ 1 samples and u N × {len(names)} "
+            f"({', '.join(names)}); got t {t.shape}, u {u.shape}"
+        )
+    problems = []
+    bad_t = np.flatnonzero(~np.isfinite(t))
+    if bad_t.size:
+        problems.append(f"t is {t[bad_t[0]]} at sample {int(bad_t[0])}")
+    elif np.any(np.diff(t) < 0):
+        problems.append(f"t decreases at sample {int(np.argmax(np.diff(t) < 0)) + 1}")
+    bad = ~np.isfinite(u)
+    for k in np.flatnonzero(bad.any(axis=0)):
+        row = int(np.argmax(bad[:, k]))
+        problems.append(f"input {names[k]} is {u[row, k]} at t = {t[row]:.6g} s (sample {row})")
+    if problems:
+        raise SimulationError("bad inputs, nothing integrated: " + "; ".join(problems))
 
 
 def _settle(model, fns, p, t, u, drive, settings, x0):
