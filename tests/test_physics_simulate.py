@@ -193,3 +193,33 @@ def test_bad_inputs_are_named_before_anything_is_integrated(fast_ramp_trace):
         simulate_inputs(MODEL, PARAMS, tr.time_s, u, "command", SimulationSettings())
     with pytest.raises(SimulationError, match="u N × "):
         simulate_inputs(MODEL, PARAMS, tr.time_s, u[:, :3], "command", SimulationSettings())
+
+
+def test_coarse_samples_keep_the_integration_step_bounded(fast_ramp_trace):
+    """``substeps`` is per sample, so the ROS2 step grew with the logging interval: at
+    100 Hz the default settings gave −49.5 bar (command drive), at 10 Hz −7376…+3390 bar.
+    Below 1 kHz each sample interval is now split so that the step is at most 0.5 ms. The
+    result is the integration, with 0.5 ms steps, of the same inputs interpolated
+    linearly: the same as that of the trace resampled to 2 kHz at 1 substep (which
+    data at 1 kHz and faster get unchanged), to rounding."""
+    tr = fast_ramp_trace.slice_time(0.0, 4.0)
+    for rate in (10.0, 100.0, 250.0):
+        coarse = tr.resample(rate)
+        p = simulate(MODEL, PARAMS, coarse).pressure_bar
+        fine = coarse.resample(2000.0)
+        p_fine = simulate(MODEL, PARAMS, fine, SimulationSettings(substeps=1)).pressure_bar
+        p_ref = np.interp(coarse.time_s, fine.time_s, p_fine)
+        assert -0.5 < p.min() and p.max() < 17.7 + 0.5, rate
+        assert np.max(np.abs(p - p_ref)) < 1e-6, rate
+
+    from clutchlab.physics.settings import MAX_STEP_S, steps_per_interval
+
+    for rate, parts in ((250.0, 2), (100.0, 5), (10.0, 50)):
+        assert set(steps_per_interval(tr.resample(rate).time_s, 4)) == {parts}
+    # 1 kHz and faster (time stamps with rounding noise too): exactly `substeps` per sample
+    t = np.arange(8001) * 1e-3 + 1234.5
+    assert steps_per_interval(t, 2) is None and steps_per_interval(t, 1) is None
+    assert steps_per_interval(tr.resample(5000.0).time_s, 4) is None
+    # a gap in coarse data is split as finely as the rest
+    parts = steps_per_interval(np.r_[np.arange(100) * 0.01, 1.5], 4)
+    assert parts[0] == 5 and parts[-1] * 4 * MAX_STEP_S >= 1.5 - 0.99

@@ -11,7 +11,7 @@ from ..errors import DataError
 from .assembly import MODEL_INPUTS
 from .settings import SimulationSettings
 
-__all__ = ["WAVEFORMS", "choose_drive", "input_matrix"]
+__all__ = ["WAVEFORMS", "choose_drive", "input_matrix", "interval_inputs", "split_intervals"]
 
 WAVEFORMS = ("sine", "triangle", "square")
 _IDX = {s.name: k for k, s in enumerate(MODEL_INPUTS)}
@@ -128,3 +128,46 @@ def interval_inputs(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     k = _IDX["current_meas_rate_mA_s"]
     u1[:, k] = u0[:, k]
     return u0, u1
+
+
+def split_intervals(
+    t: np.ndarray, u: np.ndarray, parts: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A finer grid: sample interval ``k`` of ``(t, u)`` split into ``parts[k]`` equal ones.
+
+    The inputs at the new points are interpolated linearly, as the integrator does within
+    an interval; the piecewise-constant measured-current slope keeps its interval's value.
+    The original samples are kept exactly.
+
+    Parameters
+    ----------
+    t : numpy.ndarray
+        Sample times (s), N.
+    u : numpy.ndarray
+        Inputs (N × nu, :data:`MODEL_INPUTS` order).
+    parts : numpy.ndarray
+        Parts of each of the N − 1 intervals (int ≥ 1).
+
+    Returns
+    -------
+    t_fine : numpy.ndarray
+        Times (s), M = 1 + Σ parts.
+    u_fine : numpy.ndarray
+        Inputs (M × nu).
+    keep : numpy.ndarray
+        Index in the fine grid of each original sample (N).
+    """
+    parts = np.asarray(parts, dtype=np.int64)
+    keep = np.concatenate([[0], np.cumsum(parts)])
+    k = np.repeat(np.arange(len(parts)), parts)  # original interval of each fine interval
+    frac = (np.arange(keep[-1]) - keep[k]) / parts[k]
+    t_fine = np.empty(keep[-1] + 1)
+    u_fine = np.empty((keep[-1] + 1, u.shape[1]))
+    t_fine[:-1] = t[k] + frac * (t[k + 1] - t[k])
+    u_fine[:-1] = u[k] + frac[:, None] * (u[k + 1] - u[k])
+    t_fine[keep] = t  # exactly, not t[k] + 1.0 * (t[k + 1] - t[k])
+    u_fine[keep] = u
+    r = _IDX["current_meas_rate_mA_s"]
+    u_fine[:-1, r] = u[k, r]
+    u_fine[-1, r] = u[-1, r]
+    return t_fine, u_fine, keep

@@ -7,10 +7,30 @@ import numbers
 from dataclasses import dataclass
 from typing import Literal
 
+import numpy as np
+
 from ..data.signals import SIGNALS
 from ..errors import ModelError
 
-__all__ = ["MAX_CHUNK", "MAX_SETTLE_S", "MAX_SUBSTEPS", "SimulationSettings"]
+__all__ = [
+    "COARSE_INTERVAL_S",
+    "MAX_CHUNK",
+    "MAX_SETTLE_S",
+    "MAX_STEP_S",
+    "MAX_SUBSTEPS",
+    "SimulationSettings",
+    "steps_per_interval",
+]
+
+#: Largest ROS2 step (s) on data sampled slower than 1 kHz: what 1 kHz data give with the
+#: fit's 2 substeps. Steps of 2.5–10 ms (100 Hz data at 4 or 1 substeps) produced pressures
+#: of −28 to −7376 bar.
+MAX_STEP_S = 0.5e-3
+
+#: Sample intervals (s) up to this (1 kHz and faster, with a margin for the rounding of
+#: logged time stamps) are integrated in exactly ``substeps`` ROS2 steps: results on such
+#: data do not depend on :data:`MAX_STEP_S`.
+COARSE_INTERVAL_S = 1e-3 * (1.0 + 1e-6)
 
 #: Longest settling run (s): the circuit's lags are below 0.1 s, and the run holds one
 #: state row per sample interval (10⁶ s at 1 kHz asked for 89 GiB).
@@ -35,7 +55,14 @@ class SimulationSettings:
         FMU use. ``radau``: SciPy's adaptive Radau IIA with ``rtol``/``atol`` — a
         slow reference for accuracy checks.
     substeps : int
-        ROS2 steps per sample interval (1 kHz data, 4 substeps → 0.25 ms steps).
+        ROS2 steps per sample interval, 1 to :data:`MAX_SUBSTEPS` (1 kHz data, 4 substeps →
+        0.25 ms steps). On data sampled slower than 1 kHz (median interval above 1 ms)
+        the step is bounded instead: each sample interval is split into the fewest equal
+        parts that make its steps at most :data:`MAX_STEP_S` (0.5 ms), the inputs
+        interpolated linearly as within the substeps — in effect
+        ``parts × substeps`` steps per sample (100 Hz data, 4 substeps: 5 parts, 20
+        steps of 0.5 ms), see :func:`steps_per_interval`. Data at 1 kHz and faster are
+        integrated with exactly ``substeps`` steps per sample.
     drive : {"auto", "command", "measured"}
         Excitation of the coil. ``measured`` uses the trace's measured current
         (dither included); ``command`` rebuilds the dithered command from nominal
@@ -121,3 +148,30 @@ def _is_real(value) -> bool:
         and not isinstance(value, bool)
         and math.isfinite(float(value))
     )
+
+
+def steps_per_interval(t: np.ndarray, substeps: int) -> np.ndarray | None:
+    """Parts each sample interval of ``t`` is split into so that its ROS2 steps stay short.
+
+    Parameters
+    ----------
+    t : numpy.ndarray
+        Sample times (s), N ≥ 1, non-decreasing.
+    substeps : int
+        ROS2 steps per part (:attr:`SimulationSettings.substeps`).
+
+    Returns
+    -------
+    numpy.ndarray or None
+        None when ``t`` is sampled at 1 kHz or faster (median interval at most
+        :data:`COARSE_INTERVAL_S`: every interval is one part, as before) or no interval
+        needs splitting; else the number of parts (int, ≥ 1) of each of the N − 1
+        intervals, the smallest with ``dt / (parts × substeps) ≤ MAX_STEP_S``.
+    """
+    dt = np.diff(np.asarray(t, dtype=float))
+    if dt.size == 0 or float(np.median(dt)) <= COARSE_INTERVAL_S:
+        return None
+    # the tolerance keeps an interval of exactly parts × substeps × MAX_STEP_S whole
+    parts = np.ceil(dt / (substeps * MAX_STEP_S) * (1.0 - 1e-9)).astype(np.int64)
+    parts = np.maximum(parts, 1)
+    return None if np.all(parts == 1) else parts

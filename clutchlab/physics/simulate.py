@@ -10,12 +10,12 @@ from ..data import Trace
 from ..errors import ModelError, SimulationError
 from .assembly import MODEL_INPUTS
 from .dense_call import DenseCall
-from .inputs import choose_drive, input_matrix, interval_inputs
+from .inputs import choose_drive, input_matrix, interval_inputs, split_intervals
 from .integrator import chunk_function
 from .model import CircuitModel, ModelFunctions
 from .parameters import ParameterSet
 from .result import SimulationResult
-from .settings import SimulationSettings
+from .settings import COARSE_INTERVAL_S, MAX_STEP_S, SimulationSettings, steps_per_interval
 
 __all__ = ["model_params", "simulate", "simulate_inputs"]
 
@@ -170,6 +170,11 @@ def simulate_inputs(
     t = np.asarray(t, dtype=float)
     u = np.asarray(u, dtype=float)
     _check_inputs(t, u)
+    # Coarse samples: the ROS2 step stays ≤ MAX_STEP_S on a finer grid (Radau is adaptive).
+    parts = steps_per_interval(t, settings.substeps) if settings.method == "ros2" else None
+    keep = None
+    if parts is not None:
+        t, u, keep = split_intervals(t, u, parts)
     if x0 is None:
         x0 = initial_state(fns, u[0])
         if settings.settle_s > 0:
@@ -184,11 +189,12 @@ def simulate_inputs(
     bad = ~np.all(np.isfinite(x), axis=1)
     if bad.any():
         k = int(np.argmax(bad))
+        sample = k if keep is None else int(np.searchsorted(keep, k))
         raise SimulationError(
-            f"state not finite at t = {t[k]:.6g} s (sample {k}); "
+            f"state not finite at t = {t[k]:.6g} s (sample {sample}); "
             "the integrator diverged for these parameters"
         )
-    return x, y
+    return (x, y) if keep is None else (x[keep], y[keep])
 
 
 def _check_inputs(t: np.ndarray, u: np.ndarray) -> None:
@@ -215,6 +221,8 @@ def _check_inputs(t: np.ndarray, u: np.ndarray) -> None:
 
 def _settle(model, fns, p, t, u, drive, settings, x0):
     dt = float(np.median(np.diff(t))) if len(t) > 1 else 1e-3
+    if dt > COARSE_INTERVAL_S:  # its ROS2 steps ≤ MAX_STEP_S, as on the trace
+        dt = min(dt, settings.substeps * MAX_STEP_S)
     n = max(2, round(settings.settle_s / dt) + 1)
     us = np.repeat(u[:1], n, axis=0)
     freq = u[0, [s.name for s in MODEL_INPUTS].index("dither_freq_Hz")]
