@@ -564,3 +564,30 @@ def test_every_bad_fit_setting_is_listed_at_construction():
         with pytest.raises(FitError, match=next(iter(kw))):
             FitSettings(**kw)
     assert FitSettings(prefit_samples=0).prefit_samples == 0  # 0: no pre-fit, as None
+
+
+def test_the_jacobian_matches_the_residuals_on_data_logged_below_1_khz(small_data):
+    """simulate_inputs integrates coarse samples on a finer grid; the sensitivities must do
+    the same, or the fit's Jacobian belongs to another discretization than its cost."""
+    trace = list(small_data.select(ramps=["fast"]))[0].resample(250.0)
+    model = CircuitModel()
+    settings = FitSettings(
+        progress=False,
+        method="single_shooting",
+        train_ramps=("fast",),
+        workers=1,
+        prefit_samples=None,
+    )
+    problem = fit_problem.FitProblem(model, [trace], DEFAULT_FREE, settings, model.default_params())
+    try:
+        z = problem.initial_z()
+        out = problem.evaluate(z, True)
+        jac = out["J"].toarray()
+        for j in range(3):
+            h = 1e-6 * max(1.0, abs(z[j]))
+            zz = z.copy()
+            zz[j] += h
+            fd = (problem.evaluate(zz, False)["r"] - out["r"]) / h
+            assert np.linalg.norm(jac[:, j] - fd) <= 0.02 * np.linalg.norm(fd)
+    finally:
+        problem.close()

@@ -17,7 +17,7 @@ import numpy as np
 
 from ...errors import SimulationError
 from ..dense_call import DenseCall
-from ..inputs import choose_drive, interval_inputs
+from ..inputs import choose_drive, interval_inputs, split_intervals
 from ..integrator import (
     CSE,
     chunk_function,
@@ -27,7 +27,7 @@ from ..integrator import (
     sample_step_function,
 )
 from ..model import CircuitModel
-from ..settings import SimulationSettings
+from ..settings import SimulationSettings, steps_per_interval
 from ..source_key import code_source_key
 
 __all__ = [
@@ -192,10 +192,18 @@ def simulate_sensitivities(
 
     Returns the sensor pressure and its derivative along every direction at each
     sample (the first sample's output derivative is ``∂y/∂x0 · s0``, evaluated by
-    one zero-length step).
+    one zero-length step). Samples coarser than 1 kHz are integrated on a finer grid
+    (:func:`~clutchlab.physics.settings.steps_per_interval`), as :func:`simulate_inputs`
+    does.
     """
     nd = s0.shape[1]
     fn = DenseCall(sensitivity_chunk(model, drive, substeps, nd, chunk, compile_mode))
+    # Coarse samples: the ROS2 step bounded as in simulate_inputs, so the derivatives are
+    # those of the residuals the fit's forward runs compute (1 kHz and faster: unchanged).
+    parts = steps_per_interval(t, substeps)
+    keep = None
+    if parts is not None:
+        t, u, keep = split_intervals(np.asarray(t, float), np.asarray(u, float), parts)
     u0, u1 = interval_inputs(u)
     dts = np.diff(t)
     n = len(t)
@@ -231,4 +239,6 @@ def simulate_sensitivities(
         if not (np.all(np.isfinite(xk)) and np.all(np.isfinite(sk))):
             raise SimulationError(f"state or sensitivity not finite at t = {t[k + cnt]:.6g} s")
         k += cnt
+    if keep is not None:
+        xs, ys, dys = xs[keep], ys[keep], dys[keep]
     return SensitivityRun(xs, ys, dys, sk)
