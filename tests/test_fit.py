@@ -569,7 +569,7 @@ def test_every_bad_fit_setting_is_listed_at_construction():
 def test_the_jacobian_matches_the_residuals_on_data_logged_below_1_khz(small_data):
     """simulate_inputs integrates coarse samples on a finer grid; the sensitivities must do
     the same, or the fit's Jacobian belongs to another discretization than its cost."""
-    trace = list(small_data.select(ramps=["fast"]))[0].resample(250.0)
+    trace = next(iter(small_data.select(ramps=["fast"]))).resample(250.0)
     model = CircuitModel()
     settings = FitSettings(
         progress=False,
