@@ -205,6 +205,49 @@ def test_hybrid_adds_physics_and_residual(fitted, tiny):
     assert rm < 0.5 * physics_rmse  # the residual model removes most of the physics error
 
 
+def test_hybrid_declares_the_experiments_its_physics_was_fitted_on(train, tiny, tmp_path):
+    """A hybrid on a physics fit that saw a test experiment has seen it too: its
+    ``train_experiments_`` are its own traces and the physics fit's ``result_.train``,
+    also after save / load and a refit of the loaded model, and the protocol refuses it.
+    (Before: only the residual model's traces, so ``Protocol.score`` scored it.)"""
+    from dataclasses import replace
+
+    from fmu_support import fit_result
+    from sklearn.base import clone
+
+    from clutchlab.physics.fit import PhysicsFitter
+    from clutchlab.validation import LeakageError, Protocol
+
+    fitter = PhysicsFitter.load(replace(fit_result(), train=["medium_30Hz_A"]).to_json())
+    residual = SVCPartitionedGP(features=HYBRID_FEATURES, **SMALL)
+    model = HybridModel(physics=fitter, residual=residual, form="residual").fit(train)
+    own = [t.name for t in train]
+    assert model.train_experiments_ == [*own, "medium_30Hz_A"]
+    assert model.residual_.train_experiments_ == own  # the residual model saw the traces
+    protocol = Protocol(tiny)
+    for leaky in (model, fitter):
+        with pytest.raises(LeakageError, match="medium_30Hz_A"):
+            protocol.score("hybrid", leaky)
+    model.save(tmp_path / "h.json")
+    loaded = load_model(tmp_path / "h.json")
+    assert loaded.train_experiments_ == model.train_experiments_
+    assert loaded.physics_.train_experiments_ == ["medium_30Hz_A"]
+    with pytest.raises(LeakageError, match="medium_30Hz_A"):
+        protocol.score("hybrid", loaded)
+    refit = clone(loaded).set_params(form="physics").fit(train)  # the saved physics remembers
+    assert "medium_30Hz_A" in refit.train_experiments_
+    doc = json.loads((tmp_path / "h.json").read_text())
+    doc["state"]["physics"]["train_experiments"] = "medium_30Hz_A"  # not a list: refused
+    (tmp_path / "h.json").write_text(json.dumps(doc))
+    with pytest.raises(ModelError, match=r"physics\.train_experiments: must be a list"):
+        load_model(tmp_path / "h.json")
+    # A physics fitted on the training experiments only: nothing is added, nothing refused.
+    clean = PhysicsFitter.load(replace(fit_result(), train=own).to_json())
+    ok = HybridModel(physics=clean, residual=residual, form="residual").fit(train)
+    assert ok.train_experiments_ == own
+    assert np.isfinite(protocol.score("hybrid", ok).metrics["rmse_bar"])
+
+
 def test_hybrid_needs_physics_outputs_it_cannot_get(train):
     class PressureOnly:
         def predict(self, trace):

@@ -119,6 +119,37 @@ def test_score_refuses_unfitted_and_leaky_models(tiny):
         p.score("leaky", leaky)
 
 
+class Wrapper:
+    """A composite model that lists only its own traces but predicts with a part fitted
+    before (``part_``), as a hybrid does with its physics."""
+
+    def __init__(self, part):
+        self.part = part
+
+    def fit(self, traces):
+        self.part_ = self.part
+        self.train_experiments_ = [t.name for t in traces]
+        return self
+
+    def predict(self, trace):
+        return self.part_.predict(trace)
+
+
+def test_score_refuses_a_model_whose_fitted_part_saw_a_test_experiment(tiny):
+    """The leakage check looks into the fitted models a model holds (its own list may name
+    its traces only; before, such a wrapper was scored)."""
+    p = Protocol(tiny)
+    with pytest.raises(LeakageError, match="medium_50Hz_B"):
+        p.score("wrapped", Wrapper(Spy().fit(list(tiny))).fit(p.train_traces()))
+    inner = Wrapper(Spy().fit(list(tiny))).fit(p.train_traces())
+    with pytest.raises(LeakageError, match="medium_30Hz_A"):  # two levels down
+        p.score("wrapped twice", Wrapper(inner).fit(p.train_traces()))
+    clean = Wrapper(Spy().fit(p.train_traces())).fit(p.train_traces())
+    assert p.score("clean", clean).metrics["rmse_bar"] > 0
+    undeclared = Wrapper(Spy(declare=False).fit(list(tiny))).fit(p.train_traces())
+    p.score("undeclared part", undeclared)  # nothing declared by the part: nothing to refuse
+
+
 def test_models_never_see_the_measured_test_pressure(tiny):
     hidden = inputs_only(tiny["medium_30Hz_A"])
     assert np.isnan(hidden.get("clutch_pressure_bar")).all()

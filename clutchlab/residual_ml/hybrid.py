@@ -84,6 +84,23 @@ def default_residual(latch_model: str | None = None) -> SVCPartitionedGP:
     )
 
 
+def _trained_on(model) -> list[str]:
+    """Experiments a fitted model declares it was fitted on (empty if none or not known).
+
+    ``train_experiments_`` (the estimators here, the validation variants, a
+    :class:`~clutchlab.residual_ml.physics.PhysicsPredictor` made from a fit), else
+    ``result_.train`` (a fitted :class:`~clutchlab.physics.fit.PhysicsFitter`).
+    """
+    if model is None:
+        return []
+    names = getattr(model, "train_experiments_", None)
+    if names is None:
+        names = getattr(getattr(model, "result_", None), "train", None)
+    if names is None or isinstance(names, str):
+        return []
+    return [str(n) for n in names]
+
+
 class HybridModel(TraceEstimator):
     """Physics model plus a residual model trained on its residual.
 
@@ -131,6 +148,10 @@ class HybridModel(TraceEstimator):
     form_scores_ : dict of str to float
         Leave-one-experiment-out RMSE (bar) of each form on the training traces, before
         the standalone handicap (empty unless ``form="auto"``).
+    train_experiments_ : list of str
+        Every experiment the model has seen: the training traces and those the physics
+        model was fitted on (``train_experiments_`` or ``result_.train`` of the given
+        physics), so a physics fitted on a test experiment makes the hybrid leaky too.
 
     Notes
     -----
@@ -379,7 +400,11 @@ class HybridModel(TraceEstimator):
             self.n_features_in_ = len(res.feature_names_)
         self.residual_ = res
         self.feature_names_ = list(res.feature_names_)
-        self.train_experiments_ = list(res.train_experiments_)
+        # What the hybrid has seen: its own traces and whatever its physics was fitted on
+        # (a fitted physics carries its training experiments into every prediction; a
+        # PhysicsFitter's are kept by the PhysicsPredictor made of it).
+        seen = [*res.train_experiments_, *_trained_on(self.physics_)]
+        self.train_experiments_ = list(dict.fromkeys(seen))
         return self
 
     def _predict_matrix(self, X: np.ndarray, path: bool, return_std: bool):

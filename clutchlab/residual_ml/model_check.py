@@ -379,11 +379,14 @@ class _Checker:
             where += ".__physics__"
             if value is _MISSING or (value := self.mapping(value, where)) is None:
                 return
-        self.unknown(value, ("kind", "effects", "params", "substeps"), where)
+        self.unknown(value, ("kind", "effects", "params", "substeps", "train_experiments"), where)
         ok = self.key(value, "kind", where, _one_of(("PhysicsPredictor",))) is not _MISSING
         effects = self.key(value, "effects", where, _str_list)
         params = self.key(value, "params", where, _real_dict)
         ok &= self.key(value, "substeps", where, _integer(1, MAX_SUBSTEPS)) is not _MISSING
+        # the experiments the physics was fitted on (files before it: none recorded)
+        trained = self.key(value, "train_experiments", where, _str_list, required=False)
+        ok &= trained is not _MISSING or "train_experiments" not in value
         if not ok or effects is _MISSING or params is _MISSING:
             return
         try:

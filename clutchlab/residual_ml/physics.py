@@ -37,6 +37,15 @@ class PhysicsPredictor:
         Parameter values differing from the datasheet defaults, engineering units.
     substeps : int
         ROS2 steps per sample (default 4).
+    train_experiments : sequence of str
+        Experiments the parameter values were fitted on (default none: datasheet values or
+        values of unknown origin). A hybrid model on this physics declares them among its
+        own training experiments, so the validation protocol refuses it on any of them.
+
+    Attributes
+    ----------
+    train_experiments_ : list of str
+        ``train_experiments`` as a list (the name the validation protocol reads).
 
     Raises
     ------
@@ -49,18 +58,30 @@ class PhysicsPredictor:
         effects: tuple[str, ...] = (),
         params: Mapping[str, float] | None = None,
         substeps: int = 4,
+        train_experiments: tuple[str, ...] = (),
     ) -> None:
         self.effects = tuple(effects)
         self.params = dict(params or {})
         self.substeps = int(substeps)
+        if isinstance(train_experiments, str):
+            raise ModelError("train_experiments must be a sequence of experiment names")
+        self.train_experiments = tuple(str(n) for n in train_experiments)
         self._model = CircuitModel().with_effects(*self.effects)
         self._params = self._model.params(**self.params)
 
     def __repr__(self) -> str:
+        trained = ""
+        if self.train_experiments:
+            trained = f", train_experiments={self.train_experiments!r}"
         return (
             f"PhysicsPredictor(effects={self.effects!r}, params={self.params!r}, "
-            f"substeps={self.substeps})"
+            f"substeps={self.substeps}{trained})"
         )
+
+    @property
+    def train_experiments_(self) -> list[str]:
+        """Experiments the parameter values were fitted on (empty if not known)."""
+        return list(self.train_experiments)
 
     def __eq__(self, other: object) -> bool:
         return isinstance(other, PhysicsPredictor) and self.to_dict() == other.to_dict()
@@ -72,11 +93,17 @@ class PhysicsPredictor:
         return self.to_dict()
 
     def __setstate__(self, state: dict) -> None:
-        self.__init__(tuple(state["effects"]), state["params"], state["substeps"])
+        self.__init__(
+            tuple(state["effects"]),
+            state["params"],
+            state["substeps"],
+            tuple(state.get("train_experiments", ())),
+        )
 
     @classmethod
     def from_fitter(cls, fitter, substeps: int = 4) -> PhysicsPredictor:
-        """The fitted model of a :class:`~clutchlab.physics.fit.PhysicsFitter`.
+        """The fitted model of a :class:`~clutchlab.physics.fit.PhysicsFitter`, with the
+        experiments it was fitted on (``result_.train``).
 
         Raises
         ------
@@ -85,7 +112,9 @@ class PhysicsPredictor:
         """
         fitter._check_fitted()
         model, params = fitter.model_, fitter.params_
-        return cls(tuple(model.effect_names), params.changed(), substeps)
+        result = getattr(fitter, "result_", None)
+        trained = tuple(getattr(result, "train", None) or ())
+        return cls(tuple(model.effect_names), params.changed(), substeps, trained)
 
     def predict_outputs(self, trace: Trace) -> dict[str, np.ndarray]:
         """All model outputs on ``trace`` (name → per-sample array, units of
@@ -100,20 +129,24 @@ class PhysicsPredictor:
         return self.predict_outputs(trace)["clutch_pressure_bar"]
 
     def to_dict(self) -> dict:
-        """JSON-ready description."""
-        return {
+        """JSON-ready description (``train_experiments`` only when there are some)."""
+        d = {
             "kind": "PhysicsPredictor",
             "effects": list(self.effects),
             "params": {k: float(v) for k, v in self.params.items()},
             "substeps": self.substeps,
         }
+        if self.train_experiments:
+            d["train_experiments"] = list(self.train_experiments)
+        return d
 
     @classmethod
     def from_dict(cls, d: Mapping) -> PhysicsPredictor:
         """Inverse of :meth:`to_dict`."""
         if d.get("kind") != "PhysicsPredictor":
             raise ModelError(f"not a PhysicsPredictor description: kind={d.get('kind')!r}")
-        return cls(tuple(d["effects"]), dict(d["params"]), int(d["substeps"]))
+        trained = tuple(d.get("train_experiments", ()))  # descriptions before it: none
+        return cls(tuple(d["effects"]), dict(d["params"]), int(d["substeps"]), trained)
 
     def save(self, path: str | Path) -> None:
         """Write :meth:`to_dict` as JSON to ``path``."""

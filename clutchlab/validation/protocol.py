@@ -7,7 +7,8 @@ How the test experiments stay out of fitting and model selection:
   the training set for hyperparameters and effect choice). No method returns a test trace.
 - :meth:`Protocol.score` takes a model that is **already fitted** (sklearn
   ``check_is_fitted``); it refuses a model that declares a test experiment among its
-  training experiments (``train_experiments_`` or ``result_.train``), and it passes the
+  training experiments (``train_experiments_`` or ``result_.train``, its own or those of a
+  fitted model it holds, such as a hybrid's physics), and it passes the
   model input-only copies of the test experiments: their measured clutch pressure is
   replaced by NaN, so a model that reads it at predict time fails loudly instead of scoring
   well. The measured test pressure reaches the caller only inside the returned score.
@@ -207,12 +208,42 @@ def is_fitted(model: Any) -> bool:
     return any(k.endswith("_") and not k.startswith("__") for k in vars(model))
 
 
-def _declared_training(model: Any) -> list[str] | None:
+#: How deep :func:`_declared_training` looks into models held by a model.
+_PART_DEPTH = 4
+
+
+def _declared_training(
+    model: Any, depth: int = 0, seen: set[int] | None = None
+) -> list[str] | None:
+    """Every experiment ``model`` declares it was fitted on, or None if it declares none.
+
+    Its own ``train_experiments_`` (else ``result_.train``), and those of the fitted models
+    it holds (learned attributes ending in ``_`` that predict: a hybrid's ``physics_`` and
+    ``residual_``, a wrapper's ``fitter_``), so a composite model whose part saw a test
+    experiment is refused even when the composite lists only its own traces.
+    """
+    seen = set() if seen is None else seen
+    if id(model) in seen:
+        return None
+    seen.add(id(model))
     names = getattr(model, "train_experiments_", None)
     if names is None:
         result = getattr(model, "result_", None)
         names = getattr(result, "train", None)
-    return list(names) if names is not None else None
+    found = None if names is None or isinstance(names, str) else [str(n) for n in names]
+    if depth >= _PART_DEPTH:
+        return found
+    for key, part in list(getattr(model, "__dict__", {}).items()):
+        if not key.endswith("_") or key.startswith("_") or part is None:
+            continue
+        if isinstance(part, str | bytes | int | float | np.ndarray | list | tuple | dict):
+            continue
+        if not callable(getattr(part, "predict", None)):
+            continue
+        inner = _declared_training(part, depth + 1, seen)
+        if inner is not None:
+            found = (found or []) + inner
+    return found
 
 
 class Protocol:
