@@ -11,7 +11,7 @@ from sklearn.exceptions import NotFittedError
 from synthetic import tiny_stand
 
 from clutchlab.data import Trace, dither_period_mean, dither_period_samples
-from clutchlab.errors import DataError, ModelError
+from clutchlab.errors import DataError, ModelError, OutputError
 from clutchlab.residual_ml import (
     EVENT,
     LATCHED,
@@ -29,6 +29,7 @@ from clutchlab.residual_ml import (
     latch_labels,
     load_model,
     make_variant,
+    save_model,
     score_traces,
     step_predictor,
 )
@@ -282,6 +283,41 @@ def test_save_load_round_trip_gives_identical_predictions(name, fitted, tiny, tm
     assert loaded.get_params(deep=False).keys() == model.get_params(deep=False).keys()
     with np.load(tmp_path / "m.npz", allow_pickle=False) as arrays:
         assert arrays.files  # readable without pickle
+
+
+def test_save_refuses_a_name_that_writes_over_its_arrays_or_a_file_it_did_not_write(
+    fitted, tmp_path
+):
+    """``save_model(model, "x.npz")`` wrote the JSON over the NPZ (``x.npz`` with suffix
+    ``.npz`` is itself) and reported success; a file of the user's at either name was
+    replaced. Both are refused before anything is written; clutchlab's own model files
+    are replaced as before."""
+    model = fitted["gp_base"]
+    for name in ("x.npz", "x.NPZ"):
+        with pytest.raises(OutputError, match=r"give the JSON's name \(e\.g\. x\.json"):
+            save_model(model, tmp_path / name)
+    with pytest.raises(OutputError, match="not a file name"):
+        save_model(model, "")
+    assert not list(tmp_path.iterdir())  # nothing written
+    mine = tmp_path / "notes.json"
+    mine.write_text('{"mine": 1}\n')
+    with pytest.raises(OutputError, match=r"notes\.json: exists and is not a clutchlab model"):
+        model.save(mine)
+    assert mine.read_text() == '{"mine": 1}\n' and not (tmp_path / "notes.npz").exists()
+    arrays = tmp_path / "m.npz"
+    np.savez(arrays, a=np.arange(3.0))
+    before = arrays.read_bytes()
+    with pytest.raises(OutputError, match=r"m\.npz: exists and is not the arrays file"):
+        save_model(model, tmp_path / "m.json")
+    assert arrays.read_bytes() == before and not (tmp_path / "m.json").exists()
+    (tmp_path / "d.npz").mkdir()  # a folder where the arrays would go
+    with pytest.raises(OutputError, match="is a folder"):
+        save_model(model, tmp_path / "d.json")
+    assert not (tmp_path / "d.json").exists()
+    own = tmp_path / "own.json"
+    save_model(model, own)
+    assert save_model(model, own) == tmp_path / "own.npz"  # its own files: replaced
+    assert load_model(own).train_experiments_ == model.train_experiments_
 
 
 def test_load_rejects_other_files(tmp_path, fitted):

@@ -268,7 +268,11 @@ class TraceEstimator(RegressorMixin, BaseEstimator):
     # -- persistence -------------------------------------------------------------------------
 
     def save(self, path) -> None:
-        """Write the fitted model as JSON (``path``) + NPZ (same name, ``.npz``); no pickle."""
+        """Write the fitted model as JSON (``path``) + NPZ (same name, ``.npz``); no pickle.
+
+        See :func:`~clutchlab.residual_ml.persist.save_model` (a ``.npz`` path, or a file
+        clutchlab did not write standing at either name, is refused before writing).
+        """
         from .persist import save_model
 
         save_model(self, path)

@@ -1,6 +1,8 @@
 """Save and load fitted estimators as JSON (parameters, metadata) + NPZ (arrays), no pickle.
 
-``save_model(model, "m.json")`` writes ``m.json`` and ``m.npz`` beside it; ``load_model``
+``save_model(model, "m.json")`` writes ``m.json`` and ``m.npz`` beside it (``"m.npz"`` as
+the model's name is refused: the JSON would be written over its arrays; a file clutchlab did
+not write is never replaced); ``load_model``
 reads them back (``numpy.load(..., allow_pickle=False)``). A loaded model predicts exactly
 what the saved one did: the GP weights ``K⁻¹y`` and the classifier's support vectors and
 coefficients are stored, not refitted. A hybrid model's physics is stored as its model
@@ -22,8 +24,8 @@ from pathlib import Path
 import numpy as np
 from sklearn.base import BaseEstimator
 
-from ..data.output import write_file_atomic
-from ..errors import ClutchlabError, ModelError, ModelFileError
+from ..data.output import check_output, write_file_atomic
+from ..errors import ClutchlabError, ModelError, ModelFileError, OutputError
 from .estimators import SVCPartitionedGP
 from .hybrid import HybridModel
 from .labels import LatchLabelRule
@@ -282,12 +284,17 @@ def save_model(model, path: str | Path) -> Path:
     The model is checked first (:func:`~clutchlab.residual_ml.model_check.check_model`):
     nothing is written for a model whose file would not load.
 
+    The destination is checked first too: the JSON and the NPZ must be two different
+    files, and an existing file is replaced only when clutchlab wrote it (a model JSON, and
+    the NPZ that JSON names); anything else standing there is refused by name.
+
     Parameters
     ----------
     model : GPBaseline, GPWithDerivative, SVCPartitionedGP or HybridModel
         Fitted estimator.
     path : path-like
-        JSON file to write (``.json`` suffix recommended).
+        JSON file to write (``.json`` suffix recommended; never ``.npz``, the name of the
+        arrays file written beside it).
 
     Returns
     -------
@@ -302,15 +309,77 @@ def save_model(model, path: str | Path) -> Path:
     ModelFileError
         If its state is not valid (non-finite arrays, zero scales, ...), listing every
         problem.
+    OutputError
+        Before anything is written: if ``path`` ends in ``.npz`` (the JSON would be written
+        over its own arrays), the two names lead to one file, either is a folder or lies
+        in one that cannot be written, or a file there was not written by clutchlab (a
+        JSON that is not a clutchlab model, an NPZ that no model JSON at ``path`` names).
     """
     path = Path(path)
-    npz = path.with_suffix(".npz")
+    npz = _destination(path)
     doc, arrays = model_document(model, npz.name)
     check_model_document(doc, arrays, f"{type(model).__name__} to be saved as {path}")
     text = json.dumps(doc, indent=2, allow_nan=True) + "\n"
     # each file atomically, the JSON (which names the arrays) last
     write_file_atomic(npz, lambda tmp: _savez(tmp, arrays), overwrite=True)
     write_file_atomic(path, text.encode("utf-8"), overwrite=True)
+    return npz
+
+
+#: Largest existing JSON read to decide whether clutchlab wrote it (a model JSON holds
+#: parameters and metadata only, its arrays are in the NPZ).
+_MAX_OWN_JSON_BYTES = 64 * 2**20
+
+
+def _own_document(path: Path) -> dict | None:
+    """The model document at ``path`` if it is a clutchlab model JSON, else None."""
+    try:
+        if not path.is_file() or path.stat().st_size > _MAX_OWN_JSON_BYTES:
+            return None
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError, RecursionError):
+        return None
+    return doc if isinstance(doc, dict) and doc.get("format") == FORMAT else None
+
+
+def _destination(path: Path) -> Path:
+    """The NPZ to be written beside the model JSON ``path``, once both may be written.
+
+    Raises
+    ------
+    OutputError
+        As :func:`save_model` says, before anything is written.
+    """
+    try:
+        npz = path.with_suffix(".npz")
+    except ValueError:  # no file name: "", ".", a folder ending in "/.."
+        raise OutputError(f"{str(path)!r}: not a file name for a model") from None
+    if path.suffix.lower() == ".npz" or npz == path:
+        json_name = path.with_suffix(".json").name
+        raise OutputError(
+            f"{path}: a model is saved as a JSON file with its arrays beside it as a .npz of "
+            f"the same name; give the JSON's name (e.g. {json_name}, which writes "
+            f"{json_name} + {npz.name}), not the .npz's"
+        )
+    check_output(path, kind="file", overwrite=True, what="model file")
+    check_output(npz, kind="file", overwrite=True, what="model arrays file")
+    try:
+        same = path.exists() and npz.exists() and path.samefile(npz)
+    except OSError:
+        same = False
+    if same:
+        raise OutputError(f"{path} and {npz}: are one file; a model needs two (JSON + NPZ)")
+    doc = _own_document(path)
+    if path.exists() and doc is None:
+        raise OutputError(
+            f"{path}: exists and is not a clutchlab model file; it is not replaced (choose "
+            "another name, or remove it)"
+        )
+    if (npz.exists() or npz.is_symlink()) and (doc is None or doc.get("arrays") != npz.name):
+        raise OutputError(
+            f"{npz}: exists and is not the arrays file of a clutchlab model saved as "
+            f"{path.name}; it is not replaced (choose another name, or remove it)"
+        )
     return npz
 
 
