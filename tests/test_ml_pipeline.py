@@ -139,6 +139,41 @@ def test_estimator_contract(name, train, tiny):
         est.fit(train, y=np.zeros(3))
 
 
+def _unfitted(name):
+    params = {"physics": PhysicsPredictor(substeps=2)} if name == "hybrid" else {}
+    return make_variant(name, **params)
+
+
+@pytest.mark.parametrize("name", list(VARIANTS))
+def test_fit_without_experiments_says_so(name, tiny):
+    """``fit([])`` raised scikit-learn's "requires y to be passed" (the empty list was taken
+    for a feature matrix, so the "no experiments" DataError was never reached)."""
+    for empty in ([], (), tiny.select(names=[])):
+        with pytest.raises(DataError, match="no training experiments"):
+            _unfitted(name).fit(empty)
+
+
+@pytest.mark.parametrize("name", list(VARIANTS))
+def test_fit_on_nan_names_the_experiment_signal_and_row(name, tiny):
+    """A NaN clutch pressure raised "x has a non-finite value at row 2", naming neither the
+    experiment nor the signal. Now one DataError lists every experiment and signal with a
+    non-finite value and its first row, before any fit or physics simulation."""
+    fast, slow = tiny.select(ramps=["fast"]), tiny.select(ramps=["slow"])
+    p = fast[0].get("clutch_pressure_bar").copy()
+    p[[1, 7]] = np.nan
+    i = slow[0].get("current_mA").copy()
+    i[99] = np.inf
+    bad = [fast[0].with_signals(clutch_pressure_bar=p), slow[0].with_signals(current_mA=i)]
+    with pytest.raises(DataError) as info:
+        _unfitted(name).fit([*bad, fast[1]])
+    assert info.value.problems == [
+        f"experiment {fast[0].name!r}: clutch_pressure_bar has 2 non-finite value(s), the "
+        "first at row 2 (t = 0.001 s)",
+        f"experiment {slow[0].name!r}: current_mA has 1 non-finite value(s), the first at "
+        "row 100 (t = 0.099 s)",
+    ]
+
+
 @pytest.mark.parametrize("name", list(VARIANTS))
 def test_fitted_models_predict_every_sample(name, fitted, tiny):
     model = fitted[name]

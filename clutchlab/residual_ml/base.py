@@ -29,21 +29,45 @@ from ._threads import single_thread
 from .features import FeatureBuilder, target_pressure
 from .labels import LatchLabelRule, latch_labels
 
-__all__ = ["Block", "TraceEstimator", "as_traces"]
+__all__ = ["FIT_SIGNALS", "Block", "TraceEstimator", "as_traces", "check_finite_signals"]
+
+#: Signals a fit reads from a training trace, when the trace holds them: the target (clutch
+#: pressure, bar), the line pressure of the latch labels and the latched plateau's
+#: reference (bar), and the inputs of the features (time s, currents and dither mA / Hz).
+FIT_SIGNALS: tuple[str, ...] = (
+    "time_s",
+    "current_cmd_mA",
+    "current_mA",
+    "dither_amp_mA",
+    "dither_freq_Hz",
+    "line_pressure_bar",
+    "clutch_pressure_bar",
+)
 
 
-def as_traces(X) -> list[Trace] | None:
+def as_traces(X, role: str = "") -> list[Trace] | None:
     """The traces in ``X`` (Trace, Dataset or sequence of Traces), or None for array input.
+
+    Parameters
+    ----------
+    X : Trace, Dataset, sequence of Trace, or array_like
+        The input.
+    role : str
+        What the experiments are for, in the error message (``"training"``: "no training
+        experiments").
 
     Raises
     ------
     DataError
-        If ``X`` is an empty dataset or a sequence mixing traces and other objects.
+        If ``X`` is an empty dataset, an empty list or tuple, or a sequence mixing traces
+        and other objects.
     """
     if isinstance(X, Trace):
         return [X]
     if isinstance(X, Dataset):
         traces = list(X)
+    elif isinstance(X, list | tuple) and not X:
+        traces = []  # no experiments (an empty feature matrix is an array, not a list)
     elif (
         isinstance(X, Sequence) and not isinstance(X, str) and any(isinstance(t, Trace) for t in X)
     ):
@@ -54,8 +78,36 @@ def as_traces(X) -> list[Trace] | None:
     else:
         return None
     if not traces:
-        raise DataError("no experiments to use (empty dataset)")
+        what = f"{role} experiments" if role else "experiments"
+        raise DataError(f"no {what} (an empty dataset or list was given)")
     return traces
+
+
+def check_finite_signals(traces: Sequence[Trace], signals: Sequence[str] = FIT_SIGNALS) -> None:
+    """Refuse traces with a non-finite value in one of ``signals`` (those they hold).
+
+    Raises
+    ------
+    DataError
+        Listing every experiment and signal with a NaN or infinite value: the count, the
+        first row (1-based, as in the logged file) and its time (s).
+    """
+    problems = []
+    for t in traces:
+        time_s = np.asarray(t.time_s, dtype=float)
+        for name in signals:
+            if not t.has(name):
+                continue
+            bad = ~np.isfinite(np.asarray(t.get(name), dtype=float))
+            if bad.any():
+                i = int(np.flatnonzero(bad)[0])
+                at = f" (t = {time_s[i]:.6g} s)" if np.isfinite(time_s[i]) else ""
+                problems.append(
+                    f"experiment {t.name!r}: {name} has {int(bad.sum())} non-finite value(s), "
+                    f"the first at row {i + 1}{at}"
+                )
+    if problems:
+        raise DataError("non-finite values in the training experiments", problems)
 
 
 def _numeric_lag(value) -> float:
@@ -183,12 +235,15 @@ class TraceEstimator(RegressorMixin, BaseEstimator):
         Raises
         ------
         DataError
-            If a trace lacks a needed signal, or ``y`` is given with traces.
+            If there are no training experiments, a trace lacks a needed signal or has a
+            non-finite value in one it is fitted on (experiment, signal and row named), or
+            ``y`` is given with traces.
         """
-        traces = as_traces(X)
+        traces = as_traces(X, "training")
         if traces is not None:
             if y is not None:
                 raise DataError("y must be None when fitting on traces (targets come from them)")
+            check_finite_signals(traces)
             self.lag_s_ = self._resolve_lag(traces)
             self.feature_names_ = list(self._builder().names)
             blocks = self._trace_blocks(traces)

@@ -362,11 +362,17 @@ class HybridModel(TraceEstimator):
         -------
         HybridModel
             self, fitted.
+
+        Raises
+        ------
+        DataError
+            If there are no training experiments, or a trace has a non-finite value in a
+            signal it is fitted on (experiment, signal and row named).
         """
-        from .base import as_traces
+        from .base import as_traces, check_finite_signals
 
         res = self._residual()
-        traces = as_traces(X)
+        traces = as_traces(X, "training")
         if traces is None:
             Xa, ya = validate_data(self, X, y, y_numeric=True, dtype=np.float64)
             res.feature_names_ = [f"x{j}" for j in range(Xa.shape[1])]
@@ -384,6 +390,7 @@ class HybridModel(TraceEstimator):
                 raise ModelError(
                     f"form must be 'auto' or one of {', '.join(RESIDUAL_FORMS)}, not {self.form!r}"
                 )
+            check_finite_signals(traces)  # before the physics simulates them
             phys = self._physics()
             needed = tuple(res._builder().names)
             outputs = [self._outputs(phys, t, needed) for t in traces]
