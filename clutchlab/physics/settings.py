@@ -108,24 +108,24 @@ class SimulationSettings:
         problems = []
         if self.method not in ("ros2", "radau"):
             problems.append(f"method {self.method!r} is not 'ros2' or 'radau'")
-        if not _is_int(self.substeps) or not 1 <= self.substeps <= MAX_SUBSTEPS:
+        if not is_integer(self.substeps) or not 1 <= self.substeps <= MAX_SUBSTEPS:
             problems.append(f"substeps {self.substeps!r} is not an integer in 1..{MAX_SUBSTEPS}")
         if self.drive not in ("auto", "command", "measured"):
             problems.append(f"drive {self.drive!r} is not auto, command or measured")
         if self.compile not in ("auto", "always", "never"):
             problems.append(f"compile {self.compile!r} is not auto, always or never")
-        if not _is_real(self.settle_s) or not 0 <= self.settle_s <= MAX_SETTLE_S:
+        if not is_finite_real(self.settle_s) or not 0 <= self.settle_s <= MAX_SETTLE_S:
             problems.append(f"settle_s {self.settle_s!r} is not a number in 0..{MAX_SETTLE_S:g} s")
-        if not _is_int(self.chunk) or not 1 <= self.chunk <= MAX_CHUNK:
+        if not is_integer(self.chunk) or not 1 <= self.chunk <= MAX_CHUNK:
             problems.append(f"chunk {self.chunk!r} is not an integer in 1..{MAX_CHUNK}")
-        if not _is_real(self.rtol) or not 0 < self.rtol < 1:
+        if not is_finite_real(self.rtol) or not 0 < self.rtol < 1:
             problems.append(f"rtol {self.rtol!r} is not a number in (0, 1)")
-        if not _is_real(self.atol) or not self.atol > 0:
+        if not is_finite_real(self.atol) or not self.atol > 0:
             problems.append(f"atol {self.atol!r} is not a finite number > 0")
         if self.dither_waveform not in ("sine", "triangle", "square"):
             problems.append(f"dither_waveform {self.dither_waveform!r} unknown")
         oil = SIGNALS["oil_temp_C"]
-        if not _is_real(self.oil_temp_C) or not (
+        if not is_finite_real(self.oil_temp_C) or not (
             oil.plausible_min <= self.oil_temp_C <= oil.plausible_max
         ):
             problems.append(
@@ -136,12 +136,12 @@ class SimulationSettings:
             raise ModelError("invalid simulation settings: " + "; ".join(problems))
 
 
-def _is_int(value) -> bool:
+def is_integer(value) -> bool:
     """An integer (a Python or NumPy one), not a bool."""
     return isinstance(value, numbers.Integral) and not isinstance(value, bool)
 
 
-def _is_real(value) -> bool:
+def is_finite_real(value) -> bool:
     """A finite real number, not a bool."""
     return (
         isinstance(value, numbers.Real)

@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import math
-import numbers
 from dataclasses import dataclass, field
 from typing import Literal
 
 from ...budgets import FIT_BUDGET_S
 from ...errors import FitError
-from ..settings import MAX_SETTLE_S
+from ..settings import MAX_SETTLE_S, is_finite_real, is_integer
 
 __all__ = ["DEFAULT_FREE", "FIT_BUDGET_S", "FitSettings"]
 
@@ -230,13 +228,13 @@ class FitSettings:
             ("static_max_iter", 1, None),
         ):
             value = getattr(self, name)
-            if not _is_int(value) or value < lo or (hi is not None and value > hi):
+            if not is_integer(value) or value < lo or (hi is not None and value > hi):
                 what = f"{lo}..{hi}" if hi is not None else f"≥ {lo}"
                 problems.append(f"{name} must be {what} (an integer), not {value!r}")
-        if not _is_int(self.seed):
+        if not is_integer(self.seed):
             problems.append(f"seed must be an integer, not {self.seed!r}")
         if self.prefit_samples is not None and (
-            not _is_int(self.prefit_samples) or self.prefit_samples < 0
+            not is_integer(self.prefit_samples) or self.prefit_samples < 0
         ):
             problems.append(
                 "prefit_samples must be None or ≥ 0 (an integer; 0 or None: no pre-fit), "
@@ -256,10 +254,10 @@ class FitSettings:
             ("static_time_fraction", lambda v: 0 < v < 1, "in (0, 1)"),
         ):
             value = getattr(self, name)
-            if not _is_real(value) or not ok(value):
+            if not is_finite_real(value) or not ok(value):
                 problems.append(f"{name} must be {what} (a finite number), not {value!r}")
         if self.fit_rate_Hz is not None and not (
-            _is_real(self.fit_rate_Hz) and self.fit_rate_Hz > 0
+            is_finite_real(self.fit_rate_Hz) and self.fit_rate_Hz > 0
         ):
             problems.append(f"fit_rate_Hz must be > 0 Hz or None, not {self.fit_rate_Hz!r}")
         if self.latch_law not in ("auto", "datasheet"):
@@ -268,17 +266,3 @@ class FitSettings:
             problems.append(f"regulator_lag {self.regulator_lag!r} is not auto or off")
         if problems:
             raise FitError("invalid fit settings: " + "; ".join(problems))
-
-
-def _is_int(value) -> bool:
-    """An integer (a Python or NumPy one), not a bool."""
-    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
-
-
-def _is_real(value) -> bool:
-    """A finite real number, not a bool."""
-    return (
-        isinstance(value, numbers.Real)
-        and not isinstance(value, bool)
-        and math.isfinite(float(value))
-    )
