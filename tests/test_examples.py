@@ -1,12 +1,16 @@
 """Every example script in ``examples/`` runs on a small stand dataset (issue 19, must-show 4).
 
 Each script is executed as a user would, ``python examples/NAME.py ...`` in a subprocess, and
-its printed result is checked. Together they must stay under 60 s.
+its printed result is checked. Together they must stay under 60 s: that budget is checked by
+``benchmarks/bench_examples.py`` (which runs this module and reads the wall time of each
+script from ``CLUTCHLAB_EXAMPLE_TIMES``), not by a timed test, whose result would depend on
+what else the test workers run at the same time.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import re
 import subprocess
 import sys
@@ -140,6 +144,10 @@ def test_design_sweep(tmp_path):
     assert (tmp_path / "r.parquet").is_file()
 
 
-def test_examples_take_under_a_minute_in_all():
-    assert len(TIMES) == 4, f"run the whole module: {sorted(TIMES)}"
-    assert sum(TIMES.values()) < 60.0, TIMES
+@pytest.fixture(scope="module", autouse=True)
+def _report_times():
+    """Write each script's wall time (s) to ``$CLUTCHLAB_EXAMPLE_TIMES`` (the benchmark's)."""
+    yield
+    target = os.environ.get("CLUTCHLAB_EXAMPLE_TIMES")
+    if target:
+        Path(target).write_text(json.dumps(TIMES, indent=1), encoding="utf-8")
