@@ -43,7 +43,9 @@ __all__ = [
     "atomic_file_writer",
     "check_folder_kind",
     "check_output",
+    "has_ownership_record",
     "owned_files",
+    "ownership_record",
     "write_file_atomic",
     "write_folder_atomic",
 ]
@@ -224,6 +226,35 @@ def atomic_file_writer(write_to: Callable[..., Any]) -> Callable[..., Path]:
         )
 
     return write
+
+
+def ownership_record(files: list[str] | tuple[str, ...], kind: str, **extra: str) -> bytes:
+    """The content of a folder's :data:`OWNED_NAME`: who wrote it, what it is, its files.
+
+    Parameters
+    ----------
+    files : sequence of str
+        Relative POSIX paths clutchlab wrote there.
+    kind : str
+        What the folder is (``"dataset folder"``, ``"report folder"``, ``"sweep parts"`` …);
+        another kind of output is not written into it (:func:`check_folder_kind`).
+    **extra : str
+        Further descriptions (a sweep's part-file pattern).
+    """
+    record = {"written_by": "clutchlab", "kind": kind, "files": sorted(files), **extra}
+    return (json.dumps(record, indent=1) + "\n").encode("utf-8")
+
+
+def has_ownership_record(folder: str | Path) -> bool:
+    """Whether ``folder`` holds a readable ownership record that clutchlab wrote."""
+    record = Path(folder) / OWNED_NAME
+    if not record.is_file() or record.is_symlink():
+        return False
+    try:
+        doc = json.loads(record.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(doc, dict) and doc.get("written_by") == "clutchlab"
 
 
 def owned_files(folder: str | Path) -> set[str]:
@@ -422,8 +453,7 @@ def write_folder_atomic(
             target = tmp / name
             target.parent.mkdir(parents=True, exist_ok=True)
             _write_content(target, content)
-        record = {"written_by": "clutchlab", "kind": what, "files": sorted(files)}
-        (tmp / OWNED_NAME).write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
+        (tmp / OWNED_NAME).write_bytes(ownership_record(list(files), what))
         if exists:
             _carry_over(path, tmp, keep)
         _killpoint("folder-before-swap")

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
-from ...data.output import OWNED_NAME, owned_files, write_folder_atomic
+from ...data.output import OWNED_NAME, has_ownership_record, owned_files, write_folder_atomic
 from ...errors import OutputError
 from .evaluate import STATUS_FAILED, STATUS_OK
 from .metrics import METRIC_UNITS, metric_names
@@ -153,7 +153,7 @@ def check_figures_folder(folder: str | Path, what: str = "figures") -> Path:
         raise OutputError(f"{what} {folder}: exists and is not a folder clutchlab wrote")
     if not folder.is_dir() or not any(folder.iterdir()):
         return folder
-    if not (folder / OWNED_NAME).is_file():
+    if not has_ownership_record(folder):
         mine = sorted(n for n in FIGURE_FILES if (folder / n).exists() or (folder / n).is_symlink())
         named = f" (its {', '.join(mine)} would be replaced)" if mine else ""
         raise OutputError(

@@ -32,7 +32,12 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from ...data.output import OWNED_NAME, write_file_atomic
+from ...data.output import (
+    OWNED_NAME,
+    has_ownership_record,
+    ownership_record,
+    write_file_atomic,
+)
 from ...errors import OutputError
 from .spec import SpecError
 
@@ -49,12 +54,8 @@ _META_TMP = re.compile(
 
 def _is_ours(parts: Path) -> bool:
     """Whether ``parts`` is a parts folder clutchlab wrote: its record, or an older spec.json."""
-    record = parts / OWNED_NAME
-    if record.is_file() and not record.is_symlink():
-        try:
-            return json.loads(record.read_text(encoding="utf-8")).get("written_by") == "clutchlab"
-        except (OSError, ValueError, AttributeError):
-            return False
+    if (parts / OWNED_NAME).exists():
+        return has_ownership_record(parts)
     meta = parts / "spec.json"  # written by clutchlab before the record existed
     if meta.is_file() and not meta.is_symlink():
         try:
@@ -147,16 +148,12 @@ class ResultStore:
         for stray in self.parts.iterdir():
             if _PART_TMP.fullmatch(stray.name) or _META_TMP.fullmatch(stray.name):
                 stray.unlink(missing_ok=True)
-        record = {
-            "written_by": "clutchlab",
-            "files": ["spec.json"],
-            "part_files": "part-<time ns>-<pid>-<seq>.parquet (and their .tmp while written)",
-        }
-        write_file_atomic(
-            self.parts / OWNED_NAME,
-            (json.dumps(record, indent=1) + "\n").encode("utf-8"),
-            overwrite=True,
+        record = ownership_record(
+            ["spec.json"],
+            "sweep parts",
+            part_files="part-<time ns>-<pid>-<seq>.parquet (and their .tmp while written)",
         )
+        write_file_atomic(self.parts / OWNED_NAME, record, overwrite=True)
         if meta.exists():
             try:
                 old = json.loads(meta.read_text(encoding="utf-8")).get("core_hash")
