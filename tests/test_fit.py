@@ -519,10 +519,33 @@ def test_ctrl_c_during_a_solve_interrupts_the_fit(small_data, monkeypatch):
         return evaluate(self, z, jacobian)
 
     monkeypatch.setattr(fit_problem.FitProblem, "evaluate", evaluate_then_ctrl_c)
-    with pytest.raises(KeyboardInterrupt):
-        _fit(small_data, staged_start=False, max_iter=50)
+    # as in an interactive session, whatever the test runner was started with (``nohup``
+    # and background jobs start with SIGINT ignored)
+    outer = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            _fit(small_data, staged_start=False, max_iter=50)
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    finally:
+        signal.signal(signal.SIGINT, outer)
     assert 3 <= calls["n"] < 12  # it stopped at the next iteration, not at the limit
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_a_solve_leaves_an_ignored_sigint_ignored():
+    """Under ``nohup`` SIGINT is ignored; the solve's Ctrl-C latch must not take it over
+    (the latch used to install its handler whatever was there, and put it back after)."""
+    import signal
+
+    from clutchlab.physics.fit.nlp import SigintLatch
+
+    outer = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        with SigintLatch():
+            during = signal.getsignal(signal.SIGINT)
+        after = signal.getsignal(signal.SIGINT)
+    finally:
+        signal.signal(signal.SIGINT, outer)
+    assert during is signal.SIG_IGN and after is signal.SIG_IGN
 
 
 def test_a_start_of_another_model_is_a_fit_error(small_data):

@@ -263,7 +263,14 @@ def test_ctrl_c_keeps_finished_points_with_a_message_and_no_lock(tmp_path):
     cmd = [sys.executable, "-m", "clutchlab.cli", "sweep", str(spec), "--out", str(out)]
     cmd += ["--workers", "2", "--flush-s", "0", "--quiet", "--no-figures"]
     proc = subprocess.Popen(
-        cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True
+        cmd,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        # Ctrl-C as in a terminal, even when the test runner was started with SIGINT
+        # ignored (``nohup``, a background job), which its children would inherit
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     parts = out.with_name(out.name + ".parts")
     deadline = time.monotonic() + 120

@@ -222,7 +222,9 @@ class SigintLatch:
     IPOPT calls back into Python; a ``KeyboardInterrupt`` raised inside a callback is caught
     by CasADi and reported as ``NonIpopt_Exception_Thrown``, which a fit would take for a
     stop at a limit and hand back as its result. A second Ctrl-C interrupts at once. Only
-    the main thread can hold signal handlers; elsewhere this does nothing.
+    the main thread can hold signal handlers; elsewhere this does nothing. Nor does it
+    where SIGINT is ignored (a job started with ``nohup`` or in the background of a
+    script): what the caller chose stays in force.
     """
 
     def __init__(self):
@@ -236,7 +238,8 @@ class SigintLatch:
 
     def __enter__(self) -> SigintLatch:
         if threading.current_thread() is threading.main_thread():
-            self._previous = signal.signal(signal.SIGINT, self._on_sigint)
+            if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
+                self._previous = signal.signal(signal.SIGINT, self._on_sigint)
         return self
 
     def __exit__(self, *exc) -> bool:
