@@ -120,6 +120,11 @@ def test_physics_form_predicts_the_physics_with_its_loeo_error_as_std(split, tru
     auto.form_ = "physics"  # as if chosen: its std is the physics form's LOEO RMSE
     _, std = auto.predict(trace, return_std=True)
     assert np.all(std == auto.form_scores_["physics"])
+    # Asked for by name, the physics form scores itself the same way: a finite std, not NaN.
+    assert set(model.form_scores_) == {"physics"}
+    assert model.form_scores_["physics"] == pytest.approx(auto.form_scores_["physics"], rel=1e-12)
+    _, std = model.predict(trace, return_std=True)
+    assert np.all(std == model.form_scores_["physics"]) and np.all(np.isfinite(std))
 
 
 def test_the_residual_forms_latch_decision_is_a_choice_with_the_classifier_as_default(

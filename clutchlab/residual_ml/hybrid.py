@@ -84,6 +84,11 @@ def default_residual(latch_model: str | None = None) -> SVCPartitionedGP:
     )
 
 
+def _rms(errors: list[np.ndarray]) -> float:
+    """Root mean square (bar) of the errors of every experiment together."""
+    return float(np.sqrt(np.mean(np.concatenate(errors) ** 2)))
+
+
 def _trained_on(model) -> list[str]:
     """Experiments a fitted model declares it was fitted on (empty if none or not known).
 
@@ -147,7 +152,8 @@ class HybridModel(TraceEstimator):
         The form used (``residual``, ``standalone`` or ``physics``).
     form_scores_ : dict of str to float
         Leave-one-experiment-out RMSE (bar) of each form on the training traces, before
-        the standalone handicap (empty unless ``form="auto"``).
+        the standalone handicap (``form="auto"``); with ``form="physics"`` the physics
+        form's alone (its predictive std); empty otherwise.
     train_experiments_ : list of str
         Every experiment the model has seen: the training traces and those the physics
         model was fitted on (``train_experiments_`` or ``result_.train`` of the given
@@ -265,7 +271,19 @@ class HybridModel(TraceEstimator):
     def _loeo_scores(self, traces, outputs) -> dict[str, float]:
         """Leave-one-group-out RMSE (bar, dither-period mean) of each form on ``traces``."""
         errors = self._loeo_errors(traces, outputs)
-        return {f: float(np.sqrt(np.mean(np.concatenate(e) ** 2))) for f, e in errors.items() if e}
+        return {f: _rms(e) for f, e in errors.items() if e}
+
+    @staticmethod
+    def _physics_errors(traces, outputs, held=None) -> list[np.ndarray]:
+        """Dither-period-mean errors (bar) of the physics alone on ``traces[i]`` for ``i``
+        in ``held`` (default: all). The physics learns nothing from the folds, so its
+        held-out error is its error."""
+        out = []
+        for i in range(len(traces)) if held is None else held:
+            n = dither_period_samples(traces[i])
+            meas = dither_period_mean(traces[i].get("clutch_pressure_bar"), n)
+            out.append(dither_period_mean(outputs[i][0], n) - meas)
+        return out
 
     def _loeo_errors(self, traces, outputs) -> dict[str, list[np.ndarray]]:
         """Held-out dither-period-mean errors (bar) of each form, one array per experiment.
@@ -306,9 +324,7 @@ class HybridModel(TraceEstimator):
         for f, (held, _) in enumerate(folds):
             errors["residual"] += done[jobs.index((f, "residual"))]
             errors["standalone"] += done[jobs.index((f, "standalone"))]
-            errors["physics"] += [
-                dither_period_mean(outputs[i][0], means[i][0]) - means[i][1] for i in held
-            ]
+            errors["physics"] += self._physics_errors(traces, outputs, held)
         return errors
 
     def _fold_model(self, form: str, traces, outputs, train: list[int]):
@@ -398,6 +414,8 @@ class HybridModel(TraceEstimator):
             if form == "auto":
                 scores = self._loeo_scores(traces, outputs)
                 form = self._choose_form(scores)
+            elif form == "physics":  # its score is its predictive std
+                scores = {"physics": _rms(self._physics_errors(traces, outputs))}
             if form == "standalone":
                 res = self._standalone().fit(traces)
             else:  # the physics form keeps a residual model too (saved, exported alike)
