@@ -15,6 +15,39 @@ def _csv(text: str | None) -> tuple[str, ...]:
     return tuple(s.strip() for s in (text or "").split(",") if s.strip())
 
 
+def _split_labels(dataset, train: str | None, test: str | None):
+    """The training and test ramp labels of ``--train`` / ``--test``, checked on ``dataset``.
+
+    Every label given must be one of the dataset's ramps (a typo would otherwise drop its
+    experiments silently). Without ``--test`` the test ramp is ``medium`` when the dataset
+    has one, else none (the report then scores the training experiments only).
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The experiments.
+    train, test : str or None
+        The comma-separated labels as given (None: the default).
+
+    Returns
+    -------
+    tuple of tuple of str
+        Training labels, test labels.
+
+    Raises
+    ------
+    DataError
+        A label the dataset does not have (the message lists the known ones).
+    """
+    train_ramps = _csv(train) or ("fast", "slow")
+    if test is None:
+        test_ramps = ("medium",) if "medium" in dataset.ramps else ()
+    else:
+        test_ramps = _csv(test) or ("medium",)
+    dataset.select(ramps=train_ramps + test_ramps)  # raises on an unknown label
+    return train_ramps, test_ramps
+
+
 def _cmd_discover(args: argparse.Namespace) -> int:
     from .data import load_dataset
     from .physics import CircuitModel
@@ -22,10 +55,11 @@ def _cmd_discover(args: argparse.Namespace) -> int:
     from .validation.discover import DiscoverySettings, discover, write_report
 
     dataset = load_dataset(args.dataset)
+    train_ramps, test_ramps = _split_labels(dataset, args.train, args.test)
     model = CircuitModel().with_effects(*_csv(args.effects))
     fit = FitSettings(
         free=_csv(args.free) or None,
-        train_ramps=_csv(args.train) or ("fast", "slow"),
+        train_ramps=train_ramps,
         progress=False,
         time_limit_s=args.time_limit,
         max_iter=args.max_iter,
@@ -34,7 +68,7 @@ def _cmd_discover(args: argparse.Namespace) -> int:
     )
     settings = DiscoverySettings(
         fit=fit,
-        test_ramps=_csv(args.test) or ("medium",),
+        test_ramps=test_ramps,
         candidates=_csv(args.candidates) or None,
         max_effects=args.max_effects,
         alpha=args.alpha,
@@ -83,7 +117,10 @@ def register(sub) -> None:
         "--candidates", default="", help="candidate effects (default: the whole library)"
     )
     p.add_argument("--train", default="fast,slow", help="training ramp labels (fast,slow)")
-    p.add_argument("--test", default="medium", help="test ramp labels, only scored (medium)")
+    p.add_argument(
+        "--test",
+        help="test ramp labels, only scored (default medium, when the dataset has that ramp)",
+    )
     p.add_argument(
         "--alpha", type=float, default=0.01, help="family-wise significance level (0.01)"
     )

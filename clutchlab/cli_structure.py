@@ -19,8 +19,10 @@ def _cmd_select_structure(args: argparse.Namespace) -> int:
     from .physics.fit import FitSettings, StructureSelector
 
     dataset = load_dataset(args.dataset)
+    train_ramps = _csv(args.train) or ("fast", "slow")
+    dataset.select(ramps=train_ramps)  # an unknown label is an error, not a dropped ramp
     settings = FitSettings(
-        train_ramps=_csv(args.train) or ("fast", "slow"),
+        train_ramps=train_ramps,
         progress=not args.quiet,
         time_limit_s=args.time_limit,
     )

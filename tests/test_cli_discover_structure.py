@@ -1,0 +1,74 @@
+"""``clutchlab discover`` / ``select-structure`` / ``classifiers``: input and output checks.
+
+Fast: every check here must refuse before the expensive work, so the work itself is
+replaced by a stub that fails the test if it is reached.
+"""
+
+from __future__ import annotations
+
+import pytest
+from synthetic import make_trace
+
+import clutchlab.validation.discover as discover_pkg
+from clutchlab.cli import main
+from clutchlab.data import Dataset, save_dataset
+from clutchlab.physics.fit import StructureSelector
+
+
+@pytest.fixture(scope="module")
+def dataset_dir(tmp_path_factory):
+    """Three 2 s command-only experiments, ramps fast / medium / slow."""
+    traces = [
+        make_trace([0, 0.5, 1.5, 2.0], [0, 0, 1100, 0], name=f"{ramp}_50Hz", ramp=ramp)
+        for ramp in ("fast", "medium", "slow")
+    ]
+    out = tmp_path_factory.mktemp("cli_checks") / "data"
+    save_dataset(Dataset(traces), out)
+    return out
+
+
+@pytest.fixture
+def no_work(monkeypatch):
+    """Make reaching the discovery or a structure fit an error of the test."""
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the expensive work was started")
+
+    monkeypatch.setattr(discover_pkg, "discover", refuse)
+    monkeypatch.setattr(StructureSelector, "fit", refuse)
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [["--train", "fast,fats"], ["--test", "meduim"], ["--train", "fats", "--test", "medium"]],
+)
+def test_discover_refuses_an_unknown_ramp_label(dataset_dir, tmp_path, capsys, no_work, extra):
+    out = tmp_path / "report"
+    code = main(["discover", str(dataset_dir), "--out", str(out), "--quiet", *extra])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "unknown ramp label" in err and "'fast', 'medium', 'slow'" in err
+    assert not out.exists()
+
+
+def test_discover_without_a_medium_ramp_runs_without_a_test_set(tmp_path, monkeypatch):
+    traces = [
+        make_trace([0, 0.5, 1.5, 2.0], [0, 0, 1100, 0], name=f"{ramp}_50Hz", ramp=ramp)
+        for ramp in ("fast", "slow")
+    ]
+    save_dataset(Dataset(traces), tmp_path / "data")
+    seen = {}
+
+    def stop(dataset, model, settings, baseline=None):
+        seen["test"] = settings.test_ramps
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(discover_pkg, "discover", stop)
+    code = main(["discover", str(tmp_path / "data"), "--out", str(tmp_path / "r"), "--quiet"])
+    assert code == 130 and seen["test"] == ()
+
+
+def test_select_structure_refuses_an_unknown_ramp_label(dataset_dir, capsys, no_work):
+    code = main(["select-structure", str(dataset_dir), "--train", "fast,fats", "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and "unknown ramp label" in err and "fats" in err
