@@ -72,3 +72,27 @@ def test_select_structure_refuses_an_unknown_ramp_label(dataset_dir, capsys, no_
     code = main(["select-structure", str(dataset_dir), "--train", "fast,fats", "--quiet"])
     err = capsys.readouterr().err
     assert code == 2 and "unknown ramp label" in err and "fats" in err
+
+
+def test_select_structure_never_writes_its_model_over_the_input_manifest(
+    dataset_dir, capsys, no_work
+):
+    manifest = dataset_dir / "manifest.json"
+    before = manifest.read_bytes()
+    code = main(["select-structure", str(dataset_dir), "--out", str(manifest), "--quiet"])
+    assert code == 2 and "manifest of this command's input" in capsys.readouterr().err
+    assert manifest.read_bytes() == before
+
+
+@pytest.mark.parametrize("kind", ["folder", "text"])
+def test_select_structure_refuses_a_bad_out_before_fitting(
+    dataset_dir, tmp_path, capsys, no_work, kind
+):
+    out = tmp_path / "model.json"
+    if kind == "folder":
+        out.mkdir()
+    else:
+        out.write_text("my notes\n")
+    code = main(["select-structure", str(dataset_dir), "--out", str(out), "--quiet"])
+    assert code == 2 and str(out) in capsys.readouterr().err
+    assert kind == "folder" or out.read_text() == "my notes\n"
