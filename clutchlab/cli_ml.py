@@ -31,14 +31,15 @@ def _cmd_classifiers(args: argparse.Namespace) -> int:
     from .errors import ModelError
     from .residual_ml import CLASSIFIERS, compare_classifiers
 
+    out = Path(args.out)
+    _check_classifiers_out(out)
     dataset = load_dataset(args.dataset)
     train = _training(dataset, _csv(args.train))
-    names = list(_csv(args.classifiers)) or None
+    names = list(dict.fromkeys(_csv(args.classifiers))) or None  # each one once
     unknown = sorted(set(names or []) - set(CLASSIFIERS))
     if unknown:
         raise ModelError(f"unknown classifier(s) {unknown}; known: {', '.join(CLASSIFIERS)}")
     result = compare_classifiers(list(train), names=names, progress=not args.quiet)
-    out = Path(args.out)
     fig = result.figure()
     files = {
         "classifiers.csv": result.csv_text().encode("utf-8"),
@@ -56,6 +57,38 @@ def _cmd_classifiers(args: argparse.Namespace) -> int:
 
         write_json_output(args.json, json.dumps(result.to_dict(), indent=2))
     return 0
+
+
+#: What ``clutchlab classifiers`` writes into its ``--out`` folder (see _cmd_classifiers).
+CLASSIFIER_FILES = ("classifiers.csv", "classifiers.png")
+
+
+def _check_classifiers_out(out: Path) -> None:
+    """Refuse an ``--out`` folder the comparison could not be written to, before the work.
+
+    The same refusals :func:`~clutchlab.data.write_folder_atomic` makes when writing (a
+    file where the folder goes, another kind of clutchlab output, a user's file of the
+    same name as one written), made before the leave-one-experiment-out fits.
+
+    Raises
+    ------
+    OutputError
+        Naming the folder and the reason.
+    """
+    from .data.output import check_folder_kind, check_output, owned_files
+    from .errors import OutputError
+
+    check_output(out, kind="folder", overwrite=True, what="--out")
+    if not out.is_dir():
+        return
+    check_folder_kind(out, "--out")
+    owned = owned_files(out)
+    theirs = [n for n in CLASSIFIER_FILES if (out / n).exists() and n not in owned]
+    if theirs:
+        raise OutputError(
+            f"--out {out}: clutchlab did not write these files and would replace them; "
+            "move them away or choose another folder: " + ", ".join(theirs)
+        )
 
 
 def _physics(path: str | None):

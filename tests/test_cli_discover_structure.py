@@ -96,3 +96,46 @@ def test_select_structure_refuses_a_bad_out_before_fitting(
     code = main(["select-structure", str(dataset_dir), "--out", str(out), "--quiet"])
     assert code == 2 and str(out) in capsys.readouterr().err
     assert kind == "folder" or out.read_text() == "my notes\n"
+
+
+@pytest.fixture
+def no_comparison(monkeypatch):
+    import clutchlab.residual_ml as residual_ml
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the classifier comparison was started")
+
+    monkeypatch.setattr(residual_ml, "compare_classifiers", refuse)
+
+
+def test_classifiers_refuse_a_users_file_in_out_before_the_comparison(
+    dataset_dir, tmp_path, capsys, no_comparison
+):
+    out = tmp_path / "cls"
+    out.mkdir()
+    (out / "classifiers.png").write_bytes(b"my own figure")
+    code = main(["classifiers", str(dataset_dir), "--out", str(out), "--quiet"])
+    assert code == 2 and "classifiers.png" in capsys.readouterr().err
+    assert (out / "classifiers.png").read_bytes() == b"my own figure"
+
+
+def test_classifiers_refuse_a_dataset_folder_as_out_before_the_comparison(
+    dataset_dir, capsys, no_comparison
+):
+    code = main(["classifiers", str(dataset_dir), "--out", str(dataset_dir), "--quiet"])
+    assert code == 2 and "dataset folder" in capsys.readouterr().err
+
+
+def test_classifiers_named_twice_are_compared_once(dataset_dir, tmp_path, monkeypatch):
+    import clutchlab.residual_ml as residual_ml
+
+    seen = {}
+
+    def stop(traces, names=None, progress=True):
+        seen["names"] = names
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(residual_ml, "compare_classifiers", stop)
+    argv = ["classifiers", str(dataset_dir), "--out", str(tmp_path / "c"), "--quiet"]
+    assert main([*argv, "--classifiers", "rbf_svc,linear_svc,rbf_svc"]) == 130
+    assert seen["names"] == ["rbf_svc", "linear_svc"]
