@@ -606,10 +606,20 @@ def _summary(iterations: list[IterationRecord], unexplained: bool, diag, substep
     last = iterations[-1]
     if unexplained:
         follows = ", ".join(diag.signature) or "no single signal"
-        parts.append(
-            "unexplained residual: no library effect explains a significant share of it "
-            f"({last.decision}); it follows {follows}; no effect claimed for it"
-        )
+        significant = [c.effect for c in last.candidates if c.significant]
+        if significant:  # significant, but not claimed (a flexible law matched it …)
+            verb = "explains" if len(significant) == 1 else "explain"
+            parts.append(
+                f"unexplained residual: {', '.join(significant)} {verb} a significant share "
+                f"of it, but no effect is claimed ({last.decision}); it follows {follows}"
+            )
+        else:
+            parts.append(
+                "unexplained residual: no library effect explains a significant share of it "
+                f"({last.decision}); it follows {follows}; no effect claimed for it"
+            )
+    elif last.decision == "effect limit reached" and not added:
+        parts.append("no effect was looked for (the effect limit is 0)")
     elif last.decision == "effect limit reached":
         parts.append("stopped at the effect limit; the remaining residual was not scored")
     elif last.effect is None and diag.whiteness.get("white", True):
@@ -619,7 +629,7 @@ def _summary(iterations: list[IterationRecord], unexplained: bool, diag, substep
             f"stopped: {last.decision}; the remaining residual is not white but follows "
             "none of the examined signals"
         )
-    if not added and not unexplained:
+    if not added and not unexplained and last.decision != "effect limit reached":
         parts.insert(0, "no missing effect found")
     ramp = diag.ramp_note()
     if ramp and not diag.whiteness.get("white", True):
