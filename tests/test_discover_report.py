@@ -64,3 +64,14 @@ def test_an_effect_limit_of_zero_does_not_claim_that_nothing_was_found():
     text = _summary([it], False, _diag(()), 2)
     assert "no missing effect found" not in text
     assert "no effect was looked for (the effect limit is 0)" in text
+
+
+def test_the_console_table_keeps_its_columns_when_no_effect_is_added():
+    from clutchlab.validation.discover.result import DiscoveryResult
+
+    it = _iteration(MATCHED, [_candidate("sensor_lag", True, 273.8, 0.4)])
+    result = DiscoveryResult([it], _state(), _state(), True, [], "", [], [], 1.0)
+    head, row, *notes = result.table().splitlines()
+    assert head.index("evidence") == row.index("sensor_lag")  # the columns line up
+    assert MATCHED not in row and row.split()[1] == "—"
+    assert notes == [f"iteration 0: no effect added: {MATCHED}"]

@@ -256,19 +256,26 @@ class DiscoveryResult:
         return text
 
     def table(self) -> str:
-        """Per iteration: effect, winner and runner-up scores, RMSE before → after."""
+        """Per iteration: effect, winner and runner-up scores, RMSE before → after.
+
+        An iteration that added no effect shows "—" in the effect column; why it added none
+        (its decision, often a sentence) follows the table, one line per such iteration.
+        """
         lines = [
-            f"{'it':>2s}  {'effect':30s} {'train RMSE (bar)':>20s} {'test RMSE (bar)':>20s}  "
+            f"{'it':>2s}  {'effect':30s} {'train RMSE (bar)':>19s} {'test RMSE (bar)':>19s}  "
             "evidence (statistic, share)"
         ]
+        notes = []
         for it in self.iterations:
+            if it.effect is None:
+                notes.append(f"iteration {it.index}: no effect added: {it.decision}")
             top = ", ".join(
                 f"{c.effect} {c.statistic:.1f}/{c.share:.2f}{'*' if c.significant else ''}"
                 for c in it.candidates[:3]
             )
             lines.append(
-                f"{it.index:2d}  {(it.effect or '— ' + it.decision):30s} "
+                f"{it.index:2d}  {(it.effect or '—'):30s} "
                 f"{it.before.train['rmse_bar']:9.4f} → {it.after.train['rmse_bar']:7.4f} "
                 f"{it.before.test['rmse_bar']:9.4f} → {it.after.test['rmse_bar']:7.4f}  {top}"
             )
-        return "\n".join(lines)
+        return "\n".join(lines + notes)
