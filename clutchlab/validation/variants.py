@@ -348,7 +348,9 @@ class FittedPhysics(BaseEstimator):
         fitter = PhysicsFitter(self.model, self.settings)
         try:
             fitter.fit(list(traces))
-            converged = True
+            # a fit stopped at its iteration or time limit returns (with a FitWarning)
+            # its best iterate, marked not converged: say so
+            converged = bool(fitter.result_.success)
         except FitError as exc:
             best = getattr(exc, "result", None)
             if best is None or not self.accept_best_iterate:
