@@ -36,8 +36,18 @@ def _finish(files, failed: dict[str, str], json_path: str | None) -> int:
     return 1 if failed else 0
 
 
-def _fmu_params(items: list[str] | None) -> dict[str, float]:
-    """``NAME=VALUE`` options as a dict; a malformed one exits with its text."""
+def _fmu_params(items: list[str] | None, fmu: str | None) -> dict[str, float]:
+    """``--fmu-param NAME=VALUE`` options as a dict.
+
+    Raises
+    ------
+    ModelError
+        A malformed option (its text), or ``--fmu-param`` without ``--physics-fmu`` (it
+        would be ignored): a usage error, exit status 2 like every other one, not the
+        status 1 of a failed variant.
+    """
+    from .errors import ModelError
+
     out = {}
     for item in items or ():
         name, sep, value = item.partition("=")
@@ -46,7 +56,11 @@ def _fmu_params(items: list[str] | None) -> dict[str, float]:
                 raise ValueError
             out[name.strip()] = float(value)
         except ValueError:
-            raise SystemExit(f"--fmu-param {item!r}: expected NAME=VALUE with a number") from None
+            raise ModelError(f"--fmu-param {item!r}: expected NAME=VALUE with a number") from None
+    if out and not fmu:
+        raise ModelError(
+            "--fmu-param sets a parameter of the --physics-fmu FMU, and no --physics-fmu was given"
+        )
     return out
 
 
@@ -56,7 +70,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     from .physics.fit import FitSettings
     from .validation import evaluate, write_report
 
-    fmu_params = _fmu_params(args.fmu_param)  # a malformed option fails before any work
+    fmu_params = _fmu_params(args.fmu_param, args.physics_fmu)  # fails before any work
     dataset = load_dataset(args.dataset, channel_map=args.map)
     fmu = None
     if args.physics_fmu:
