@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from .cli_types import positive_float
@@ -12,6 +13,29 @@ __all__ = ["register"]
 
 def _csv(text: str | None) -> tuple[str, ...]:
     return tuple(s.strip() for s in (text or "").split(",") if s.strip())
+
+
+def _unfinished_candidates(selection) -> list[str]:
+    """The candidates of a structure selection whose fit stopped before converging.
+
+    A flexible candidate that kept its start (the plain optimum, because its iterate was
+    worse on the training set) is a finished decision, not listed.
+
+    Parameters
+    ----------
+    selection : StructureSelection
+        From :class:`~clutchlab.physics.fit.StructureSelector`.
+
+    Returns
+    -------
+    list of str
+        ``"name (solver status)"`` per unfinished candidate, in the order fitted.
+    """
+    return [
+        f"{c.name} ({c.status})"
+        for c in selection.candidates
+        if not c.converged and "kept its start" not in c.status
+    ]
 
 
 def _cmd_select_structure(args: argparse.Namespace) -> int:
@@ -31,6 +55,15 @@ def _cmd_select_structure(args: argparse.Namespace) -> int:
     ).fit(dataset)
     sel = selector.selection_
     print(sel.table())
+    stopped = _unfinished_candidates(sel)
+    if stopped:
+        print(
+            f"clutchlab select-structure: warning: {len(stopped)} of {len(sel.candidates)} "
+            f"candidate fits stopped before converging ({'; '.join(stopped)}): each is scored "
+            "at its best iterate (its start when no iteration finished), so the choice may "
+            "differ with a longer --time-limit",
+            file=sys.stderr,
+        )
     if args.out:
         out = Path(args.out)
         sel.best_result().to_json(out)

@@ -139,3 +139,37 @@ def test_classifiers_named_twice_are_compared_once(dataset_dir, tmp_path, monkey
     argv = ["classifiers", str(dataset_dir), "--out", str(tmp_path / "c"), "--quiet"]
     assert main([*argv, "--classifiers", "rbf_svc,linear_svc,rbf_svc"]) == 130
     assert seen["names"] == ["rbf_svc", "linear_svc"]
+
+
+def _fake_selection(*statuses):
+    from clutchlab.physics.fit.structure import CandidateScore, StructureSelection
+
+    names = ("plain", "force", "play")
+    cands = [
+        CandidateScore(n, [], 8, 0.35, -20.0, status=s, converged=s == "Solve_Succeeded")
+        for n, s in zip(names, statuses, strict=False)
+    ]
+    return StructureSelection("plain", [], "BIC", 425, 21.0, cands, ["fast_50Hz"], 1.0)
+
+
+@pytest.mark.parametrize(
+    ("statuses", "warned"),
+    [
+        (("not run", "Maximum_Iterations_Exceeded"), "2 of 2 candidate fits stopped"),
+        (("Solve_Succeeded", "Solve_Succeeded; kept its start (the iterate was worse)"), None),
+    ],
+)
+def test_select_structure_warns_when_the_choice_rests_on_unfinished_fits(
+    dataset_dir, capsys, monkeypatch, statuses, warned
+):
+    def fake_fit(self, data):
+        self.selection_ = _fake_selection(*statuses)
+        return self
+
+    monkeypatch.setattr(StructureSelector, "fit", fake_fit)
+    assert main(["select-structure", str(dataset_dir), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    if warned:
+        assert warned in err and "plain (not run)" in err and "--time-limit" in err
+    else:
+        assert "warning" not in err
