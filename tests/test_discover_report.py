@@ -75,3 +75,126 @@ def test_the_console_table_keeps_its_columns_when_no_effect_is_added():
     assert head.index("evidence") == row.index("sensor_lag")  # the columns line up
     assert MATCHED not in row and row.split()[1] == "—"
     assert notes == [f"iteration 0: no effect added: {MATCHED}"]
+
+
+def _model_state(rmse_train, rmse_test, experiments=("fast_30Hz_A", "slow_30Hz_A")):
+    import numpy as np
+
+    n = 50
+    cur = np.tile(np.linspace(0.0, 1100.0, n), len(experiments))
+    residual = SimpleNamespace(
+        experiments=list(experiments),
+        slices=[(k * n, (k + 1) * n) for k in range(len(experiments))],
+        signals={"current_mA": cur},
+        r=0.01 * np.sin(cur / 100.0),
+        keep=np.ones(cur.size, bool),
+    )
+    test = {"medium_30Hz_A": (np.linspace(0.0, 1100.0, n), 0.02 * np.cos(np.arange(n)))}
+    return SimpleNamespace(
+        residual=residual,
+        train={"rmse_bar": rmse_train},
+        test={"rmse_bar": rmse_test},
+        test_residual=test,
+    )
+
+
+def _figure_iteration(effect=None):
+    it = _iteration(
+        MATCHED,
+        [_candidate("sensor_lag", True, 273.8, 0.4), _candidate("stribeck_friction", False)],
+        effect=effect,
+    )
+    it.before, it.after = _model_state(0.0226, 0.0348), _model_state(0.0226, 0.0348)
+    it.threshold_p = 0.005
+    for c in it.candidates:
+        c.k, c.p_value, c.novelty, c.status = 1, 0.5, 0.3, "scored"
+    return it
+
+
+def _drawn(fig):
+    import io
+
+    fig.savefig(io.BytesIO(), format="png", dpi=100)  # lays the figure out
+    return fig
+
+
+def test_residual_figure_titles_fit_and_say_what_was_added_and_which_experiment_is_which():
+    from clutchlab.validation.discover.report import plot_residuals
+
+    fig = _drawn(plot_residuals(_figure_iteration()))
+    width = fig.bbox.width
+    for ax in fig.axes:
+        box = ax.title.get_window_extent()
+        assert box.x0 >= 0 and box.x1 <= width, ax.get_title()  # not cut at the edge
+        assert "unchanged" not in ax.get_title()
+    titles = [ax.get_title() for ax in fig.axes]
+    assert any("no effect added" in t for t in titles)
+    labels = [t.get_text() for ax in fig.axes if ax.get_legend() for t in ax.get_legend().texts]
+    assert {"fast_30Hz_A", "slow_30Hz_A", "medium_30Hz_A"} <= set(labels)
+    assert "model − measured" in fig.get_suptitle()
+
+
+def test_diagnostics_title_is_wrapped_not_cut():
+    from clutchlab.validation.discover.report import plot_diagnostics
+
+    summary = "RMS 0.0173 bar, not white; follows " + ", ".join(
+        f"signal_{k} (η² 0.1{k}, r +0.3{k})" for k in range(8)
+    )
+    it = _figure_iteration()
+    it.diagnostics = SimpleNamespace(
+        associations=[{"signal": "didt_mA_s", "eta2": 0.14}],
+        cross_correlation={"didt_mA_s": {"lags_s": [-0.1, 0.0, 0.1], "values": [0.2, 0.3, 0.2]}},
+        spectrum={"freq_Hz": [0.0, 1.0, 2.0], "psd_bar2_Hz": [1e-4, 1e-5, 1e-6]},
+        summary=lambda: summary,
+    )
+    fig = _drawn(plot_diagnostics(it))
+    assert " ".join(fig.get_suptitle().split()).endswith("signal_7 (η² 0.17, r +0.37)")
+    box = fig._suptitle.get_window_extent()
+    assert box.x0 >= 0 and box.x1 <= fig.bbox.width
+
+
+def test_evidence_figure_explains_its_colours_and_states_a_zero_statistic():
+    from clutchlab.validation.discover.report import plot_evidence
+
+    fig = _drawn(plot_evidence(_figure_iteration()))
+    ax = fig.axes[0]
+    legend = [t.get_text() for t in ax.get_legend().texts]
+    assert legend == ["significant, not added", "not significant"]
+    notes = [t.get_text() for t in ax.texts]
+    assert " 0, share 0.00" in notes and " 274, share 0.40" in notes
+
+
+def test_interactive_figures_say_what_was_added_and_keep_the_whole_summary():
+    from clutchlab.validation.discover.interactive import (
+        iplot_diagnostics,
+        iplot_evidence,
+        iplot_residuals,
+    )
+
+    it = _figure_iteration()
+    titles = [a.text for a in iplot_residuals(it).layout.annotations]
+    assert titles and not any("unchanged" in t for t in titles)
+    assert any("after (no effect added)" in t for t in titles)
+    summary = "RMS 0.0173 bar, not white; follows " + ", ".join(
+        f"signal_{k} (η² 0.1{k}, r +0.3{k})" for k in range(8)
+    )
+    it.diagnostics = SimpleNamespace(
+        associations=[{"signal": "didt_mA_s", "eta2": 0.14, "unit": "mA/s"}],
+        cross_correlation={"didt_mA_s": {"lags_s": [-0.1, 0.0, 0.1], "values": [0.2, 0.3, 0.2]}},
+        spectrum={"freq_Hz": [0.0, 1.0, 2.0], "psd_bar2_Hz": [1e-4, 1e-5, 1e-6]},
+        summary=lambda: summary,
+    )
+    title = iplot_diagnostics(it).layout.title.text
+    assert title.replace("<br>", " ").endswith("signal_7 (η² 0.17, r +0.37)")
+    assert "grey: not significant" in iplot_evidence(it).layout.title.text
+
+
+def test_interactive_residuals_without_test_experiments_have_no_empty_test_row():
+    from clutchlab.validation.discover.interactive import iplot_residuals
+
+    it = _figure_iteration()
+    for state in (it.before, it.after):
+        state.test_residual = {}
+        state.test = {"rmse_bar": float("nan")}
+    titles = [a.text for a in iplot_residuals(it).layout.annotations]
+    assert len(titles) == 2 and not any("nan" in t or "test" in t for t in titles)

@@ -10,6 +10,7 @@ imported on use; the page embeds plotly.js once (:func:`clutchlab._plotly.plotly
 from __future__ import annotations
 
 import html
+import textwrap
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -36,14 +37,15 @@ _CYCLE = (
 )
 
 
-def _layout(fig: Any, title: str, height: int) -> Any:
+def _layout(fig: Any, title: str, height: int, title_lines: int = 1) -> Any:
+    extra = 18 * (title_lines - 1)  # room for a title wrapped over several lines
     fig.update_layout(
         title={"text": title, "x": 0.01, "xanchor": "left", "font": {"size": 14}},
-        height=height,
+        height=height + extra,
         template="plotly_white",
         hovermode="closest",
         legend={"groupclick": "togglegroup"},
-        margin={"l": 70, "r": 20, "t": 70, "b": 50},
+        margin={"l": 70, "r": 20, "t": 70 + extra, "b": 50},
     )
     return fig
 
@@ -65,14 +67,15 @@ def iplot_residuals(it: IterationRecord) -> go.Figure:
     import plotly.graph_objects as go
     from plotly.subplots import make_subplots
 
-    label_after = it.effect or "unchanged"
+    after = f"after (+ {it.effect})" if it.effect else "after (no effect added)"
+    with_test = bool(it.before.test_residual)  # no test experiments: no empty test row
     titles = []
-    for row in ("training", "unseen test ramp"):
-        for state, when in ((it.before, "before"), (it.after, f"after (+ {label_after})")):
+    for row in ("training", "unseen test ramp")[: 2 if with_test else 1]:
+        for state, when in ((it.before, "before"), (it.after, after)):
             rmse = (state.train if row == "training" else state.test)["rmse_bar"]
             titles.append(f"{row}, {when}: RMSE {rmse:.4f} bar")
     fig = make_subplots(
-        rows=2,
+        rows=2 if with_test else 1,
         cols=2,
         shared_xaxes=True,
         shared_yaxes="rows",
@@ -113,13 +116,19 @@ def iplot_residuals(it: IterationRecord) -> go.Figure:
             add(name, cur, np.asarray(res.r[a:b])[keep], 1, col, "markers")
         for name, (cur, r) in state.test_residual.items():
             add(name, cur, r, 2, col, "lines")
-    for row in (1, 2):
+    rows = (1, 2) if with_test else (1,)
+    for row in rows:
         for col in (1, 2):
             fig.add_hline(y=0.0, line={"color": "#000000", "width": 0.7}, row=row, col=col)
-    fig.update_xaxes(title_text="nominal VFS current (mA)", row=2)
+    fig.update_xaxes(title_text="nominal VFS current (mA)", row=rows[-1])
     fig.update_yaxes(title_text="residual, training (bar)", row=1, col=1)
-    fig.update_yaxes(title_text="residual, test (bar)", row=2, col=1)
-    return _layout(fig, f"Iteration {it.index}: residual before / after", 700)
+    if with_test:
+        fig.update_yaxes(title_text="residual, unseen test ramp (bar)", row=2, col=1)
+    return _layout(
+        fig,
+        f"Iteration {it.index}: residual (model − measured, dither-period mean) before / after",
+        700 if with_test else 400,
+    )
 
 
 def iplot_evidence(it: IterationRecord) -> go.Figure:
@@ -151,7 +160,7 @@ def iplot_evidence(it: IterationRecord) -> go.Figure:
             orientation="h",
             marker_color=colors,
             customdata=[[c.share, c.p_value, c.novelty, c.status] for c in cands],
-            text=[f"share {c.share:.2f}" for c in cands],
+            text=[f"{c.statistic:.3g}, share {c.share:.2f}" for c in cands],
             textposition="auto",
             hovertemplate="%{y}: statistic %{x:.4g}<br>share %{customdata[0]:.3f}, "
             "p %{customdata[1]:.2g}, novelty %{customdata[2]:.2f}<br>%{customdata[3]}"
@@ -169,7 +178,8 @@ def iplot_evidence(it: IterationRecord) -> go.Figure:
     )
     return _layout(
         fig,
-        f"Iteration {it.index}: evidence per candidate effect",
+        f"Iteration {it.index}: evidence per candidate effect "
+        "(green: added, orange: significant, grey: not significant)",
         int(24 * max(len(cands), 4) + 160),
     )
 
@@ -245,5 +255,5 @@ def iplot_diagnostics(it: IterationRecord) -> go.Figure:
     fig.update_yaxes(title_text="cross-correlation (-)", row=1, col=2)
     fig.update_xaxes(title_text="frequency (Hz)", row=1, col=3)
     fig.update_yaxes(title_text="residual PSD (bar²/Hz)", row=1, col=3)
-    summary = html.escape(d.summary()[:110])
-    return _layout(fig, f"Iteration {it.index}: residual diagnostics — {summary}", 430)
+    lines = textwrap.wrap(f"Iteration {it.index}: residual diagnostics — {d.summary()}", 130)
+    return _layout(fig, "<br>".join(html.escape(x) for x in lines), 430, len(lines))

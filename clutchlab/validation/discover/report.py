@@ -6,10 +6,12 @@ import base64
 import html
 import io
 import math
+import textwrap
 from pathlib import Path
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.patches import Patch
 
 from ..._plotly import MARKER_SCRIPT, figure_div, plotlyjs_script
 from ...data.output import write_folder_atomic
@@ -35,29 +37,31 @@ def plot_residuals(it: IterationRecord) -> Figure:
     rows = 2 if with_test else 1
     fig = Figure(figsize=(10, 3.25 * rows + 0.5), layout="constrained")  # no pyplot
     axes = np.asarray(fig.subplots(rows, 2, sharex=True, sharey="row")).reshape(rows, 2)
-    label_after = it.effect or "unchanged"
-    for col, (state, title) in enumerate(
-        ((it.before, "before"), (it.after, f"after (+ {label_after})"))
-    ):
+    after = f"after (+ {it.effect})" if it.effect else "after (no effect added)"
+    for col, (state, title) in enumerate(((it.before, "before"), (it.after, after))):
         ax = axes[0, col]
-        for _name, cur, r, keep in _train_curves(state):
-            ax.plot(cur[keep], r[keep], ".", ms=1.5, alpha=0.6)
-        ax.set_title(f"training, {title}: RMSE {state.train['rmse_bar']:.4f} bar")
+        for name, cur, r, keep in _train_curves(state):
+            ax.plot(cur[keep], r[keep], ".", ms=1.5, alpha=0.6, label=name)
+        ax.set_title(f"{title}: training RMSE {state.train['rmse_bar']:.4f} bar", fontsize=10)
         if with_test:
             ax = axes[1, col]
             for name, (cur, r) in state.test_residual.items():
                 ax.plot(cur, r, lw=0.7, label=name)
-            ax.set_title(f"unseen test ramp, {title}: RMSE {state.test['rmse_bar']:.4f} bar")
+            ax.set_title(f"{title}: test RMSE {state.test['rmse_bar']:.4f} bar", fontsize=10)
         axes[-1, col].set_xlabel("nominal VFS current (mA)")
     for ax in axes.ravel():
         ax.axhline(0.0, color="black", lw=0.6)
         ax.grid(alpha=0.3)
     axes[0, 0].set_ylabel("residual, training (bar)")
+    if axes[0, 1].get_legend_handles_labels()[0]:
+        axes[0, 1].legend(loc="best", fontsize=6, markerscale=5, ncol=2)
     if with_test:
-        axes[1, 0].set_ylabel("residual, test (bar)")
+        axes[1, 0].set_ylabel("residual, unseen test ramp (bar)")
         if it.after.test_residual:
             axes[1, 1].legend(loc="best", fontsize=7)
-    fig.suptitle(f"Iteration {it.index}: residual before / after")
+    fig.suptitle(
+        f"Iteration {it.index}: residual (model − measured, dither-period mean) before / after"
+    )
     return fig
 
 
@@ -74,13 +78,27 @@ def plot_evidence(it: IterationRecord) -> Figure:
         for c in cands
     ]
     ax.barh([c.effect for c in cands], stats, color=colors)
-    for y, c in enumerate(cands):
-        ax.text(max(c.statistic, 1e-2), y, f" share {c.share:.2f}", va="center", fontsize=7)
+    for y, c in enumerate(cands):  # the value in words: a bar at 0 is drawn at 0.01
+        ax.text(
+            max(c.statistic, 1e-2),
+            y,
+            f" {c.statistic:.3g}, share {c.share:.2f}",
+            va="center",
+            fontsize=7,
+        )
     for k in sorted({c.k for c in cands}):
         ax.axvline(chi2.isf(it.threshold_p, k), ls="--", lw=0.8, color="black")
     ax.set_xscale("log")
     ax.set_xlabel("score statistic n_eff·ln(RSS₀/RSS₁) (dashed: significance threshold)")
     ax.set_title(f"Iteration {it.index}: evidence per candidate effect")
+    shown = {
+        "tab:green": f"added ({it.effect})",
+        "tab:orange": "significant, not added",
+        "tab:gray": "not significant",
+    }
+    handles = [Patch(color=k, label=v) for k, v in shown.items() if k in colors]
+    if handles:
+        ax.legend(handles=handles, loc="best", fontsize=7)
     ax.grid(alpha=0.3, axis="x")
     return fig
 
@@ -103,7 +121,8 @@ def plot_diagnostics(it: IterationRecord) -> Figure:
     ax3.set(xlabel="frequency (Hz)", ylabel="residual PSD (bar²/Hz)")
     for ax in (ax1, ax2, ax3):
         ax.grid(alpha=0.3)
-    fig.suptitle(f"Iteration {it.index}: residual diagnostics — {d.summary()[:110]}", fontsize=9)
+    text = textwrap.fill(f"Iteration {it.index}: residual diagnostics — {d.summary()}", 150)
+    fig.suptitle(text, fontsize=9)  # wrapped, never cut: the summary names what it follows
     return fig
 
 
