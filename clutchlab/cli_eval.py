@@ -86,16 +86,20 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     if args.fit_max_iter is not None:
         kw["max_iter"] = args.fit_max_iter
     options = {}
+    physics_model = CircuitModel().with_effects(*_csv(args.effects))
     if args.physics_model:
         from .physics.fit import PhysicsFitter
+        from .validation.variants import check_fit_effects
 
-        options["physics_fitted"] = {"fitted": PhysicsFitter.load(args.physics_model)}
+        fitted = PhysicsFitter.load(args.physics_model)
+        check_fit_effects(fitted.result_, physics_model)  # before any variant is fitted
+        options["physics_fitted"] = {"fitted": fitted}
     ev = evaluate(
         dataset,
         _csv(args.variants) or None,
         train=_csv(args.train),
         test=_csv(args.test),
-        physics_model=CircuitModel().with_effects(*_csv(args.effects)),
+        physics_model=physics_model,
         physics_settings=FitSettings(**kw),
         on_error="report",
         progress=not args.quiet,
@@ -159,7 +163,7 @@ def register(sub) -> None:
         metavar="FIT.json",
         help="a fit from `clutchlab fit-physics` on this dataset's training ramps: used as "
         "physics_fitted (and under hybrid) instead of fitting again; refused if it was "
-        "fitted on other experiments",
+        "fitted on other experiments or lacks --effects",
     )
     p.add_argument(
         "--no-classifiers",

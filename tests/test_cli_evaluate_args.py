@@ -23,3 +23,75 @@ def test_a_bad_fmu_param_is_a_usage_error(tmp_path, capsys, extra, message):
     err = capsys.readouterr().err
     assert code == 2 and err.startswith("clutchlab evaluate: error: --fmu-param") and message in err
     assert not out.exists()
+
+
+def _fit_json(path, effects, train):
+    """A fit result as `clutchlab fit-physics` writes it, at the datasheet values."""
+    from clutchlab.physics import CircuitModel
+    from clutchlab.physics.fit import FitResult
+
+    model = CircuitModel().with_effects(*effects)
+    values = dict(model.default_params().values)
+    free = ["reg_F0"]
+    FitResult(
+        effects=list(effects),
+        values=values,
+        units={p.name: p.unit for p in model.parameters},
+        free=free,
+        std_errors={"reg_F0": 0.01},
+        correlation=[[1.0]],
+        singular_values=[1.0],
+        unidentifiable=[],
+        weak_directions=[],
+        per_experiment={},
+        per_experiment_values={},
+        cost_history=[1.0],
+        status="Solve_Succeeded",
+        success=True,
+        iterations=3,
+        wall_s=1.0,
+        train=list(train),
+    ).to_json(path)
+    return path
+
+
+def test_a_given_physics_fit_without_the_asked_effects_is_refused_before_any_work(
+    tmp_path, capsys, monkeypatch
+):
+    from synthetic import make_trace
+
+    import clutchlab.validation as validation
+    from clutchlab.data import Dataset, save_dataset
+
+    traces = [
+        make_trace([0, 0.5, 1.5, 2.0], [0, 0, 1100, 0], name=f"{ramp}_50Hz", ramp=ramp)
+        for ramp in ("fast", "medium", "slow")
+    ]
+    save_dataset(Dataset(traces), tmp_path / "data")
+    fit = _fit_json(tmp_path / "fit.json", [], ["fast_50Hz", "slow_50Hz"])
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the evaluation was started")
+
+    monkeypatch.setattr(validation, "evaluate", refuse)
+    argv = ["evaluate", str(tmp_path / "data"), "--out", str(tmp_path / "r"), "--quiet"]
+    code = main([*argv, "--physics-model", str(fit), "--effects", "sensor_lag"])
+    err = capsys.readouterr().err
+    assert code == 2 and "lacks the effect(s) sensor_lag" in err
+    assert not (tmp_path / "r").exists()
+
+
+def test_fitted_physics_refuses_a_given_fit_without_the_models_effects(tmp_path):
+    from synthetic import make_trace
+
+    from clutchlab.errors import FitError
+    from clutchlab.physics import CircuitModel
+    from clutchlab.physics.fit import PhysicsFitter
+    from clutchlab.validation.variants import FittedPhysics
+
+    trace = make_trace([0, 0.5, 1.5, 2.0], [0, 0, 1100, 0], name="fast_50Hz")
+    fitter = PhysicsFitter.load(_fit_json(tmp_path / "fit.json", [], ["fast_50Hz"]))
+    model = CircuitModel().with_effects("sensor_lag")
+    with pytest.raises(FitError, match="lacks the effect"):
+        FittedPhysics(model, fitted=fitter).fit([trace])
+    assert FittedPhysics(CircuitModel(), fitted=fitter).fit([trace]).converged_

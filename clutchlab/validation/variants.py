@@ -340,6 +340,7 @@ class FittedPhysics(BaseEstimator):
                     f"({', '.join(sorted(fitter.result_.train))}) than this evaluation's "
                     f"training experiments ({', '.join(names)}); refit it on the training ramps"
                 )
+            check_fit_effects(fitter.result_, self.model)
             self.fitter_ = fitter
             self.result_ = fitter.result_
             self.converged_ = bool(fitter.result_.success)
@@ -372,6 +373,32 @@ class FittedPhysics(BaseEstimator):
     def predict(self, trace: Trace) -> np.ndarray:
         """Clutch pressure (bar) of the fitted model on ``trace``."""
         return self.predict_outputs(trace)["clutch_pressure_bar"]
+
+
+def check_fit_effects(result: Any, model: Any) -> None:
+    """Refuse a given physics fit that lacks an effect the evaluation's model declares.
+
+    Parameters
+    ----------
+    result : FitResult
+        The fit made before (``clutchlab fit-physics``), used as ``physics_fitted``.
+    model : CircuitModel or None
+        The model structure asked for (``--effects``); None: the base circuit.
+
+    Raises
+    ------
+    FitError
+        Naming the effects the fit lacks (scoring it would report a model without them
+        under a report that says they were on).
+    """
+    wanted = tuple(getattr(model, "effect_names", ()) or ())
+    missing = [e for e in wanted if e not in result.effects]
+    if missing:
+        raise FitError(
+            f"the given physics fit lacks the effect(s) {', '.join(missing)} asked for "
+            f"(its effects: {', '.join(result.effects) or 'none'}); refit it with "
+            "`clutchlab fit-physics --effects ...`, or leave those effects out"
+        )
 
 
 def _check_moved(result: Any, model: Any) -> None:
