@@ -132,6 +132,14 @@ def test_cli_writes_the_issue_json_and_a_report(cli_run):
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_the_html_report_names_the_training_and_test_experiments(cli_run):
+    _, out = cli_run
+    doc = json.loads((out / "discovery.json").read_text())
+    html = (out / "report" / "report.html").read_text()
+    assert f"Training: {len(doc['train'])} experiments ({', '.join(doc['train'])})" in html
+    assert f"test, only scored: {len(doc['test'])} ({', '.join(doc['test'])})" in html
+
+
 def test_the_report_draws_every_figure_interactive_offline(cli_run):
     """Issue 19: report.html draws each iteration's figures with Plotly (embedded once) in
     headless Chromium with the network disabled; the PNGs stay for report.md."""

@@ -195,6 +195,16 @@ def _html_table(head: list[str], rows: list[list[str]]) -> str:
     return f"<table border='1' cellpadding='3' style='border-collapse:collapse'>{h}{b}</table>"
 
 
+def _split_text(result: DiscoveryResult) -> str:
+    """Which experiments were fitted on and which only scored, and the wall time."""
+    train = f"Training: {len(result.train)} experiments ({', '.join(result.train)})"
+    if result.test:
+        test = f"test, only scored: {len(result.test)} ({', '.join(result.test)})"
+    else:
+        test = "no test experiments (the test rows of the tables are empty)"
+    return f"{train}; {test}; {result.wall_s:.1f} s."
+
+
 def write_report(
     result: DiscoveryResult, out: str | Path, command: str = "", interactive: bool = True
 ) -> Path:
@@ -220,12 +230,12 @@ def write_report(
     """
     out = Path(out)
     files: dict[str, bytes] = {}
+    split = _split_text(result)
     md = [
         "# clutchlab discover — closing the loop",
         "",
         f"Command: `{command}`  " if command else "",
-        f"Training: {len(result.train)} experiments; test (only scored): "
-        f"{len(result.test)} experiments; {result.wall_s:.1f} s.",
+        split,
         "",
         f"**Result:** {result.summary}",
         "",
@@ -233,6 +243,7 @@ def write_report(
     parts_html = [
         "<h1>clutchlab discover — closing the loop</h1>",
         f"<p>Command: <code>{html.escape(command)}</code></p>" if command else "",
+        f"<p>{html.escape(split)}</p>",
         f"<p><b>Result:</b> {html.escape(result.summary)}</p>",
     ]
     for it in result.iterations:
