@@ -95,3 +95,16 @@ def test_fitted_physics_refuses_a_given_fit_without_the_models_effects(tmp_path)
     with pytest.raises(FitError, match="lacks the effect"):
         FittedPhysics(model, fitted=fitter).fit([trace])
     assert FittedPhysics(CircuitModel(), fitted=fitter).fit([trace]).converged_
+
+
+def test_a_classifier_comparison_that_cannot_run_is_skipped_not_failed():
+    """One training experiment: the comparison (not asked for by name) is left out with
+    its reason; the evaluation has no failure (exit status 0, not 1)."""
+    from synthetic import tiny_stand
+
+    from clutchlab.validation import evaluate
+
+    data = tiny_stand(4).select(names=["fast_30Hz_A", "medium_30Hz_A"])
+    ev = evaluate(data, ["gp_base"], train=("fast",), progress=False, on_error="report")
+    assert ev.failed == {} and "gp_base" in ev.scores
+    assert "at least 2 training experiments" in ev.extra["classifier_comparison_skipped"]
