@@ -50,9 +50,8 @@ def _cmd_select_structure(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         time_limit_s=args.time_limit,
     )
-    selector = StructureSelector(
-        _csv(args.candidates) or None, settings, base_effects=_csv(args.effects)
-    ).fit(dataset)
+    candidates = tuple(dict.fromkeys(_csv(args.candidates))) or None  # each one fitted once
+    selector = StructureSelector(candidates, settings, base_effects=_csv(args.effects)).fit(dataset)
     sel = selector.selection_
     print(sel.table())
     stopped = _unfinished_candidates(sel)

@@ -173,3 +173,16 @@ def test_select_structure_warns_when_the_choice_rests_on_unfinished_fits(
         assert warned in err and "plain (not run)" in err and "--time-limit" in err
     else:
         assert "warning" not in err
+
+
+def test_select_structure_fits_a_candidate_named_twice_once(dataset_dir, monkeypatch):
+    seen = {}
+
+    def stop(self, data):
+        seen["candidates"] = self.candidates
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(StructureSelector, "fit", stop)
+    argv = ["select-structure", str(dataset_dir), "--candidates", "plain,force,plain", "--quiet"]
+    assert main(argv) == 130
+    assert seen["candidates"] == ("plain", "force")
