@@ -69,7 +69,9 @@ def _cmd_discover(args: argparse.Namespace) -> int:
     settings = DiscoverySettings(
         fit=fit,
         test_ramps=test_ramps,
-        candidates=_csv(args.candidates) or None,
+        # each once: a repeated name would be scored twice and tighten the per-candidate
+        # significance level (alpha / number of candidates)
+        candidates=tuple(dict.fromkeys(_csv(args.candidates))) or None,
         max_effects=args.max_effects,
         alpha=args.alpha,
         alternatives=not args.no_alternatives,

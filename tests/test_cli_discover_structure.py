@@ -186,3 +186,16 @@ def test_select_structure_fits_a_candidate_named_twice_once(dataset_dir, monkeyp
     argv = ["select-structure", str(dataset_dir), "--candidates", "plain,force,plain", "--quiet"]
     assert main(argv) == 130
     assert seen["candidates"] == ("plain", "force")
+
+
+def test_discover_scores_a_candidate_named_twice_once(dataset_dir, tmp_path, monkeypatch):
+    seen = {}
+
+    def stop(dataset, model, settings, baseline=None):
+        seen["candidates"] = settings.candidates
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(discover_pkg, "discover", stop)
+    argv = ["discover", str(dataset_dir), "--out", str(tmp_path / "r"), "--quiet"]
+    assert main([*argv, "--candidates", "sensor_lag,supply_droop,sensor_lag"]) == 130
+    assert seen["candidates"] == ("sensor_lag", "supply_droop")
