@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 from pathlib import Path
 
@@ -70,9 +71,21 @@ def _cmd_select_structure(args: argparse.Namespace) -> int:
     if args.json:
         sel.to_json(args.json)
         print(f"structure choice written to {args.json}")
-    effects = ",".join(sel.effects) or "''"
-    print(f"score it with: clutchlab evaluate {args.dataset} --effects {effects} ...")
+    print("score it with: " + _evaluate_hint(args, sel.effects, train_ramps))
     return 0
+
+
+def _evaluate_hint(args: argparse.Namespace, effects: list[str], train: tuple[str, ...]) -> str:
+    """The ``clutchlab evaluate`` command that scores the chosen structure on the test ramp:
+    reusing the fit written to ``--out`` when there is one, with the same training ramps."""
+    words = ["clutchlab", "evaluate", str(args.dataset)]
+    if args.out:
+        words += ["--physics-model", str(args.out)]
+    if effects:
+        words += ["--effects", ",".join(effects)]
+    if train != ("fast", "slow"):
+        words += ["--train", ",".join(train)]
+    return " ".join(shlex.quote(w) for w in words) + " --out REPORT"
 
 
 def register(sub) -> None:

@@ -199,3 +199,37 @@ def test_discover_scores_a_candidate_named_twice_once(dataset_dir, tmp_path, mon
     argv = ["discover", str(dataset_dir), "--out", str(tmp_path / "r"), "--quiet"]
     assert main([*argv, "--candidates", "sensor_lag,supply_droop,sensor_lag"]) == 130
     assert seen["candidates"] == ("sensor_lag", "supply_droop")
+
+
+@pytest.mark.parametrize(
+    ("extra", "effects", "hint"),
+    [
+        ([], [], "clutchlab evaluate {data} --out REPORT"),
+        (
+            ["--out", "{tmp}/m.json", "--train", "slow"],
+            ["vfs_force_monotone"],
+            "clutchlab evaluate {data} --physics-model {tmp}/m.json "
+            "--effects vfs_force_monotone --train slow --out REPORT",
+        ),
+    ],
+)
+def test_select_structure_hints_at_an_evaluate_command_that_works(
+    dataset_dir, tmp_path, capsys, monkeypatch, extra, effects, hint
+):
+    from clutchlab.physics.fit import FitResult
+
+    def fake_fit(self, data):
+        self.selection_ = _fake_selection("Solve_Succeeded")
+        self.selection_.effects = effects
+        return self
+
+    monkeypatch.setattr(StructureSelector, "fit", fake_fit)
+    monkeypatch.setattr(FitResult, "to_json", lambda self, path=None: "{}")
+    monkeypatch.setattr(
+        type(_fake_selection()), "best_result", lambda self: FitResult.__new__(FitResult)
+    )
+    argv = [a.format(tmp=tmp_path) for a in extra]
+    assert main(["select-structure", str(dataset_dir), "--quiet", *argv]) == 0
+    out = capsys.readouterr().out
+    assert "score it with: " + hint.format(data=dataset_dir, tmp=tmp_path) in out
+    assert "''" not in out
