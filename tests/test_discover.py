@@ -140,6 +140,15 @@ def test_the_html_report_names_the_training_and_test_experiments(cli_run):
     assert f"test, only scored: {len(doc['test'])} ({', '.join(doc['test'])})" in html
 
 
+def test_the_report_says_whether_each_refit_converged(cli_run):
+    _, out = cli_run
+    doc = json.loads((out / "discovery.json").read_text())
+    html = (out / "report" / "report.html").read_text()
+    for it in doc["iterations"]:
+        state = "converged" if it["fit_converged_after"] else "NOT converged"
+        assert f"fit after: {it['fit_status_after']}, {state}" in html
+
+
 def test_the_report_draws_every_figure_interactive_offline(cli_run):
     """Issue 19: report.html draws each iteration's figures with Plotly (embedded once) in
     headless Chromium with the network disabled; the PNGs stay for report.md."""

@@ -265,10 +265,16 @@ def write_report(
             ],
         ]
         err_head = ["data", "RMSE before (bar)", "RMSE after (bar)", "fit % before", "fit % after"]
+        record = it.to_dict()
         params = [
             [p["name"], _fmt(p["value"], ".5g"), _fmt(p["std_error"], ".3g"), p["unit"]]
-            for p in it.to_dict()["parameters_after"]
+            for p in record["parameters_after"]
         ]
+        fit_state = f"fit after: {record['fit_status_after']}, " + (
+            "converged"
+            if record["fit_converged_after"]
+            else "NOT converged (stopped at a limit; its best iterate is the model)"
+        )
         figs = {
             "residuals": plot_residuals(it),
             "evidence": plot_evidence(it),
@@ -288,7 +294,7 @@ def write_report(
             "",
             _md_table(err_head, errs),
             "",
-            "Parameters after (± standard error):",
+            f"Parameters after (± standard error); {fit_state}:",
             "",
             _md_table(["parameter", "value", "± SE", "unit"], params),
             "",
@@ -306,7 +312,7 @@ def write_report(
             _html_table(_CAND_HEAD, _candidate_rows(it)),
             "<br>",
             _html_table(err_head, errs),
-            "<p>Parameters after (± standard error):</p>",
+            f"<p>Parameters after (± standard error); {html.escape(fit_state)}:</p>",
             _html_table(["parameter", "value", "± SE", "unit"], params),
             *(
                 figure_div(_IPLOTS[k](it), f"plot-iteration{it.index}_{k}")
