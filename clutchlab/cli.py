@@ -271,7 +271,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--variants", default="", help="comma separated (default: every available)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--json", help="also write metrics.json here")
-    p.set_defaults(func=_cmd_demo, report_out=True)
+    from .cli_eval import REPORT_FILES
+
+    p.set_defaults(func=_cmd_demo, report_out=True, report_files=REPORT_FILES)
 
     p = sub.add_parser("data", help="test-stand data: check and convert logs and datasets")
     data = p.add_subparsers(dest="data_command", required=True)
@@ -331,9 +333,12 @@ def check_outputs(args: argparse.Namespace) -> None:
         _check_replaceable(Path(out) / "model.json", args, "--out", "json")
     if getattr(args, "report_out", False):
         check_output(out, kind="folder", overwrite=True, what="--out")
+        from .data.output import check_folder_files
         from .validation.report import REPORT_FOLDER
 
         check_folder_kind(out, REPORT_FOLDER)
+        # a user's report.html there is refused now, not after an hour of fitting
+        check_folder_files(out, getattr(args, "report_files", ()), what=REPORT_FOLDER)
 
 
 #: Arguments that name what a command writes, not what it reads.

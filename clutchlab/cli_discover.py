@@ -8,7 +8,11 @@ import sys
 
 from .cli_types import positive_float
 
-__all__ = ["register"]
+__all__ = ["REPORT_FILES", "register"]
+
+#: The fixed files of a discovery report (the iteration figures beside them vary); a
+#: user's file of one of these names in --out is refused before any work.
+REPORT_FILES = ("report.html", "report.md", "discovery.json")
 
 
 def _csv(text: str | None) -> tuple[str, ...]:
@@ -150,4 +154,4 @@ def register(sub) -> None:
         "better than each flexible component law of at most its size (default: asked)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress display")
-    p.set_defaults(func=_cmd_discover, report_out=True)
+    p.set_defaults(func=_cmd_discover, report_out=True, report_files=REPORT_FILES)

@@ -10,7 +10,11 @@ from pathlib import Path
 from .budgets import FIT_BUDGET_S
 from .cli_types import positive_float
 
-__all__ = ["command_line", "register", "run_demo_command"]
+__all__ = ["REPORT_FILES", "command_line", "register", "run_demo_command"]
+
+#: The fixed files of an evaluation report (figures/ beside them vary with the variants);
+#: a user's file of one of these names in --out is refused before any work.
+REPORT_FILES = ("report.html", "report.md", "metrics.json", "metrics.csv")
 
 
 def _csv(text: str | None) -> tuple[str, ...]:
@@ -201,4 +205,4 @@ def register(sub) -> None:
     )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--json", help="also write metrics.json here")
-    p.set_defaults(func=_cmd_evaluate, report_out=True)
+    p.set_defaults(func=_cmd_evaluate, report_out=True, report_files=REPORT_FILES)

@@ -75,20 +75,11 @@ def _check_classifiers_out(out: Path) -> None:
     OutputError
         Naming the folder and the reason.
     """
-    from .data.output import check_folder_kind, check_output, owned_files
-    from .errors import OutputError
+    from .data.output import check_folder_files, check_folder_kind, check_output
 
     check_output(out, kind="folder", overwrite=True, what="--out")
-    if not out.is_dir():
-        return
     check_folder_kind(out, "--out")
-    owned = owned_files(out)
-    theirs = [n for n in CLASSIFIER_FILES if (out / n).exists() and n not in owned]
-    if theirs:
-        raise OutputError(
-            f"--out {out}: clutchlab did not write these files and would replace them; "
-            "move them away or choose another folder: " + ", ".join(theirs)
-        )
+    check_folder_files(out, CLASSIFIER_FILES, what="--out")
 
 
 def _physics(path: str | None):

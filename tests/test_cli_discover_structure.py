@@ -233,3 +233,15 @@ def test_select_structure_hints_at_an_evaluate_command_that_works(
     out = capsys.readouterr().out
     assert "score it with: " + hint.format(data=dataset_dir, tmp=tmp_path) in out
     assert "''" not in out
+
+
+@pytest.mark.parametrize("name", ["report.html", "discovery.json"])
+def test_discover_refuses_a_users_report_file_in_out_before_the_work(
+    dataset_dir, tmp_path, capsys, no_work, name
+):
+    out = tmp_path / "report"
+    out.mkdir()
+    (out / name).write_text("mine\n")
+    code = main(["discover", str(dataset_dir), "--out", str(out), "--quiet"])
+    assert code == 2 and name in capsys.readouterr().err
+    assert (out / name).read_text() == "mine\n"

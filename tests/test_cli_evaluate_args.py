@@ -108,3 +108,25 @@ def test_a_classifier_comparison_that_cannot_run_is_skipped_not_failed():
     ev = evaluate(data, ["gp_base"], train=("fast",), progress=False, on_error="report")
     assert ev.failed == {} and "gp_base" in ev.scores
     assert "at least 2 training experiments" in ev.extra["classifier_comparison_skipped"]
+
+
+@pytest.mark.parametrize("command", ["evaluate", "demo"])
+def test_a_users_report_file_in_out_is_refused_before_the_work(
+    tmp_path, capsys, monkeypatch, command
+):
+    import clutchlab.validation as validation
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the evaluation was started")
+
+    monkeypatch.setattr(validation, "evaluate", refuse)
+    monkeypatch.setattr(validation, "run_demo", refuse)
+    out = tmp_path / "report"
+    out.mkdir()
+    (out / "metrics.json").write_text('{"mine": true}\n')
+    (out / "notes.txt").write_text("kept\n")
+    argv = ["evaluate", str(tmp_path / "no-data")] if command == "evaluate" else ["demo"]
+    code = main([*argv, "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and "metrics.json" in err and "notes.txt" not in err
+    assert (out / "metrics.json").read_text() == '{"mine": true}\n'

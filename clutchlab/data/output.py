@@ -32,7 +32,7 @@ import shutil
 import signal
 import stat
 import tempfile
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -41,6 +41,7 @@ from ..errors import OutputError
 __all__ = [
     "OWNED_NAME",
     "atomic_file_writer",
+    "check_folder_files",
     "check_folder_kind",
     "check_output",
     "has_ownership_record",
@@ -388,6 +389,45 @@ def check_folder_kind(path: str | Path, what: str) -> None:
         )
 
 
+def check_folder_files(
+    path: str | Path, names: Iterable[str], *, what: str = "output"
+) -> list[str]:
+    """Refuse a folder in which a file clutchlab did not write stands where one of ``names``
+    would go; :func:`write_folder_atomic` does this when writing, a command before its work.
+
+    Parameters
+    ----------
+    path : path-like
+        The output folder (nothing to check when it does not exist yet).
+    names : iterable of str
+        Relative POSIX paths of files that will be written there.
+    what : str
+        Name of the output in messages.
+
+    Returns
+    -------
+    list of str
+        The files (relative POSIX paths) clutchlab did not write there: kept by a write.
+
+    Raises
+    ------
+    OutputError
+        Listing the user's files in the way (nothing is changed).
+    """
+    path = Path(path)
+    if not path.is_dir():
+        return []
+    owned = owned_files(path)
+    keep = [n for n in _tree(path) if n not in owned]
+    clash = sorted(k for k in keep if _clashes(k, set(names)))
+    if clash:
+        raise OutputError(
+            f"{what} {path}: clutchlab did not write these files and would replace them; "
+            "move them away or choose another folder: " + ", ".join(clash)
+        )
+    return keep
+
+
 def write_folder_atomic(
     path: str | Path,
     files: Mapping[str, Content],
@@ -431,14 +471,7 @@ def write_folder_atomic(
     keep: list[str] = []
     if exists:
         check_folder_kind(path, what)
-        owned = owned_files(path)
-        keep = [n for n in _tree(path) if n not in owned]
-        clash = sorted(k for k in keep if _clashes(k, set(files)))
-        if clash:
-            raise OutputError(
-                f"{what} {path}: clutchlab did not write these files and would replace them; "
-                "move them away or choose another folder: " + ", ".join(clash)
-            )
+        keep = check_folder_files(path, files, what=what)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
