@@ -8,6 +8,7 @@ from __future__ import annotations
 import pytest
 
 from clutchlab.cli import main
+from clutchlab.errors import DataError
 
 
 @pytest.mark.parametrize(
@@ -130,3 +131,21 @@ def test_a_users_report_file_in_out_is_refused_before_the_work(
     err = capsys.readouterr().err
     assert code == 2 and "metrics.json" in err and "notes.txt" not in err
     assert (out / "metrics.json").read_text() == '{"mine": true}\n'
+
+
+def test_a_classifier_comparison_on_data_that_never_latch_is_skipped_not_failed():
+    """Training data with one latch state: the comparison has nothing to classify."""
+    from synthetic import make_trace
+
+    from clutchlab.data import Dataset
+    from clutchlab.validation import evaluate
+
+    traces = []
+    for ramp in ("fast", "medium", "slow"):
+        tr = make_trace([0, 0.5, 1.5, 2.0], [0, 0, 500, 0], name=f"{ramp}_50Hz", ramp=ramp)
+        traces.append(tr.with_signals(clutch_pressure_bar=0.5 + tr.get("current_cmd_mA") / 100))
+    ev = evaluate(Dataset(traces), ["gp_base"], progress=False, on_error="report")
+    assert ev.failed == {} and "gp_base" in ev.scores
+    assert "only one latch state" in ev.extra["classifier_comparison_skipped"]
+    with pytest.raises(DataError, match="only one latch state"):
+        evaluate(Dataset(traces), ["gp_base"], progress=False, classifiers=True)

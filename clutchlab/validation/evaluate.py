@@ -22,7 +22,7 @@ from tqdm.auto import tqdm
 
 from .. import __version__
 from ..data import Dataset
-from ..errors import ClutchlabError
+from ..errors import ClutchlabError, DataError
 from .hysteresis import HysteresisCurve, hysteresis_curve
 from .protocol import ExperimentReference, Protocol, VariantScore
 from .settings import AnalysisSettings
@@ -520,6 +520,13 @@ def evaluate(
         t0 = time.perf_counter()
         try:
             ev.classifier_comparison = _classifier_comparison(protocol, progress, random_state)
+        except DataError as exc:
+            if chosen:  # not asked for by name: data it cannot run on leave it out
+                ev.extra["classifier_comparison_skipped"] = f"not possible on these data: {exc}"
+            elif on_error == "raise":
+                raise
+            else:
+                ev.failed["classifier_comparison"] = f"{type(exc).__name__}: {exc}"
         except Exception as exc:
             if on_error == "raise":
                 raise
