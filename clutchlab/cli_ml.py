@@ -45,7 +45,7 @@ def _cmd_classifiers(args: argparse.Namespace) -> int:
         "classifiers.csv": result.csv_text().encode("utf-8"),
         "classifiers.png": lambda path: fig.savefig(path, dpi=120, format="png"),
     }
-    write_folder_atomic(out, files, overwrite=True, what="--out")
+    write_folder_atomic(out, files, overwrite=True, what=CLASSIFIER_FOLDER)
     print(
         f"latch classifiers, leave-one-experiment-out over {len(train)} training experiments "
         f"({', '.join(_csv(args.train))}); features: {', '.join(result.feature_names)}"
@@ -61,6 +61,8 @@ def _cmd_classifiers(args: argparse.Namespace) -> int:
 
 #: What ``clutchlab classifiers`` writes into its ``--out`` folder (see _cmd_classifiers).
 CLASSIFIER_FILES = ("classifiers.csv", "classifiers.png")
+#: The kind of that folder in its ownership record (see clutchlab.data.output).
+CLASSIFIER_FOLDER = "classifier comparison folder"
 
 
 def _check_classifiers_out(out: Path) -> None:
@@ -78,8 +80,8 @@ def _check_classifiers_out(out: Path) -> None:
     from .data.output import check_folder_files, check_folder_kind, check_output
 
     check_output(out, kind="folder", overwrite=True, what="--out")
-    check_folder_kind(out, "--out")
-    check_folder_files(out, CLASSIFIER_FILES, what="--out")
+    check_folder_kind(out, CLASSIFIER_FOLDER)
+    check_folder_files(out, CLASSIFIER_FILES, what=CLASSIFIER_FOLDER)
 
 
 def _physics(path: str | None):

@@ -245,3 +245,25 @@ def test_discover_refuses_a_users_report_file_in_out_before_the_work(
     code = main(["discover", str(dataset_dir), "--out", str(out), "--quiet"])
     assert code == 2 and name in capsys.readouterr().err
     assert (out / name).read_text() == "mine\n"
+
+
+def test_a_classifier_folder_is_named_as_such_when_another_output_would_replace_it(
+    dataset_dir, tmp_path, capsys, no_work
+):
+    """Its ownership record said kind '--out' ('holds a --out clutchlab wrote'); one written
+    so before is still recognized, and a classifier run may write into it again."""
+    import json
+
+    from clutchlab.data.output import OWNED_NAME
+
+    out = tmp_path / "clf"
+    out.mkdir()
+    (out / "classifiers.csv").write_text("name\n")
+    record = {"written_by": "clutchlab", "kind": "--out", "files": ["classifiers.csv"]}
+    (out / OWNED_NAME).write_text(json.dumps(record))
+    code = main(["discover", str(dataset_dir), "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and "holds a classifier comparison folder clutchlab wrote" in err
+    from clutchlab.cli_ml import _check_classifiers_out
+
+    _check_classifiers_out(out)  # the same kind: accepted

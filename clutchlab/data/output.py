@@ -281,6 +281,8 @@ def _ownership(folder: str | Path) -> tuple[set[str], str | None]:
     except (OSError, ValueError, KeyError, TypeError):
         return set(), None  # an unreadable record owns nothing: everything is kept
     kind = doc.get("kind") if isinstance(doc.get("kind"), str) else None
+    if kind == "--out" and "classifiers.csv" in files:  # recorded so before it had a name
+        kind = "classifier comparison folder"
     if kind is None and "manifest.json" in files:
         kind = "dataset folder"
     elif kind is None and {"report.html", "report.md"} & set(files):
