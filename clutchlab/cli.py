@@ -315,7 +315,9 @@ def check_outputs(args: argparse.Namespace) -> None:
     - a model folder (``folder_out``, ``train``): a folder, and its ``model.json`` as above;
     - a report folder (``evaluate``, ``demo``, ``discover``) may exist: what clutchlab wrote
       there is replaced and every other file is kept (see :mod:`clutchlab.data.output`); a
-      folder holding another kind of clutchlab output (a dataset) is refused.
+      folder holding another kind of clutchlab output (a dataset) is refused;
+    - ``--json`` must not name ``--out`` itself, nor a non-JSON file written in the ``--out``
+      folder (``report_files``): one would be written over the other.
     """
     from .data.output import check_folder_kind, check_output
 
@@ -323,6 +325,18 @@ def check_outputs(args: argparse.Namespace) -> None:
         check_output(args.json, kind="file", overwrite=True, what="--json")
         _check_replaceable(args.json, args, "--json", "json")
     out = getattr(args, "out", None)
+    if out and getattr(args, "json", None):
+        target, folder = Path(os.path.abspath(args.json)), Path(os.path.abspath(out))
+        clash = target == folder or (
+            target.parent == folder
+            and target.name in getattr(args, "report_files", ())
+            and target.suffix != ".json"
+        )
+        if clash:
+            raise OutputError(
+                f"--json {args.json}: is what --out {out} writes; the one would be written "
+                "over the other; choose another name"
+            )
     if not out:
         return
     if getattr(args, "file_out", None):

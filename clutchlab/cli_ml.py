@@ -211,7 +211,7 @@ def register(sub) -> None:
     p.add_argument("--train", default="fast,slow", help="training ramp labels (fast,slow)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", help="also write the result here")
-    p.set_defaults(func=_cmd_classifiers)
+    p.set_defaults(func=_cmd_classifiers, report_files=CLASSIFIER_FILES)
 
     p = sub.add_parser("train", help="train a paper-pipeline model variant on training ramps")
     p.add_argument("dataset", help="dataset folder (manifest.json + experiments)")

@@ -267,3 +267,32 @@ def test_a_classifier_folder_is_named_as_such_when_another_output_would_replace_
     from clutchlab.cli_ml import _check_classifiers_out
 
     _check_classifiers_out(out)  # the same kind: accepted
+
+
+@pytest.mark.parametrize(
+    ("command", "out", "json_name"),
+    [
+        ("select-structure", "m.json", "m.json"),
+        ("discover", "report", "report"),
+        ("discover", "report", "report/report.html"),
+        ("classifiers", "clf", "clf/classifiers.csv"),
+    ],
+)
+def test_json_and_out_naming_the_same_file_are_refused_before_the_work(
+    dataset_dir, tmp_path, capsys, no_work, no_comparison, command, out, json_name
+):
+    argv = [command, str(dataset_dir), "--out", str(tmp_path / out)]
+    code = main([*argv, "--json", str(tmp_path / json_name), "--quiet"])
+    assert code == 2 and "the one would be written over the other" in capsys.readouterr().err
+    assert not (tmp_path / out).exists()
+
+
+def test_json_inside_the_report_folder_as_its_own_json_is_accepted(
+    dataset_dir, tmp_path, monkeypatch
+):
+    def stop(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(discover_pkg, "discover", stop)
+    argv = ["discover", str(dataset_dir), "--out", str(tmp_path / "r"), "--quiet"]
+    assert main([*argv, "--json", str(tmp_path / "r" / "discovery.json")]) == 130
