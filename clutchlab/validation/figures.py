@@ -44,6 +44,8 @@ VARIANT_COLORS: dict[str, str] = {
     "paper_svc_gp": "#2ca02c",
     "hybrid": "#9467bd",
     "augmented_hybrid": "#8c564b",
+    "paper_faithful": "#e377c2",
+    "physics_fmu": "#7f7f7f",
 }
 _RAMP_COLORS = {"fast": "tab:blue", "medium": "black", "slow": "tab:green"}
 _MAX_POINTS = 6000

@@ -1,4 +1,4 @@
-"""The evaluation report states a physics fit's convergence as the fit reported it."""
+"""The evaluation report: fit convergence as the fit reported it, one colour per variant."""
 
 from __future__ import annotations
 
@@ -42,3 +42,16 @@ def test_a_fit_returned_at_its_iteration_limit_is_not_reported_converged(
     monkeypatch.setattr(fit_pkg, "PhysicsFitter", Fitter)
     model = FittedPhysics().fit([fast_ramp_trace])
     assert model.converged_ is success
+
+
+def test_every_variant_has_its_own_colour_in_every_figure():
+    """A variant without a fixed colour took the k-th of the cycle, k its place in the
+    figure: paper_faithful was drawn in hybrid's purple in the uncertainty figure and in
+    pink in the residual figure."""
+    from clutchlab.validation.figures import VARIANT_COLORS
+    from clutchlab.validation.variants import variant_names
+
+    names = [*variant_names(), "physics_fmu", "measured"]
+    assert set(names) <= set(VARIANT_COLORS)
+    colours = [VARIANT_COLORS[n] for n in names]
+    assert len(set(colours)) == len(colours)
