@@ -24,7 +24,8 @@ def _split_labels(dataset, train: str | None, test: str | None):
 
     Every label given must be one of the dataset's ramps (a typo would otherwise drop its
     experiments silently). Without ``--test`` the test ramp is ``medium`` when the dataset
-    has one, else none (the report then scores the training experiments only).
+    has one and it is not trained on, else none (the report then scores the training
+    experiments only).
 
     Parameters
     ----------
@@ -45,7 +46,8 @@ def _split_labels(dataset, train: str | None, test: str | None):
     """
     train_ramps = _csv(train) or ("fast", "slow")
     if test is None:
-        test_ramps = ("medium",) if "medium" in dataset.ramps else ()
+        medium = "medium" in dataset.ramps and "medium" not in train_ramps
+        test_ramps = ("medium",) if medium else ()
     else:
         test_ramps = _csv(test) or ("medium",)
     dataset.select(ramps=train_ramps + test_ramps)  # raises on an unknown label
@@ -125,7 +127,8 @@ def register(sub) -> None:
     p.add_argument("--train", default="fast,slow", help="training ramp labels (fast,slow)")
     p.add_argument(
         "--test",
-        help="test ramp labels, only scored (default medium, when the dataset has that ramp)",
+        help="test ramp labels, only scored (default medium, when the dataset has that ramp "
+        "and --train does not name it)",
     )
     p.add_argument(
         "--alpha", type=float, default=0.01, help="family-wise significance level (0.01)"

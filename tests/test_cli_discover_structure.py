@@ -51,6 +51,20 @@ def test_discover_refuses_an_unknown_ramp_label(dataset_dir, tmp_path, capsys, n
     assert not out.exists()
 
 
+def test_discover_training_on_medium_without_test_has_no_test_set(
+    dataset_dir, tmp_path, monkeypatch
+):
+    seen = {}
+
+    def stop(dataset, model, settings, baseline=None):
+        seen["test"] = settings.test_ramps
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(discover_pkg, "discover", stop)
+    argv = ["discover", str(dataset_dir), "--out", str(tmp_path / "r"), "--quiet"]
+    assert main([*argv, "--train", "fast,medium,slow"]) == 130 and seen["test"] == ()
+
+
 def test_discover_without_a_medium_ramp_runs_without_a_test_set(tmp_path, monkeypatch):
     traces = [
         make_trace([0, 0.5, 1.5, 2.0], [0, 0, 1100, 0], name=f"{ramp}_50Hz", ramp=ramp)
