@@ -326,9 +326,9 @@ def check_outputs(args: argparse.Namespace) -> None:
         _check_replaceable(args.json, args, "--json", "json")
     out = getattr(args, "out", None)
     if out and getattr(args, "json", None):
-        target, folder = Path(os.path.abspath(args.json)), Path(os.path.abspath(out))
-        clash = target == folder or (
-            target.parent == folder
+        target, out_path = Path(os.path.abspath(args.json)), Path(os.path.abspath(out))
+        clash = target == out_path or (
+            target.parent == out_path
             and target.name in getattr(args, "report_files", ())
             and target.suffix != ".json"
         )
@@ -337,6 +337,9 @@ def check_outputs(args: argparse.Namespace) -> None:
                 f"--json {args.json}: is what --out {out} writes; the one would be written "
                 "over the other; choose another name"
             )
+    folder = getattr(args, "report_out", False) or getattr(args, "folder_out", False)
+    if out == "" and folder:
+        raise OutputError("--out: an empty name; give the folder to write (e.g. report)")
     if not out:
         return
     if getattr(args, "file_out", None):
@@ -346,7 +349,7 @@ def check_outputs(args: argparse.Namespace) -> None:
         check_output(out, kind="folder", overwrite=True, what="--out")
         _check_replaceable(Path(out) / "model.json", args, "--out", "json")
     if getattr(args, "report_out", False):
-        check_output(out, kind="folder", overwrite=True, what="--out")
+        check_output(out, kind="folder", overwrite=True, what="--out", whole=True)
         from .data.output import check_folder_files
         from .validation.report import REPORT_FOLDER
 

@@ -79,7 +79,7 @@ def _check_classifiers_out(out: Path) -> None:
     """
     from .data.output import check_folder_files, check_folder_kind, check_output
 
-    check_output(out, kind="folder", overwrite=True, what="--out")
+    check_output(out, kind="folder", overwrite=True, what="--out", whole=True)
     check_folder_kind(out, CLASSIFIER_FOLDER)
     check_folder_files(out, CLASSIFIER_FILES, what=CLASSIFIER_FOLDER)
 

@@ -310,3 +310,11 @@ def test_json_inside_the_report_folder_as_its_own_json_is_accepted(
     monkeypatch.setattr(discover_pkg, "discover", stop)
     argv = ["discover", str(dataset_dir), "--out", str(tmp_path / "r"), "--quiet"]
     assert main([*argv, "--json", str(tmp_path / "r" / "discovery.json")]) == 130
+
+
+def test_classifiers_into_the_current_folder_is_refused_before_the_comparison(
+    dataset_dir, tmp_path, capsys, monkeypatch, no_comparison
+):
+    monkeypatch.chdir(tmp_path)
+    code = main(["classifiers", str(dataset_dir), "--out", ".", "--quiet"])
+    assert code == 2 and "is the current folder or holds it" in capsys.readouterr().err

@@ -149,3 +149,23 @@ def test_a_classifier_comparison_on_data_that_never_latch_is_skipped_not_failed(
     assert "only one latch state" in ev.extra["classifier_comparison_skipped"]
     with pytest.raises(DataError, match="only one latch state"):
         evaluate(Dataset(traces), ["gp_base"], progress=False, classifiers=True)
+
+
+@pytest.mark.parametrize("out", [".", "", ".."])
+def test_the_current_folder_as_report_folder_is_refused_before_the_work(
+    tmp_path, capsys, monkeypatch, out
+):
+    """It cannot be swapped in atomically: the run ended with 'cannot write: Device or
+    resource busy' after all its work."""
+    import clutchlab.validation as validation
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the evaluation was started")
+
+    monkeypatch.setattr(validation, "evaluate", refuse)
+    here = tmp_path / "work"
+    here.mkdir()
+    monkeypatch.chdir(here)
+    code = main(["evaluate", str(tmp_path / "no-data"), "--out", out, "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and ("is the current folder or holds it" in err or "empty name" in err)

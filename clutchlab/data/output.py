@@ -84,7 +84,12 @@ def _nearest_existing(path: Path) -> Path:
 
 
 def check_output(
-    path: str | Path, *, kind: str = "file", overwrite: bool = False, what: str = "output"
+    path: str | Path,
+    *,
+    kind: str = "file",
+    overwrite: bool = False,
+    what: str = "output",
+    whole: bool = False,
 ) -> Path:
     """Check an output location before any work is done.
 
@@ -99,6 +104,9 @@ def check_output(
         clutchlab wrote there is replaced, every other file is kept).
     what : str
         Name of the output in messages (e.g. ``"--out"``).
+    whole : bool
+        The folder is written whole by :func:`write_folder_atomic` (swapped in): it must not
+        be the current working folder or hold it.
 
     Returns
     -------
@@ -124,6 +132,12 @@ def check_output(
                 raise OutputError(f"{what} {path}: exists and is not a regular file")
     elif path.exists() and not path.is_dir():
         raise OutputError(f"{what} {path}: exists and is not a folder")
+    elif whole and _holds_cwd(path):
+        raise OutputError(
+            f"{what} {path or '.'}: is the current folder or holds it; a folder is written by "
+            "swapping it whole, which cannot be done to the folder you are in; choose a "
+            "subfolder (e.g. report)"
+        )
     elif path.is_dir() and not overwrite and any(path.iterdir()):
         raise OutputError(
             f"{what} {path}: folder exists and is not empty (pass --overwrite to write into "
@@ -144,6 +158,15 @@ def check_output(
     os.close(fd)
     os.unlink(probe)
     return path
+
+
+def _holds_cwd(path: Path) -> bool:
+    """Whether ``path`` is the current working folder or one of its parents."""
+    try:
+        here, there = Path.cwd().resolve(), path.resolve()
+    except OSError:
+        return False
+    return there == here or there in here.parents
 
 
 def _write_content(target: Path, content: Content) -> None:
@@ -468,7 +491,7 @@ def write_folder_atomic(
         raise ValueError(f"output names must be relative and inside the folder: {bad}")
     with contextlib.suppress(OSError):
         _recover(path)
-    check_output(path, kind="folder", overwrite=overwrite, what=what)
+    check_output(path, kind="folder", overwrite=overwrite, what=what, whole=True)
     exists = path.is_dir()
     keep: list[str] = []
     if exists:
