@@ -140,6 +140,20 @@ def test_the_html_report_names_the_training_and_test_experiments(cli_run):
     assert f"test, only scored: {len(doc['test'])} ({', '.join(doc['test'])})" in html
 
 
+def test_an_iteration_that_scored_no_candidate_has_no_empty_evidence_figure(cli_run):
+    _, out = cli_run
+    doc = json.loads((out / "discovery.json").read_text())
+    report = out / "report"
+    html = (report / "report.html").read_text()
+    assert any(not it["candidates"] for it in doc["iterations"])  # the effect limit
+    for k, it in enumerate(doc["iterations"]):
+        evidence = report / f"iteration{k}_evidence.png"
+        assert evidence.exists() == bool(it["candidates"])
+        if not it["candidates"]:
+            assert f"No candidate was scored ({it['decision']})." in html
+            assert f"plot-iteration{k}_evidence" not in html
+
+
 def test_the_report_says_whether_each_refit_converged(cli_run):
     _, out = cli_run
     doc = json.loads((out / "discovery.json").read_text())
@@ -158,12 +172,14 @@ def test_the_report_draws_every_figure_interactive_offline(cli_run):
     assert browser is not None, "no headless Chromium: set CLUTCHLAB_CHROMIUM or install one"
     report = cli_run[1] / "report"
     html = (report / "report.html").read_text(encoding="utf-8")
-    n_iter = len(json.loads((report / "discovery.json").read_text())["iterations"])
+    iterations = json.loads((report / "discovery.json").read_text())["iterations"]
+    # residuals and diagnostics per iteration; evidence where candidates were scored
+    n_figures = sum(3 if it["candidates"] else 2 for it in iterations)
     assert html.count("* plotly.js v") == 1 and "<img" not in html
     page = load_page(report / "report.html", browser)
-    assert page.offline and page.plots == page.plots_drawn == page.figures == 3 * n_iter
+    assert page.offline and page.plots == page.plots_drawn == page.figures == n_figures
     md = (report / "report.md").read_text(encoding="utf-8")
-    assert md.count(".png)") == 3 * n_iter
+    assert md.count(".png)") == n_figures
 
 
 def test_the_one_undeclared_effect_is_named_and_lowers_both_errors(cli_run):

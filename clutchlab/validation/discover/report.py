@@ -275,12 +275,24 @@ def write_report(
             if record["fit_converged_after"]
             else "NOT converged (stopped at a limit; its best iterate is the model)"
         )
-        figs = {
-            "residuals": plot_residuals(it),
-            "evidence": plot_evidence(it),
-            "diagnostics": plot_diagnostics(it),
-        }
+        figs = {"residuals": plot_residuals(it)}
+        if it.candidates:  # none scored (effect limit, no candidate left): no empty axes
+            figs["evidence"] = plot_evidence(it)
+        figs["diagnostics"] = plot_diagnostics(it)
         pngs = {k: _png(f, files, f"iteration{it.index}_{k}.png") for k, f in figs.items()}
+        if it.candidates:
+            evidence_md = [
+                f"Significance level per candidate: p < {it.threshold_p:.2g}.",
+                "",
+                _md_table(_CAND_HEAD, _candidate_rows(it)),
+            ]
+            evidence_html = [
+                f"<p>Significance level per candidate: p &lt; {it.threshold_p:.2g}.</p>",
+                _html_table(_CAND_HEAD, _candidate_rows(it)),
+            ]
+        else:
+            evidence_md = [f"No candidate was scored ({it.decision})."]
+            evidence_html = [f"<p>No candidate was scored ({html.escape(it.decision)}).</p>"]
         md += [
             f"## {title}",
             "",
@@ -288,9 +300,7 @@ def write_report(
             "",
             f"Sparse regression (pysindy STLSQ, R² {it.sparse.r2:.2f}): `{it.sparse.equation()}`",
             "",
-            f"Significance level per candidate: p < {it.threshold_p:.2g}.",
-            "",
-            _md_table(_CAND_HEAD, _candidate_rows(it)),
+            *evidence_md,
             "",
             _md_table(err_head, errs),
             "",
@@ -298,9 +308,7 @@ def write_report(
             "",
             _md_table(["parameter", "value", "± SE", "unit"], params),
             "",
-            f"![evidence](iteration{it.index}_evidence.png)",
-            f"![residuals](iteration{it.index}_residuals.png)",
-            f"![diagnostics](iteration{it.index}_diagnostics.png)",
+            *(f"![{k}](iteration{it.index}_{k}.png)" for k in figs),
             "",
         ]
         parts_html += [
@@ -308,8 +316,7 @@ def write_report(
             f"<p>Residual before: {html.escape(it.diagnostics.summary())}</p>",
             f"<p>Sparse regression (pysindy STLSQ, R² {it.sparse.r2:.2f}): "
             f"<code>{html.escape(it.sparse.equation())}</code></p>",
-            f"<p>Significance level per candidate: p &lt; {it.threshold_p:.2g}.</p>",
-            _html_table(_CAND_HEAD, _candidate_rows(it)),
+            *evidence_html,
             "<br>",
             _html_table(err_head, errs),
             f"<p>Parameters after (± standard error); {html.escape(fit_state)}:</p>",
