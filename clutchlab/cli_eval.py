@@ -33,8 +33,12 @@ def _finish(files, failed: dict[str, str], json_path: str | None) -> int:
     if json_path:
         write_json(files.doc, json_path)
     for name, why in failed.items():
-        what = "the latch-classifier comparison" if name == "classifier_comparison" else name
-        print(f"{'' if what != name else 'variant '}{what} failed: {why}", file=sys.stderr)
+        what = (
+            "the latch-classifier comparison"
+            if name == "classifier_comparison"
+            else f"variant {name}"
+        )
+        print(f"{what} failed: {why}", file=sys.stderr)
     for line in summary_lines(files.doc):
         print(line)
     print(f"report: {files.html}")

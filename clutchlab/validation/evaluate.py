@@ -396,7 +396,9 @@ def evaluate(
     classifiers : bool, optional
         Run the latch-classifier comparison (paper Table 1 / Fig. 2, leave-one-experiment-out
         on the training experiments) when residual_ml offers it. Default: when a
-        residual_ml variant is among the scored ones.
+        residual_ml variant is among the scored ones, and left out (the report says why)
+        when the data cannot support it (fewer than 2 training experiments, one latch
+        state); True: such data are a failure of the comparison.
     bands : bool
         Compute the in-sample hysteresis curves of the hysteresis-band figure (paper Fig. 5).
     command : str
