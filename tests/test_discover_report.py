@@ -198,3 +198,13 @@ def test_interactive_residuals_without_test_experiments_have_no_empty_test_row()
         state.test = {"rmse_bar": float("nan")}
     titles = [a.text for a in iplot_residuals(it).layout.annotations]
     assert len(titles) == 2 and not any("nan" in t or "test" in t for t in titles)
+
+
+def test_the_console_table_shows_a_dash_without_test_experiments():
+    from clutchlab.validation.discover.result import DiscoveryResult
+
+    it = _iteration("no significant effect", [_candidate("supply_droop", False)])
+    it.before = it.after = _state(0.4221, float("nan"))
+    result = DiscoveryResult([it], it.before, it.after, True, [], "", [], [], 1.0)
+    row = result.table().splitlines()[1]
+    assert "nan" not in row and "0.4221 →  0.4221         – →       –" in row

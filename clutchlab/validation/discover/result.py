@@ -165,6 +165,15 @@ class IterationRecord:
         }
 
 
+def _rmse(errors: dict, width: int) -> str:
+    """``errors["rmse_bar"]`` in a column of ``width``; "–" where there is none (no test
+    experiments: NaN)."""
+    value = errors.get("rmse_bar")
+    if value is None or not math.isfinite(value):
+        return f"{'–':>{width}s}"
+    return f"{value:{width}.4f}"
+
+
 @dataclass
 class DiscoveryResult:
     """The outcome of :func:`~clutchlab.validation.discover.discover`.
@@ -275,7 +284,7 @@ class DiscoveryResult:
             )
             lines.append(
                 f"{it.index:2d}  {(it.effect or '—'):30s} "
-                f"{it.before.train['rmse_bar']:9.4f} → {it.after.train['rmse_bar']:7.4f} "
-                f"{it.before.test['rmse_bar']:9.4f} → {it.after.test['rmse_bar']:7.4f}  {top}"
+                f"{_rmse(it.before.train, 9)} → {_rmse(it.after.train, 7)} "
+                f"{_rmse(it.before.test, 9)} → {_rmse(it.after.test, 7)}  {top}"
             )
         return "\n".join(lines + notes)
