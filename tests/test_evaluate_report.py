@@ -55,3 +55,19 @@ def test_every_variant_has_its_own_colour_in_every_figure():
     assert set(names) <= set(VARIANT_COLORS)
     colours = [VARIANT_COLORS[n] for n in names]
     assert len(set(colours)) == len(colours)
+
+
+@pytest.mark.parametrize("converged", [False, True])
+def test_the_terminal_summary_says_when_the_physics_fit_did_not_converge(converged):
+    from clutchlab.validation.report import summary_lines
+
+    doc = {
+        "variants": {"physics_default": {"rmse_bar": 0.41}, "physics_fitted": {"rmse_bar": 0.42}},
+        "details": {},
+        "physics_fit": {"status": "not run", "converged": converged, "iterations": 0},
+    }
+    lines = summary_lines(doc)
+    said = [line for line in lines if "NOT converge" in line]
+    assert len(said) == (0 if converged else 1)
+    if not converged:
+        assert "(not run, 0 iterations)" in said[0]

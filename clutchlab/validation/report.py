@@ -241,7 +241,8 @@ def summary_lines(doc: dict[str, Any]) -> list[str]:
     Returns
     -------
     list of str
-        A heading line and one line per scored variant.
+        A heading line and one line per scored variant; then, when the physics fit stopped
+        before converging, a line saying so (the report says it too).
     """
     rows = doc.get("variants") or {}
     if not rows:
@@ -254,6 +255,13 @@ def summary_lines(doc: dict[str, Any]) -> list[str]:
         rmse_txt, reg_txt = (f"{v:.4f}" if _is_number(v) else "–" for v in (rmse, reg))
         share_txt = _pct(pm.get("sq_error_share_latch_window"))
         out.append(f"{name:{width}s}  {rmse_txt:>10s}  {share_txt:>18s}  {reg_txt:>20s}")
+    fit = doc.get("physics_fit") or {}
+    if fit and not fit.get("converged", True) and "physics_fitted" in rows:
+        out.append(
+            f"physics_fitted: its fit did NOT converge ({fit.get('status')}, "
+            f"{fit.get('iterations')} iterations): its best iterate is scored; a longer fit "
+            "time or iteration limit may change it"
+        )
     return out
 
 
