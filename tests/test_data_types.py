@@ -296,3 +296,19 @@ def test_window_and_crossing_lengths_are_checked():
         first_crossing(np.arange(3.0), np.array([-1.0, -0.5, 0.5, 1.0]), True)
     with pytest.raises(DataError, match="same length"):
         first_crossing(np.arange(5.0), np.array([-1.0, 1.0]), True)
+
+
+def test_pressure_metrics_of_a_flat_measurement_has_no_fit_pct_and_no_warning():
+    """A measured pressure that does not vary printed numpy's divide warnings (fit % = -inf
+    or NaN with a RuntimeWarning); it has no fit % to give."""
+    import warnings
+
+    from clutchlab.data import pressure_metrics
+
+    y = np.full(50, 3.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        m = pressure_metrics(y, y + 0.1)
+        exact = pressure_metrics(y, y.copy())
+    assert np.isnan(m["fit_pct"]) and np.isnan(exact["fit_pct"])
+    assert m["rmse_bar"] == pytest.approx(0.1)

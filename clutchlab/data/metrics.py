@@ -17,7 +17,8 @@ def pressure_metrics(measured: np.ndarray, predicted: np.ndarray) -> dict[str, f
 
     Returns
     -------
-    dict with ``rmse_bar``, ``mae_bar``, ``max_abs_bar``, ``fit_pct``.
+    dict with ``rmse_bar``, ``mae_bar``, ``max_abs_bar``, ``fit_pct``. ``fit_pct`` is NaN
+    when the measured pressure does not vary (no spread to explain), without a warning.
     """
     y = np.asarray(measured, dtype=float)
     p = np.asarray(predicted, dtype=float)
@@ -26,9 +27,11 @@ def pressure_metrics(measured: np.ndarray, predicted: np.ndarray) -> dict[str, f
             f"measured {y.shape} and predicted {p.shape} must have the same shape, non-empty"
         )
     e = p - y
+    spread = float(np.linalg.norm(y - y.mean()))
+    fit = 100.0 * (1.0 - np.linalg.norm(e) / spread) if spread > 0 else np.nan
     return {
         "rmse_bar": float(np.sqrt(np.mean(e * e))),
         "mae_bar": float(np.mean(np.abs(e))),
         "max_abs_bar": float(np.max(np.abs(e))),
-        "fit_pct": float(100.0 * (1.0 - np.linalg.norm(e) / np.linalg.norm(y - y.mean()))),
+        "fit_pct": float(fit),
     }
