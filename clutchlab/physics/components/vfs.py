@@ -28,7 +28,15 @@ class VariableForceSolenoid(Component):
     name = _C
     description = "variable-force solenoid valve (normally low)"
     PARAMETERS = (
-        param(_C, "K_m", "N/A", 14.0, 5.0, 30.0, "magnetic force gain at saturation"),
+        param(
+            _C,
+            "K_m",
+            "N/A",
+            14.0,
+            5.0,
+            30.0,
+            "magnetic force gain at saturation, newton per ampere",
+        ),
         param(_C, "i_knee", "mA", 200.0, 50.0, 500.0, "current at the knee of the force curve"),
         param(_C, "F_pre", "N", 1.0, 0.1, 5.0, "spring preload (closing)"),
         param(_C, "k", "N/mm", 2.0, 0.5, 10.0, "spring rate"),
