@@ -394,6 +394,10 @@ def test_classifier_comparison_table_and_figure(train, tmp_path):
     assert (tmp_path / "c.csv").read_text().splitlines()[0].startswith("name,label,accuracy")
     fig = res.figure(max_points=500)
     assert len(fig.axes) == 2 and "0." in fig.axes[0].texts[0].get_text()
+    # two panels side by side in a figure two panels wide (it was three wide, one empty);
+    # the accuracy on a box, readable over the points
+    assert fig.get_size_inches()[0] == pytest.approx(2 * 4.2)
+    assert fig.axes[0].texts[0].get_bbox_patch() is not None
     with pytest.raises(DataError, match="at least 2"):
         compare_classifiers([train[0]])
 

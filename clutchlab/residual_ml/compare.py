@@ -129,7 +129,7 @@ class ClassifierComparison:
         rng = np.random.default_rng(seed)
         pick = rng.choice(X.shape[0], min(max_points, X.shape[0]), replace=False)
         n = len(self.rows)
-        ncol = 3
+        ncol = min(3, n)  # one classifier: one panel, not a row of three with two empty
         nrow = int(np.ceil(n / ncol))
         fig = Figure(figsize=(4.2 * ncol, 3.4 * nrow), layout="constrained")
         cmap = ListedColormap(["#f3c6f0", "#c8ecc8"])
@@ -152,6 +152,8 @@ class ClassifierComparison:
                 ha="right",
                 fontsize=11,
                 weight="bold",
+                # readable over the points it sits on
+                bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "0.6", "alpha": 0.85},
             )
             ax.set_xlabel("nominal current (mA)")
             ax.set_ylabel("dI/dt (mA/s)")
