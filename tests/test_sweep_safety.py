@@ -317,3 +317,15 @@ def test_a_stale_lock_of_a_killed_sweep_is_taken_over_with_a_note(tmp_path):
     assert f"note: {lock} was left by sweep PID {dead.pid}" in res.stderr
     assert "taken over" in res.stderr and "Traceback" not in res.stderr
     assert not lock.exists()
+
+
+def test_out_in_a_folder_that_does_not_exist_yet_is_created(tmp_path):
+    """``--out new/r.parquet`` passed the checks, then crashed creating ``new/r.parquet.lock``."""
+    from test_sweep_run import _spec
+
+    from clutchlab.physics.design import run_sweep
+
+    out = tmp_path / "new" / "deeper" / "r.parquet"
+    res = run_sweep(_spec(n=2), out, workers=1, progress=False, figures=False)
+    assert res.n_run == 2 and res.n_failed == 0 and out.is_file()
+    assert {f.name for f in out.parent.iterdir()} == {"r.parquet", "r.parquet.parts"}

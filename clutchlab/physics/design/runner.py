@@ -234,6 +234,7 @@ def run_sweep(
     out = check_sweep_output(out, overwrite, figures=figures)
     client, own_client = _connect(scheduler)  # before the lock and the parts folder exist
     try:
+        _make_parent(out)  # --out new/r.parquet: the lock file goes into new/
         with output_lock(out):
             try:
                 return _run_locked(
@@ -246,6 +247,16 @@ def run_sweep(
         if own_client:
             with contextlib.suppress(Exception):
                 client.close()
+
+
+def _make_parent(out: Path) -> None:
+    """Create the folder of ``out`` (checked writable by :func:`check_sweep_output`)."""
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(
+            f"--out {out}: cannot create its folder {out.parent} ({exc.strerror or exc})"
+        ) from exc
 
 
 def _n_kept(spec: SweepSpec, out: Path) -> int:
