@@ -80,6 +80,7 @@ def _cmd_stand(args: argparse.Namespace) -> int:
     step = max(len(DEFAULT_SETTINGS) // n, 1)
     settings = DEFAULT_SETTINGS[::step][:n] if n < len(DEFAULT_SETTINGS) else DEFAULT_SETTINGS
     ramps = _ramps(args.ramps)
+    check_json_apart(args.json, [Path(args.out), truth_path(args.out)])
     if args.plant == "stand":
         if args.temperature != "levels":
             raise SystemExit("--temperature drift applies to the zoo's plants (--plant NAME)")
@@ -423,6 +424,35 @@ def _check_replaceable(path: str | Path, args: argparse.Namespace, flag: str, ki
             f"{flag} {target}: exists and is not {description}, so clutchlab did not write "
             "it; choose another name (or remove the file)"
         )
+
+
+def check_json_apart(
+    json_path: str | Path | None, outputs: list[Path], flag: str = "--out"
+) -> None:
+    """Refuse a ``--json`` that is one of the command's own outputs or lies inside one.
+
+    The summary is written last, so ``--json r.parquet`` or ``--json DS/manifest.json`` would
+    replace the results the command has just written (``OutputError``, before any work).
+
+    Parameters
+    ----------
+    json_path : path or None
+        The ``--json`` argument (nothing is checked when None).
+    outputs : list of Path
+        Files and folders the command writes.
+    flag : str
+        The argument the outputs come from, for the message.
+    """
+    if not json_path:
+        return
+    target = Path(json_path).resolve()
+    for output in outputs:
+        own = Path(output).resolve()
+        if target == own or own in target.parents:
+            raise OutputError(
+                f"--json {json_path}: is {'inside ' if target != own else ''}{output}, which "
+                f"this command writes ({flag}); write the summary elsewhere"
+            )
 
 
 def write_json_output(path: str | Path, text: str) -> Path:

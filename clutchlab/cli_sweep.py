@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 import warnings
+from pathlib import Path
 
 from .cli_types import nonnegative_float, positive_int
 
@@ -36,12 +37,16 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from .cli import check_json_apart
     from .physics.design import design_points, load_spec, run_sweep
     from .physics.design.runner import check_sweep_output
 
     spec = load_spec(args.spec)
     if not args.dry_run:  # before any work
         check_sweep_output(args.out, args.overwrite, figures=not args.no_figures)
+        out = Path(args.out)
+        siblings = [out.with_name(out.name + s) for s in (".lock", ".parts", ".figures")]
+        check_json_apart(args.json, [out, *siblings])
     if args.scheduler and args.workers is not None:
         raise SystemExit("clutchlab sweep: --workers is for local runs; a Dask cluster has its own")
     if args.dry_run:

@@ -119,3 +119,15 @@ def test_cli_stand_writes_extra_ramp_rates(tmp_path):
     bad = _clutchlab("stand", "--out", str(tmp_path / "bad"), "--ramps", "fast=0,x", check=False)
     assert bad.returncode != 0 and "--ramps: 'fast=0'" in bad.stderr and "'x'" in bad.stderr
     assert not (tmp_path / "bad").exists()
+
+
+@pytest.mark.parametrize("json_name", ["ds.truth.json", "ds/manifest.json", "ds"])
+def test_cli_stand_json_may_not_be_the_truth_or_inside_the_dataset(tmp_path, capsys, json_name):
+    """``--json DS.truth.json`` replaced the truth; ``--json DS/manifest.json`` broke DS."""
+    from clutchlab.cli import main
+
+    out = tmp_path / "ds"
+    args = ["stand", "--out", str(out), "--settings", "1", "--ramps", "fast=0.5", "--quiet"]
+    assert main([*args, "--json", str(tmp_path / json_name)]) == 2
+    assert "this command writes (--out); write the summary elsewhere" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []  # refused before any work

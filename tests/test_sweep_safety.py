@@ -329,3 +329,17 @@ def test_out_in_a_folder_that_does_not_exist_yet_is_created(tmp_path):
     res = run_sweep(_spec(n=2), out, workers=1, progress=False, figures=False)
     assert res.n_run == 2 and res.n_failed == 0 and out.is_file()
     assert {f.name for f in out.parent.iterdir()} == {"r.parquet", "r.parquet.parts"}
+
+
+@pytest.mark.parametrize(
+    "json_name", ["r.parquet", "r.parquet.figures/tornado.png", "r.parquet.parts/x.json"]
+)
+def test_sweep_json_may_not_be_one_of_its_outputs(tmp_path, capsys, json_name):
+    """``--json r.parquet`` replaced the consolidated results with the summary."""
+    from clutchlab.cli import main
+
+    spec = short_spec(tmp_path, n=2)
+    args = ["sweep", str(spec), "--out", str(tmp_path / "r.parquet"), "--workers", "1"]
+    assert main([*args, "--quiet", "--json", str(tmp_path / json_name)]) == 2
+    assert "this command writes (--out); write the summary elsewhere" in capsys.readouterr().err
+    assert [p.name for p in tmp_path.iterdir()] == ["short.toml"]  # refused before any work
