@@ -167,3 +167,21 @@ def test_a_step_spec_built_in_code_is_checked_too():
     scenario = ScenarioSpec()
     with pytest.raises(ModelError, match="sample_rate_Hz must be > 0"):
         ramp_trace(scenario.ramps[0], None, scenario, 0.0)
+
+
+def test_load_spec_reports_a_folder_and_a_binary_file_without_a_traceback(tmp_path, capsys):
+    """A folder or a non-UTF-8 file given as the spec raised IsADirectoryError /
+    UnicodeDecodeError with a traceback."""
+    folder = tmp_path / "spec.toml"
+    folder.mkdir()
+    with pytest.raises(SpecError, match="is a folder; give the spec file"):
+        load_spec(folder)
+    binary = tmp_path / "spec.xlsx"
+    binary.write_bytes(b"PK\x03\x04\xff\xfe\x00")
+    with pytest.raises(SpecError, match="not a text file in UTF-8"):
+        load_spec(binary)
+    from clutchlab.cli import main
+
+    out = str(tmp_path / "r.parquet")
+    assert main(["sweep", str(binary), "--out", out, "--dry-run"]) == 2
+    assert "spec.xlsx: invalid sweep spec" in capsys.readouterr().err

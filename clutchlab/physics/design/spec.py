@@ -305,13 +305,23 @@ def load_spec(path: str | Path) -> SweepSpec:
     Raises
     ------
     SpecError
-        For unreadable TOML or any invalid entry (all problems listed).
+        For a missing, unreadable or non-UTF-8 file, invalid TOML, or any invalid entry
+        (all problems listed).
     """
     path = Path(path)
     try:
         doc = tomllib.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise SpecError([f"file not found: {path}"], str(path)) from None
+    except IsADirectoryError:
+        raise SpecError([f"{path} is a folder; give the spec file (TOML)"], str(path)) from None
+    except UnicodeDecodeError as exc:
+        raise SpecError(
+            [f"not a text file in UTF-8 (byte {exc.start}: {exc.reason}); a spec is TOML"],
+            str(path),
+        ) from None
+    except OSError as exc:
+        raise SpecError([f"cannot read: {exc.strerror or exc}"], str(path)) from None
     except tomllib.TOMLDecodeError as exc:
         raise SpecError([f"not valid TOML: {exc}"], str(path)) from None
     from .spec_parse import parse_spec
