@@ -72,6 +72,17 @@ def test_unknown_parameter_lists_known_ones_and_all_problems_at_once():
         ({"metrics": {"gain_mA": [700, 250]}}, "gain_mA must be [low, high]"),
         ({"scenario": {"step": {"from_mA": 500, "to_mA": 500}}}, "from_mA ≠ to_mA"),
         ({"colour": 1}, "unknown top-level key 'colour'"),
+        # these four raised a ValueError / TypeError traceback instead of a SpecError
+        ({"metrics": {"hysteresis_mA": ["a", "b"]}}, "hysteresis_mA must be [low, high]"),
+        ({"metrics": {"ripple_mA": ["a", 1]}}, "ripple_mA must be [low, high]"),
+        ({"scenario": {"dither": {"shape": ["A"]}}}, "unknown shape ['A']"),
+        ({"scenario": {"ramps": [{"label": ["x"], "ramp_s": 1}]}}, "label must be a non-empty"),
+        # these were accepted and gave NaN metrics or a physically impossible circuit
+        ({"metrics": {"gain_mA": [250, float("inf")]}}, "0 ≤ low < high ≤ 1100 (mA)"),
+        ({"metrics": {"hysteresis_mA": [1200, 1500]}}, "0 ≤ low < high ≤ 1100 (mA)"),
+        ({"scenario": {"line_pressure_bar": -5.0}}, "line_pressure_bar -5 bar not in (0, 60]"),
+        ({"scenario": {"prime_pressure_bar": 20.0}}, "below line_pressure_bar (17.7 bar)"),
+        ({"scenario": {"oil_temp_C": -300.0}}, "oil_temp_C -300 °C not in -40–180 °C"),
         (
             {"variables": [{"name": "dither_amp_scale", "low": 0.5, "high": 1.5}]},
             "high 1.5 × shape B (peak 225 mA) exceeds the 225 mA dither range",

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from ...data import SIGNALS
 from ...errors import ModelError
 from ..effects import effect_names
 from ..model import CircuitModel
@@ -44,9 +45,18 @@ def _table(doc: dict, key: str, allowed: set[str], problems: list[str]) -> dict:
     return tab
 
 
+#: Largest nominal current of the circuit and of the stand's ramps (mA).
+MAX_CURRENT_MA = 1100.0
+
+
+def _is_finite(v: Any) -> bool:
+    """Whether ``v`` is a finite int or float (not a bool, a string or a list)."""
+    return not isinstance(v, bool) and isinstance(v, int | float) and math.isfinite(v)
+
+
 def _number(tab: dict, key: str, where: str, default: float, problems: list[str]) -> float:
     v = tab.get(key, default)
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+    if not _is_finite(v):
         problems.append(f"{where} {key} must be a finite number, got {v!r}")
         return default
     return float(v)
@@ -169,6 +179,8 @@ def _parse_ramp(item: Any, k: int, problems: list[str]) -> RampProfile | None:
             )
             return None
         where = f"[scenario] ramps[{k}]"
+        if not isinstance(item["label"], str) or not item["label"].strip():
+            problems.append(f"{where}: label must be a non-empty string, got {item['label']!r}")
         ramp = RampProfile(
             str(item["label"]),
             _number(item, "ramp_s", where, 1.0, problems),
@@ -195,7 +207,7 @@ def _parse_scenario(doc: dict, problems: list[str]) -> ScenarioSpec:
         problems.append(f"[scenario] ramps: duplicate labels in {labels}")
     dither = _table(tab, "dither", {"freq_Hz", "shape", "waveform"}, problems)
     shape = dither.get("shape", "B")
-    if shape not in DITHER_SHAPES:
+    if not isinstance(shape, str) or shape not in DITHER_SHAPES:
         problems.append(
             f"[scenario.dither] unknown shape {shape!r}; known: {', '.join(DITHER_SHAPES)}"
         )
@@ -213,16 +225,40 @@ def _parse_scenario(doc: dict, problems: list[str]) -> ScenarioSpec:
             problems.extend(exc.problems)
             step = d
     d = ScenarioSpec()
+    line = _number(tab, "line_pressure_bar", "[scenario]", d.line_pressure_bar, problems)
+    prime = _number(tab, "prime_pressure_bar", "[scenario]", d.prime_pressure_bar, problems)
+    oil = _number(tab, "oil_temp_C", "[scenario]", d.oil_temp_C, problems)
+    problems += _supply_problems(line, prime, oil)
     return ScenarioSpec(
         ramps=tuple(ramps) or d.ramps,
         dither_freq_Hz=_number(dither, "freq_Hz", "[scenario.dither]", 50.0, problems),
         dither_shape=str(shape),
         dither_waveform=str(waveform),
         step=step,
-        line_pressure_bar=_number(tab, "line_pressure_bar", "[scenario]", 17.7, problems),
-        prime_pressure_bar=_number(tab, "prime_pressure_bar", "[scenario]", 0.5, problems),
-        oil_temp_C=_number(tab, "oil_temp_C", "[scenario]", 40.0, problems),
+        line_pressure_bar=line,
+        prime_pressure_bar=prime,
+        oil_temp_C=oil,
     )
+
+
+def _supply_problems(line: float, prime: float, oil: float) -> list[str]:
+    """Line / prime pressure (bar, gauge) and oil temperature (°C) a circuit can run at."""
+    out = []
+    p_lo, p_hi = (
+        SIGNALS["line_pressure_bar"].plausible_min,
+        SIGNALS["line_pressure_bar"].plausible_max,
+    )
+    t_lo, t_hi = SIGNALS["oil_temp_C"].plausible_min, SIGNALS["oil_temp_C"].plausible_max
+    if not 0 < line <= p_hi:
+        out.append(f"[scenario] line_pressure_bar {line:g} bar not in (0, {p_hi:g}] bar")
+    if not p_lo <= prime < line:
+        out.append(
+            f"[scenario] prime_pressure_bar {prime:g} bar must be ≥ {p_lo:g} bar and below "
+            f"line_pressure_bar ({line:g} bar)"
+        )
+    if not t_lo <= oil <= t_hi:
+        out.append(f"[scenario] oil_temp_C {oil:g} °C not in {t_lo:g}–{t_hi:g} °C")
+    return out
 
 
 def _parse_simulation(doc: dict, problems: list[str]) -> SimulationSpec:
@@ -252,8 +288,12 @@ def _parse_metrics(doc: dict, problems: list[str]) -> MetricSettings:
             continue
         v = tab[k]
         if isinstance(default, tuple):
-            if not (isinstance(v, list) and len(v) == 2 and v[0] < v[1]):
-                problems.append(f"[metrics] {k} must be [low, high] with low < high (mA)")
+            numbers = isinstance(v, list) and len(v) == 2 and all(_is_finite(x) for x in v)
+            if not (numbers and 0 <= v[0] < v[1] <= MAX_CURRENT_MA):
+                problems.append(
+                    f"[metrics] {k} must be [low, high] with 0 ≤ low < high ≤ "
+                    f"{MAX_CURRENT_MA:g} (mA), got {v!r}"
+                )
                 continue
             kw[k] = (float(v[0]), float(v[1]))
         else:
