@@ -131,3 +131,36 @@ def test_cli_stand_json_may_not_be_the_truth_or_inside_the_dataset(tmp_path, cap
     assert main([*args, "--json", str(tmp_path / json_name)]) == 2
     assert "this command writes (--out); write the summary elsewhere" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []  # refused before any work
+
+
+def _no_simulation(*args, **kwargs):
+    raise AssertionError("the stand ran before its output was checked")
+
+
+@pytest.mark.parametrize("simulate", ["run_stand", "run_plant"])
+def test_write_stand_refuses_its_output_before_the_simulation(tmp_path, monkeypatch, simulate):
+    """A user's file in the way, or a ramp label that is no file name, was found only when
+    the dataset was saved: after minutes of simulation."""
+    from clutchlab.errors import DataError, OutputError
+    from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, write_stand
+    from clutchlab.physics.stand.plants import PlantConfig
+
+    monkeypatch.setattr("clutchlab.physics.stand.stand.run_stand", _no_simulation)
+    monkeypatch.setattr("clutchlab.physics.stand.plants.run_plant", _no_simulation)
+    kind = (
+        StandConfig if simulate == "run_stand" else lambda **kw: PlantConfig("quadratic_play", **kw)
+    )
+    settings = (DitherSetting(30.0, "A"),)
+    theirs = tmp_path / "measured"
+    theirs.mkdir()
+    (theirs / "fast_30Hz_A.csv").write_text("time_s,current_mA\n")
+    (theirs / "notes.txt").write_text("keep")
+    config = kind(settings=settings, ramps=(RampProfile("fast", 1.0),))
+    with pytest.raises(OutputError, match=r"would replace them.*: fast_30Hz_A\.csv$"):
+        write_stand(theirs, config, overwrite=True, progress=False)
+    assert (theirs / "fast_30Hz_A.csv").read_text() == "time_s,current_mA\n"
+    config = kind(settings=settings, ramps=(RampProfile("a/b", 1.0),))
+    with pytest.raises(DataError, match="cannot write the dataset") as err:
+        write_stand(tmp_path / "new", config, progress=False)
+    assert "'a/b_30Hz_A' is not a portable file name" in str(err.value)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["measured"]

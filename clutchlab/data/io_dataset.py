@@ -29,6 +29,7 @@ __all__ = [
     "FORMATS",
     "MANIFEST_NAME",
     "DatasetScan",
+    "experiment_name_problems",
     "load_dataset",
     "save_dataset",
     "scan_dataset",
@@ -38,13 +39,23 @@ __all__ = [
 _BAD_STEM = re.compile(r'[<>:"/\\|?*\x00-\x1f]')
 
 
-def _manifest_text(dataset: Dataset, suffix: str) -> str:
-    """``manifest.json`` content; DataError listing every problem (before anything is written)."""
-    manifest = dataset.manifest(suffix=suffix)
+def experiment_name_problems(names: list[str]) -> list[str]:
+    """Why experiment names cannot be a dataset's file names (empty list: they can).
+
+    Parameters
+    ----------
+    names : list of str
+        Experiment names, in dataset order (each becomes ``<name>.<format>``).
+
+    Returns
+    -------
+    list of str
+        One line per problem: a name that is not a portable file name, or that differs from
+        an earlier one only in case (the files would collide on Windows and macOS).
+    """
     problems: list[str] = []
     lower: dict[str, str] = {}
-    for i, (trace, entry) in enumerate(zip(dataset, manifest["experiments"], strict=True)):
-        name = trace.name
+    for i, name in enumerate(names):
         if _BAD_STEM.search(name) or name.strip() != name or name in (".", ".."):
             problems.append(f"experiment {i}: name {name!r} is not a portable file name")
         if name.lower() in lower:
@@ -53,6 +64,15 @@ def _manifest_text(dataset: Dataset, suffix: str) -> str:
                 " (the files would collide on case-insensitive file systems)"
             )
         lower.setdefault(name.lower(), name)
+    return problems
+
+
+def _manifest_text(dataset: Dataset, suffix: str) -> str:
+    """``manifest.json`` content; DataError listing every problem (before anything is written)."""
+    manifest = dataset.manifest(suffix=suffix)
+    problems = experiment_name_problems([trace.name for trace in dataset])
+    for i, (trace, entry) in enumerate(zip(dataset, manifest["experiments"], strict=True)):
+        name = trace.name
         try:
             json.dumps(entry, default=json_default, allow_nan=False)
         except (TypeError, ValueError) as exc:

@@ -417,8 +417,8 @@ def check_folder_kind(path: str | Path, what: str) -> None:
 def check_folder_files(
     path: str | Path, names: Iterable[str], *, what: str = "output"
 ) -> list[str]:
-    """Refuse a folder in which a file clutchlab did not write stands where one of ``names``
-    would go; :func:`write_folder_atomic` does this when writing, a command before its work.
+    """Refuse a folder that :func:`write_folder_atomic` would refuse for ``names``: a
+    command calls this before its work, the write again when writing.
 
     Parameters
     ----------
@@ -427,7 +427,7 @@ def check_folder_files(
     names : iterable of str
         Relative POSIX paths of files that will be written there.
     what : str
-        Name of the output in messages.
+        Name (and kind) of the output, as given to :func:`write_folder_atomic`.
 
     Returns
     -------
@@ -437,11 +437,13 @@ def check_folder_files(
     Raises
     ------
     OutputError
-        Listing the user's files in the way (nothing is changed).
+        The folder holds another kind of clutchlab output (:func:`check_folder_kind`), or a
+        file clutchlab did not write stands where one of ``names`` would go (all listed).
     """
     path = Path(path)
     if not path.is_dir():
         return []
+    check_folder_kind(path, what)
     owned = owned_files(path)
     keep = [n for n in _tree(path) if n not in owned]
     clash = sorted(k for k in keep if _clashes(k, set(names)))
@@ -493,10 +495,7 @@ def write_folder_atomic(
         _recover(path)
     check_output(path, kind="folder", overwrite=overwrite, what=what, whole=True)
     exists = path.is_dir()
-    keep: list[str] = []
-    if exists:
-        check_folder_kind(path, what)
-        keep = check_folder_files(path, files, what=what)
+    keep = check_folder_files(path, list(files), what=what)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))

@@ -22,6 +22,7 @@ __all__ = [
     "BenchNoise",
     "bench_drive",
     "experiment_meta",
+    "experiment_name",
     "measured_signals",
     "quantize",
     "wander",
@@ -208,6 +209,11 @@ def measured_signals(
         ),
         "oil_temp_C": quantize(drive.oil_temp_C + rng.standard_normal(n) * 0.1, 0.1),
     }
+
+
+def experiment_name(ramp: RampProfile, setting: DitherSetting) -> str:
+    """Name (and file stem) of one experiment, e.g. ``fast_50Hz_B``."""
+    return f"{ramp.label}_{setting.tag}"
 
 
 def experiment_meta(ramp: RampProfile, setting: DitherSetting) -> dict:

@@ -18,8 +18,9 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from ...data import Dataset, Trace, save_dataset
-from ...data.output import check_output, write_file_atomic
-from ...errors import ModelError
+from ...data.io_dataset import MANIFEST_NAME, experiment_name_problems
+from ...data.output import check_folder_files, check_output, write_file_atomic
+from ...errors import DataError, ModelError
 from ..assembly import MODEL_INPUTS
 from ..effects import effect_names
 from ..model import CircuitModel
@@ -30,6 +31,7 @@ from .environment import (
     BenchNoise,
     bench_drive,
     experiment_meta,
+    experiment_name,
     measured_signals,
 )
 from .scenarios import RAMPS, DitherSetting, RampProfile
@@ -193,7 +195,7 @@ def run_stand(config: StandConfig | None = None, progress: bool = True) -> Stand
         u[:, names.index("prime_pressure_bar")] = drive.prime_bar
         u[:, names.index("oil_temp_C")] = drive.oil_temp_C
         x, y = simulate_inputs(model, params, t, u, "command", sim)
-        name = f"{ramp.label}_{setting.tag}"
+        name = experiment_name(ramp, setting)
         truth_p[name] = y[:, 1].copy()
         signals = measured_signals(rng, drive, x[:, i_state], y[:, 0], config.noise)
         traces.append(Trace(name, signals, meta=experiment_meta(ramp, setting)))
@@ -245,8 +247,10 @@ def write_stand(
     from .plants import PlantConfig, run_plant
 
     out = Path(out)
+    config = config or StandConfig()
     check_output(out, kind="folder", overwrite=overwrite, what="dataset folder")
     check_output(truth_path(out), kind="file", overwrite=overwrite, what="truth file")
+    _check_files(out, config, figure)  # before the (minutes long) simulation
     if isinstance(config, PlantConfig):
         run = run_plant(config, progress=progress)
     else:
@@ -261,3 +265,18 @@ def write_stand(
     truth = json.dumps(run.truth(), indent=2, ensure_ascii=False) + "\n"
     write_file_atomic(truth_path(out), truth.encode("utf-8"), overwrite=True)
     return run
+
+
+def _check_files(out: Path, config, figure: bool) -> None:
+    """What :func:`save_dataset` would refuse, checked before the simulation.
+
+    Experiment names that are not portable file names (a ramp label ``a/b``), and a user's
+    file (or another kind of clutchlab output) in ``out`` where a dataset file would go.
+    """
+    names = [experiment_name(r, s) for r in config.ramps for s in config.settings]
+    if problems := experiment_name_problems(names):
+        raise DataError(f"cannot write the dataset {out}", problems)
+    files = [f"{n}.csv" for n in names] + [MANIFEST_NAME]
+    if figure:
+        files.append("pressure_vs_current.png")
+    check_folder_files(out, files, what="dataset folder")

@@ -8,7 +8,13 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from ....data import Dataset, Trace
-from ..environment import BenchNoise, bench_drive, experiment_meta, measured_signals
+from ..environment import (
+    BenchNoise,
+    bench_drive,
+    experiment_meta,
+    experiment_name,
+    measured_signals,
+)
 from ..scenarios import RAMPS, DitherSetting, RampProfile
 from .common import delayed, run_kernel
 from .registry import get_plant
@@ -103,7 +109,7 @@ def run_plant(config: PlantConfig, progress: bool = True) -> PlantRun:
         )
         current, pressure = run_kernel(spec.simulate, vec, drive, config.substeps, setting.waveform)
         pressure = delayed(pressure, delay_s, dt)
-        name = f"{ramp.label}_{setting.tag}"
+        name = experiment_name(ramp, setting)
         truth_p[name] = pressure.copy()
         signals = measured_signals(rng, drive, current, pressure, config.noise)
         traces.append(Trace(name, signals, meta=experiment_meta(ramp, setting)))
