@@ -164,3 +164,26 @@ def test_write_stand_refuses_its_output_before_the_simulation(tmp_path, monkeypa
         write_stand(tmp_path / "new", config, progress=False)
     assert "'a/b_30Hz_A' is not a portable file name" in str(err.value)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["measured"]
+
+
+def test_overview_draws_every_ramp_of_the_setting_in_a_colour_of_its_own():
+    """``--ramps fast=2.5,r5=5,...`` drew r5 in fast's blue; a label with an underscore
+    (``warm_up``) made the figure pick the wrong setting and drop the other ramps."""
+    from matplotlib.colors import to_hex
+    from synthetic import make_trace
+
+    from clutchlab.data import Dataset, Trace
+    from clutchlab.physics.stand import plot_pressure_vs_current
+
+    def trace(label, freq=30.0):
+        tr = make_trace([0, 0.2, 0.6], [0, 0, 1100], dither_Hz=freq, ramp=label)
+        tr = tr.with_signals(clutch_pressure_bar=tr.get("current_cmd_mA") / 100.0)
+        tr.meta |= {"dither_freq_Hz": freq, "dither_shape": "A"}
+        return Trace(f"{label}_{freq:g}Hz_A", tr.signals, meta=tr.meta)
+
+    labels = ["warm_up", "fast", "r5", "medium", "r20", "slow"]
+    ds = Dataset([trace(label) for label in labels] + [trace("fast", 50.0)])
+    lines = plot_pressure_vs_current(ds).axes[0].get_lines()
+    assert [line.get_label() for line in lines] == [f"{x} ({x}_30Hz_A)" for x in labels]
+    colours = [to_hex(line.get_color()) for line in lines]
+    assert len(set(colours)) == len(labels), colours

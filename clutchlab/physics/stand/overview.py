@@ -7,6 +7,25 @@ from ...data import Dataset, dither_period_mean, dither_period_samples
 __all__ = ["plot_pressure_vs_current"]
 
 _COLORS = {"fast": "tab:blue", "medium": "black", "slow": "tab:green"}
+#: Colours of other ramp labels (``--ramps r5=5,...``), in order: none of the three above.
+_OTHER_COLORS = (
+    "tab:orange",
+    "tab:red",
+    "tab:purple",
+    "tab:brown",
+    "tab:pink",
+    "tab:olive",
+    "tab:cyan",
+    "tab:gray",
+)
+
+
+def _setting_tag(trace) -> str:
+    """The dither tag (``50Hz_B``) of a stand experiment: from its metadata, else its name."""
+    freq, shape = trace.meta.get("dither_freq_Hz"), trace.meta.get("dither_shape")
+    if isinstance(freq, int | float) and isinstance(shape, str):
+        return f"{freq:g}Hz_{shape}"
+    return "_".join(trace.name.rsplit("_", 2)[1:])  # <ramp label>_<freq>Hz_<shape>
 
 
 def plot_pressure_vs_current(dataset: Dataset, setting: str | None = None):
@@ -17,23 +36,32 @@ def plot_pressure_vs_current(dataset: Dataset, setting: str | None = None):
     dataset : Dataset
         Stand or test-stand dataset with ``current_cmd_mA``.
     setting : str, optional
-        Only experiments whose name ends with this dither tag (e.g. ``50Hz_A``);
-        the first experiment's tag when omitted.
+        Only experiments of this dither setting (tag, e.g. ``50Hz_A``); the first
+        experiment's when omitted.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One line per ramp; ``fast`` / ``medium`` / ``slow`` in blue / black / green, every
+        other ramp label in a colour of its own.
     """
     from matplotlib.figure import Figure  # imported on use: simulation workers never draw
 
     fig = Figure(figsize=(7.5, 5), layout="constrained")  # no pyplot: no global backend
     ax = fig.subplots()
-    tag = setting or "_".join(dataset[0].name.split("_")[1:])
+    tag = setting or (_setting_tag(dataset[0]) if len(dataset) else "")
+    others: dict[str, str] = {}
     for trace in dataset:
-        if not trace.name.endswith(tag) or not trace.has("current_cmd_mA"):
+        if _setting_tag(trace) != tag or not trace.has("current_cmd_mA"):
             continue
+        if trace.ramp not in _COLORS and trace.ramp not in others:
+            others[trace.ramp] = _OTHER_COLORS[len(others) % len(_OTHER_COLORS)]
         p = dither_period_mean(trace.get("clutch_pressure_bar"), dither_period_samples(trace))
         ax.plot(
             trace.get("current_cmd_mA"),
             p,
             lw=0.9,
-            color=_COLORS.get(trace.ramp),
+            color=_COLORS.get(trace.ramp) or others[trace.ramp],
             label=f"{trace.ramp} ({trace.name})",
         )
     ax.set(
