@@ -11,6 +11,7 @@ import pytest
 from realism import check_hysteresis_bands, check_latch, check_layout, check_linear_rise
 
 from clutchlab.data import load_dataset
+from clutchlab.physics.stand import DitherSetting, RampProfile
 
 
 def test_stand_layout_and_metadata(stand_run):
@@ -187,3 +188,38 @@ def test_overview_draws_every_ramp_of_the_setting_in_a_colour_of_its_own():
     assert [line.get_label() for line in lines] == [f"{x} ({x}_30Hz_A)" for x in labels]
     colours = [to_hex(line.get_color()) for line in lines]
     assert len(set(colours)) == len(labels), colours
+
+
+@pytest.mark.parametrize(
+    ("config", "needle"),
+    [
+        # ZeroDivisionError / IndexError tracebacks before:
+        ({"sample_rate_Hz": 0.0}, "sample_rate_Hz must be a finite number > 0, not 0.0"),
+        ({"settings": ()}, "settings: at least one dither setting is needed"),
+        ({"ramps": ()}, "ramps: at least one ramp is needed"),
+        # silently written: data that fails `clutchlab data check`, noise of negative size
+        ({"sample_rate_Hz": 300.0}, "300 Hz does not resolve a 70 Hz dither (at least 700 Hz"),
+        ({"pressure_noise_bar": -0.1}, "noise pressure_bar must be a finite number ≥ 0"),
+        ({"ramps": (RampProfile("fast", -1.0),)}, "'fast' needs ramp_s > 0 s"),
+        ({"settings": (DitherSetting(50.0, "Z"),)}, "unknown dither shape 'Z'"),
+    ],
+)
+def test_stand_config_lists_its_problems_before_any_work(tmp_path, config, needle):
+    from clutchlab.errors import ModelError
+    from clutchlab.physics.stand import StandConfig
+
+    with pytest.raises(ModelError, match="invalid stand configuration") as err:
+        StandConfig(**config)
+    assert needle in str(err.value)
+
+
+def test_plant_refuses_a_waveform_it_cannot_make():
+    """A plant drew a square dither as a sine, and wrote "square" in the manifest."""
+    from clutchlab.errors import ModelError
+    from clutchlab.physics.stand.plants import PlantConfig
+
+    square = (DitherSetting(50.0, "A", "square"),)
+    with pytest.raises(ModelError, match="waveform 'square' is not one of"):
+        PlantConfig("quadratic_play", settings=square)
+    with pytest.raises(ModelError, match="temperature must be 'levels' or 'drift'"):
+        PlantConfig("quadratic_play", temperature="hot")

@@ -10,17 +10,20 @@ effects): the zoo's independence rests on it.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from .scenarios import DitherSetting, RampProfile, dither_amplitude
+from ...data.validate import MIN_SAMPLES_PER_DITHER_PERIOD
+from .scenarios import DITHER_SHAPES, DitherSetting, RampProfile, dither_amplitude
 
 __all__ = [
     "TEMPERATURE_LEVELS",
     "BenchDrive",
     "BenchNoise",
     "bench_drive",
+    "bench_problems",
     "experiment_meta",
     "experiment_name",
     "measured_signals",
@@ -224,3 +227,85 @@ def experiment_meta(ramp: RampProfile, setting: DitherSetting) -> dict:
         "dither_shape": setting.shape,
         "dither_waveform": setting.waveform,
     }
+
+
+def _finite(v) -> bool:
+    return not isinstance(v, bool) and isinstance(v, int | float) and math.isfinite(v)
+
+
+def bench_problems(
+    settings,
+    ramps,
+    seed,
+    sample_rate_Hz,
+    substeps,
+    noise: BenchNoise,
+    waveforms: tuple[str, ...] = ("sine", "triangle", "square"),
+) -> list[str]:
+    """What is wrong with a run of the bench (empty list: nothing), every problem at once.
+
+    Parameters
+    ----------
+    settings : tuple of DitherSetting
+        Dither settings: at least one; frequency > 0 Hz, a known shape, one of ``waveforms``.
+    ramps : tuple of RampProfile
+        Ramps: at least one; ``ramp_s`` > 0 s, ``hold_s`` ≥ 0 s, 0 < ``peak_mA`` ≤ 1100 mA.
+    seed : int
+        Non-negative integer.
+    sample_rate_Hz : float
+        Logging rate (Hz): at least 10 × the highest dither frequency, so that the dataset
+        passes :func:`clutchlab.data.validate_trace`.
+    substeps : int
+        Integration steps per sample, ≥ 1.
+    noise : BenchNoise
+        Standard deviations and ADC steps, each finite and ≥ 0 (bar, mA).
+    waveforms : tuple of str
+        Dither waveforms the circuit can make.
+    """
+    out: list[str] = []
+    settings, ramps = tuple(settings), tuple(ramps)
+    if not settings:
+        out.append("settings: at least one dither setting is needed")
+    if not ramps:
+        out.append("ramps: at least one ramp is needed")
+    for s in settings:
+        if not isinstance(s, DitherSetting):
+            out.append(f"settings: {s!r} is not a DitherSetting")
+            continue
+        if not (_finite(s.freq_Hz) and s.freq_Hz > 0):
+            out.append(f"settings: dither frequency {s.freq_Hz!r} Hz must be > 0")
+        if not isinstance(s.shape, str) or s.shape not in DITHER_SHAPES:
+            out.append(
+                f"settings: unknown dither shape {s.shape!r}; known: {sorted(DITHER_SHAPES)}"
+            )
+        if s.waveform not in waveforms:
+            out.append(f"settings: dither waveform {s.waveform!r} is not one of {waveforms}")
+    for r in ramps:
+        if not isinstance(r, RampProfile):
+            out.append(f"ramps: {r!r} is not a RampProfile")
+            continue
+        if not isinstance(r.label, str) or not r.label.strip():
+            out.append(f"ramps: label {r.label!r} must be a non-empty string")
+        if not (_finite(r.ramp_s) and r.ramp_s > 0 and _finite(r.hold_s) and r.hold_s >= 0):
+            out.append(f"ramps: {r.label!r} needs ramp_s > 0 s and hold_s ≥ 0 s")
+        if not (_finite(r.peak_mA) and 0 < r.peak_mA <= 1100):
+            out.append(f"ramps: {r.label!r} peak_mA {r.peak_mA!r} not in (0, 1100] mA")
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        out.append(f"seed must be a non-negative integer, not {seed!r}")
+    if isinstance(substeps, bool) or not isinstance(substeps, int | np.integer) or substeps < 1:
+        out.append(f"substeps must be an integer ≥ 1, not {substeps!r}")
+    if not (_finite(sample_rate_Hz) and sample_rate_Hz > 0):
+        out.append(f"sample_rate_Hz must be a finite number > 0, not {sample_rate_Hz!r}")
+    else:
+        freqs = [s.freq_Hz for s in settings if isinstance(s, DitherSetting) and _finite(s.freq_Hz)]
+        need = MIN_SAMPLES_PER_DITHER_PERIOD * max(freqs, default=0.0)
+        if sample_rate_Hz < need:
+            out.append(
+                f"sample_rate_Hz {sample_rate_Hz:g} Hz does not resolve a {max(freqs):g} Hz "
+                f"dither (at least {need:g} Hz: {MIN_SAMPLES_PER_DITHER_PERIOD:g} samples per "
+                "period, or the dataset would fail its own check)"
+            )
+    for key, value in noise.as_dict().items():
+        if not (_finite(value) and value >= 0):
+            out.append(f"noise {key} must be a finite number ≥ 0, not {value!r}")
+    return out

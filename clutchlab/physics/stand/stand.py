@@ -30,6 +30,7 @@ from ..simulate import simulate_inputs
 from .environment import (
     BenchNoise,
     bench_drive,
+    bench_problems,
     experiment_meta,
     experiment_name,
     measured_signals,
@@ -97,6 +98,12 @@ class StandConfig:
         ROS2 steps per sample (finer than the fit model's default).
     overrides : dict
         Truth parameter values replacing the as-built ones (engineering units).
+
+    Raises
+    ------
+    ModelError
+        Listing every problem of the settings, ramps, seed, sample rate, substeps and noise
+        (:func:`~clutchlab.physics.stand.environment.bench_problems`).
     pressure_noise_bar, current_noise_mA : float
         Standard deviation of sensor noise.
     pressure_lsb_bar, current_lsb_mA : float
@@ -115,6 +122,18 @@ class StandConfig:
     current_noise_mA: float = 2.0
     pressure_lsb_bar: float = 0.01
     current_lsb_mA: float = 0.5
+
+    def __post_init__(self) -> None:
+        problems = bench_problems(
+            self.settings,
+            self.ramps,
+            self.seed,
+            self.sample_rate_Hz,
+            self.substeps,
+            self.noise,
+        )
+        if problems:
+            raise ModelError("invalid stand configuration:\n  - " + "\n  - ".join(problems))
 
     @property
     def noise(self) -> BenchNoise:
@@ -247,7 +266,9 @@ def write_stand(
     from .plants import PlantConfig, run_plant
 
     out = Path(out)
-    config = config or StandConfig()
+    config = StandConfig() if config is None else config
+    if not isinstance(config, StandConfig | PlantConfig):
+        raise TypeError(f"write_stand: config must be a StandConfig or PlantConfig, not {config!r}")
     check_output(out, kind="folder", overwrite=overwrite, what="dataset folder")
     check_output(truth_path(out), kind="file", overwrite=overwrite, what="truth file")
     _check_files(out, config, figure)  # before the (minutes long) simulation

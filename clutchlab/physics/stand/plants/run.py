@@ -8,9 +8,11 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from ....data import Dataset, Trace
+from ....errors import ModelError
 from ..environment import (
     BenchNoise,
     bench_drive,
+    bench_problems,
     experiment_meta,
     experiment_name,
     measured_signals,
@@ -20,6 +22,9 @@ from .common import delayed, run_kernel
 from .registry import get_plant
 
 __all__ = ["PlantConfig", "PlantRun", "run_plant"]
+
+#: Dither waveforms a plant's kernel makes (:func:`~.common.dither_wave`).
+PLANT_WAVEFORMS = ("sine", "triangle")
 
 _ALL_SETTINGS: tuple[DitherSetting, ...] = tuple(
     DitherSetting(f, s) for f in (30.0, 50.0, 70.0) for s in ("A", "B", "C")
@@ -50,6 +55,12 @@ class PlantConfig:
         Oil temperature per run: fixed levels, or warming 40 → 85 °C through every run.
     noise : BenchNoise
         Sensor noise and ADC steps of the bench.
+
+    Raises
+    ------
+    ModelError
+        Listing every problem of the settings (a plant makes sine and triangle dither only),
+        ramps, seed, sample rate, substeps, noise and temperature.
     """
 
     plant: str
@@ -61,6 +72,23 @@ class PlantConfig:
     substeps: int = 20
     temperature: str = "levels"
     noise: BenchNoise = field(default_factory=BenchNoise)
+
+    def __post_init__(self) -> None:
+        problems = bench_problems(
+            self.settings,
+            self.ramps,
+            self.seed,
+            self.sample_rate_Hz,
+            self.substeps,
+            self.noise,
+            waveforms=PLANT_WAVEFORMS,
+        )
+        if self.temperature not in ("levels", "drift"):
+            problems.append(f"temperature must be 'levels' or 'drift', not {self.temperature!r}")
+        if problems:
+            raise ModelError(
+                f"invalid configuration of plant {self.plant!r}:\n  - " + "\n  - ".join(problems)
+            )
 
 
 @dataclass(frozen=True)
