@@ -8,7 +8,7 @@ import json
 import os
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NoReturn
 
 from . import __version__
 from .cli_types import nonnegative_int
@@ -22,6 +22,12 @@ __all__ = ["main"]
 
 def _csv_list(text: str | None) -> tuple[str, ...]:
     return tuple(s.strip() for s in (text or "").split(",") if s.strip())
+
+
+def usage_error(command: str, message: str) -> NoReturn:
+    """Stop with ``clutchlab COMMAND: error: MESSAGE`` and exit status 2, as argparse does."""
+    print(f"clutchlab {command}: error: {message}", file=sys.stderr)
+    raise SystemExit(2)
 
 
 def _list_plants() -> int:
@@ -61,7 +67,7 @@ def _ramps(text: str | None):
     if len(set(labels)) != len(labels):
         problems.append(f"repeated labels in {labels}")
     if problems:
-        raise SystemExit("--ramps: " + "; ".join(problems))
+        usage_error("stand", "--ramps: " + "; ".join(problems))
     return tuple(out)
 
 
@@ -72,10 +78,10 @@ def _cmd_stand(args: argparse.Namespace) -> int:
     if args.list_plants:
         return _list_plants()
     if not args.out:
-        raise SystemExit("clutchlab stand: --out is required (or --list-plants)")
+        usage_error("stand", "--out is required (or --list-plants)")
     n = args.settings
     if not 1 <= n <= len(DEFAULT_SETTINGS):
-        raise SystemExit(f"--settings must be 1..{len(DEFAULT_SETTINGS)}")
+        usage_error("stand", f"--settings must be 1..{len(DEFAULT_SETTINGS)}")
     # Spread the chosen settings over frequencies and shapes (3 → 30/A, 50/B, 70/C).
     step = max(len(DEFAULT_SETTINGS) // n, 1)
     settings = DEFAULT_SETTINGS[::step][:n] if n < len(DEFAULT_SETTINGS) else DEFAULT_SETTINGS
@@ -83,7 +89,7 @@ def _cmd_stand(args: argparse.Namespace) -> int:
     check_json_apart(args.json, [Path(args.out), truth_path(args.out)])
     if args.plant == "stand":
         if args.temperature != "levels":
-            raise SystemExit("--temperature drift applies to the zoo's plants (--plant NAME)")
+            usage_error("stand", "--temperature drift applies to the zoo's plants (--plant NAME)")
         config = StandConfig(
             effects=_csv_list(args.effects),
             builtin_effects=not args.no_builtin,
@@ -94,7 +100,7 @@ def _cmd_stand(args: argparse.Namespace) -> int:
         config.model()  # unknown effect names fail before any work
     else:
         if args.no_builtin:
-            raise SystemExit("--no-builtin applies to the stand only; a plant has no built-ins")
+            usage_error("stand", "--no-builtin applies to the stand only; a plant has no built-ins")
         config = PlantConfig(
             plant=args.plant,
             effects=_csv_list(args.effects),

@@ -37,24 +37,36 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from .cli import check_json_apart
+    from .cli import check_json_apart, usage_error
     from .physics.design import design_points, load_spec, run_sweep
     from .physics.design.runner import check_sweep_output
 
+    if args.scheduler and args.workers is not None:
+        usage_error("sweep", "--workers is for local runs; a Dask cluster has its own")
     spec = load_spec(args.spec)
     if not args.dry_run:  # before any work
         check_sweep_output(args.out, args.overwrite, figures=not args.no_figures)
         out = Path(args.out)
         siblings = [out.with_name(out.name + s) for s in (".lock", ".parts", ".figures")]
         check_json_apart(args.json, [out, *siblings])
-    if args.scheduler and args.workers is not None:
-        raise SystemExit("clutchlab sweep: --workers is for local runs; a Dask cluster has its own")
     if args.dry_run:
         points = design_points(spec)
         print(
             f"{spec.name}: {len(points)} points ({spec.sampling.method}), "
-            f"variables {', '.join(spec.variable_names)}; spec core {spec.core_hash}"
+            f"variables {', '.join(spec.variable_names) or '(none)'}; spec core {spec.core_hash}"
         )
+        if args.json:
+            from .cli import write_json_output
+
+            summary = {
+                "name": spec.name,
+                "dry_run": True,
+                "n_points": len(points),
+                "sampling": spec.sampling.method,
+                "variables": list(spec.variable_names),
+                "core_hash": spec.core_hash,
+            }
+            write_json_output(args.json, json.dumps(summary, indent=2))
         return 0
     res = run_sweep(
         spec,
@@ -111,7 +123,11 @@ def register(sub) -> None:
         help="write finished points to disk at least every S seconds, ≥ 0 (default 5; 0: after "
         "every batch)",
     )
-    p.add_argument("--dry-run", action="store_true", help="validate the spec, count the points")
+    p.add_argument(
+        "--dry-run",
+        action="store_true",
+        help="validate the spec, count the points (with --json: that count there); runs nothing",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", help="also write a summary here")
     p.set_defaults(func=_cmd_sweep)

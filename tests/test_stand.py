@@ -223,3 +223,23 @@ def test_plant_refuses_a_waveform_it_cannot_make():
         PlantConfig("quadratic_play", settings=square)
     with pytest.raises(ModelError, match="temperature must be 'levels' or 'drift'"):
         PlantConfig("quadratic_play", temperature="hot")
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["--settings", "0"], "--settings must be 1..9"),
+        (["--ramps", "fast=0"], "--ramps: 'fast=0'"),
+        (["--temperature", "drift"], "--temperature drift applies to the zoo's plants"),
+        (["--plant", "quadratic_play", "--no-builtin"], "--no-builtin applies to the stand only"),
+    ],
+)
+def test_cli_stand_usage_errors_exit_2_with_the_command_name(tmp_path, capsys, args, needle):
+    """These printed a bare message and exited 1, unlike every other usage error (2)."""
+    from clutchlab.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["stand", "--out", str(tmp_path / "ds"), *args])
+    assert exc.value.code == 2
+    assert f"clutchlab stand: error: {needle}" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []

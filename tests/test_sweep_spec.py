@@ -196,3 +196,21 @@ def test_load_spec_reports_a_folder_and_a_binary_file_without_a_traceback(tmp_pa
     out = str(tmp_path / "r.parquet")
     assert main(["sweep", str(binary), "--out", out, "--dry-run"]) == 2
     assert "spec.xlsx: invalid sweep spec" in capsys.readouterr().err
+
+
+def test_cli_dry_run_writes_its_count_to_json_and_scheduler_with_workers_exits_2(tmp_path, capsys):
+    """``--dry-run --json X`` wrote nothing; ``--scheduler A --workers N`` exited 1 with a bare
+    message, after the output checks."""
+    import json
+
+    from clutchlab.cli import main
+
+    summary = tmp_path / "count.json"
+    args = ["sweep", str(EXAMPLE), "--out", str(tmp_path / "r.parquet")]
+    assert main([*args, "--dry-run", "--json", str(summary)]) == 0
+    doc = json.loads(summary.read_text())
+    assert doc["n_points"] == 1000 and doc["dry_run"] is True and "vfs_d_orf" in doc["variables"]
+    with pytest.raises(SystemExit) as exc:
+        main([*args, "--scheduler", "tcp://127.0.0.1:8786", "--workers", "2"])
+    assert exc.value.code == 2
+    assert "clutchlab sweep: error: --workers is for local runs" in capsys.readouterr().err
