@@ -38,7 +38,9 @@ def _list_plants() -> int:
         print(f"{name:21s} {spec.summary}")
         for component, law in spec.laws.items():
             print(f"{'':23s}{component}: {law}")
-        print(f"{'':23s}effects it carries: {', '.join(spec.effects)}")
+        print(
+            f"{'':23s}effects it can carry (--effects; none by default): {', '.join(spec.effects)}"
+        )
     return 0
 
 

@@ -243,3 +243,14 @@ def test_cli_stand_usage_errors_exit_2_with_the_command_name(tmp_path, capsys, a
     assert exc.value.code == 2
     assert f"clutchlab stand: error: {needle}" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_list_plants_says_the_effects_are_optional(capsys):
+    """``effects it carries: sensor_lag, ...`` read as if every run had them; a run has none
+    unless --effects names them (its truth file says ``"effects": []``)."""
+    from clutchlab.cli import main
+
+    assert main(["stand", "--list-plants"]) == 0
+    out = capsys.readouterr().out
+    assert "effects it carries" not in out
+    assert out.count("effects it can carry (--effects; none by default): sensor_lag") == 4
