@@ -114,8 +114,9 @@ def test_local_sweep_writes_results_figures_and_skips_finished_points(tmp_path):
     pd.testing.assert_frame_equal(_numbers(again.table), _numbers(df))
     # Another model core in the same place is refused, not mixed in.
     other = _spec(n=4, simulation={"settle_s": 0.3})
-    with pytest.raises(ValueError, match="holds results of another spec"):
+    with pytest.raises(ValueError, match="holds results of another spec") as err:
         run_sweep(other, out, workers=1, progress=False)
+    assert "invalid sweep spec" not in str(err.value)  # the spec is valid; --out is taken
 
 
 def test_dask_local_cluster_gives_the_same_numbers_as_the_local_run(tmp_path):

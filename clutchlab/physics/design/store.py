@@ -41,7 +41,7 @@ from ...data.output import (
 from ...errors import OutputError
 from .spec import SpecError
 
-__all__ = ["ResultStore", "check_parts_folder", "read_results"]
+__all__ = ["OtherSpecResultsError", "ResultStore", "check_parts_folder", "read_results"]
 
 #: Part files clutchlab writes (``part-<time ns>-<pid>-<seq>.parquet``), and their temporaries.
 _PART = re.compile(r"part-\d{20}-\d+-\d{6}\.parquet")
@@ -50,6 +50,17 @@ _PART_TMP = re.compile(r"part-\d{20}-\d+-\d{6}\.parquet\.\d+\.tmp")
 _META_TMP = re.compile(
     r"(\.spec\.json\..+\.tmp|\.\.clutchlab-owned\.json\..+\.tmp|spec\.json\.tmp)"
 )
+
+
+class OtherSpecResultsError(SpecError):
+    """``--out`` holds results of a spec with another core: the spec itself is valid.
+
+    A :class:`SpecError` (so a ``ValueError``) whose message does not call the spec invalid.
+    """
+
+    def __init__(self, message: str, source: str) -> None:
+        super().__init__([message], source)
+        self.args = (f"{source}: {message}",)
 
 
 def _is_ours(parts: Path) -> bool:
@@ -163,12 +174,10 @@ class ResultStore:
                     "start these results again"
                 ) from exc
             if old != core_hash:
-                raise SpecError(
-                    [
-                        f"{self.parts} holds results of another spec (core {old}, this one "
-                        f"{core_hash}): model, scenario, simulation or metrics changed; "
-                        "use another --out or --overwrite"
-                    ],
+                raise OtherSpecResultsError(
+                    f"{self.parts} holds results of another spec (core {old}, this one "
+                    f"{core_hash}): model, scenario, simulation or metrics changed; "
+                    "use another --out or --overwrite",
                     str(self.out),
                 )
         else:
