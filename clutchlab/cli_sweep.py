@@ -112,7 +112,11 @@ def register(sub) -> None:
         default=None,
         help="local worker processes, ≥ 1 (default: CPU count; 1 = in this process)",
     )
-    p.add_argument("--overwrite", action="store_true", help="discard existing results first")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="discard existing results (and their figures) first",
+    )
     p.add_argument("--retry-failed", action="store_true", help="run failed points again")
     p.add_argument("--no-figures", action="store_true", help="no tornado / scatter figures")
     p.add_argument(

@@ -343,3 +343,22 @@ def test_sweep_json_may_not_be_one_of_its_outputs(tmp_path, capsys, json_name):
     assert main([*args, "--quiet", "--json", str(tmp_path / json_name)]) == 2
     assert "this command writes (--out); write the summary elsewhere" in capsys.readouterr().err
     assert [p.name for p in tmp_path.iterdir()] == ["short.toml"]  # refused before any work
+
+
+def test_overwrite_without_figures_removes_the_discarded_results_figures(tmp_path):
+    """``--overwrite --no-figures`` replaced the results but left the old study's figures
+    beside them, as if they showed the new results; a user's file there stays."""
+    from test_sweep_run import _spec
+
+    from clutchlab.physics.design import run_sweep
+
+    out = tmp_path / "r.parquet"
+    figures = tmp_path / "r.parquet.figures"
+    run_sweep(_spec(n=2), out, workers=1, progress=False)
+    assert (figures / "tornado.png").is_file()
+    run_sweep(_spec(n=2, seed=9), out, workers=1, progress=False, figures=False, overwrite=True)
+    assert not figures.exists()
+    run_sweep(_spec(n=2), out, workers=1, progress=False, overwrite=True)
+    (figures / "notes.txt").write_text("mine")
+    run_sweep(_spec(n=2), out, workers=1, progress=False, figures=False, overwrite=True)
+    assert [p.name for p in figures.iterdir()] == ["notes.txt"]

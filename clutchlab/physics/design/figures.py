@@ -5,6 +5,7 @@ matplotlib ``Figure`` objects only (no pyplot state): safe in workers and server
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -27,6 +28,7 @@ __all__ = [
     "metric_unit",
     "plot_metrics_vs_variables",
     "plot_tornado",
+    "remove_figures",
     "write_figures",
 ]
 
@@ -173,6 +175,24 @@ def check_figures_folder(folder: str | Path, what: str = "figures") -> Path:
             "move them away or choose another --out: " + ", ".join(clash)
         )
     return folder
+
+
+def remove_figures(folder: str | Path) -> None:
+    """Delete the figures clutchlab wrote in ``folder`` (an overwritten sweep's), nothing else.
+
+    Only the files of the folder's ownership record go, and the record; a user's file stays
+    (and with it the folder). A folder without clutchlab's record is left alone.
+    """
+    folder = Path(folder)
+    if folder.is_symlink() or not folder.is_dir() or not has_ownership_record(folder):
+        return
+    for name in owned_files(folder):
+        target = folder / name
+        if target.is_file() or target.is_symlink():
+            target.unlink(missing_ok=True)
+    (folder / OWNED_NAME).unlink(missing_ok=True)
+    with contextlib.suppress(OSError):
+        folder.rmdir()  # only when nothing of the user's is left in it
 
 
 def write_figures(table: pd.DataFrame, spec: SweepSpec, folder: str | Path) -> tuple[Path, ...]:

@@ -198,7 +198,7 @@ def run_sweep(
     progress : bool
         Show a progress bar.
     overwrite : bool
-        Discard existing results first.
+        Discard existing results first, and the figures clutchlab drew of them.
     retry_failed : bool
         Evaluate points recorded as failed again (default: a failed point counts as done).
     figures : bool
@@ -424,6 +424,10 @@ def _run_locked(
 ) -> SweepResult:  # fmt: skip
     points = design_points(spec)
     store = ResultStore(out, spec.core_hash, _spec_doc(spec), overwrite=overwrite)
+    if overwrite:  # the figures of the discarded results go with them (drawn again at the end)
+        from .figures import remove_figures
+
+        remove_figures(out.with_name(out.name + ".figures"))
     done = store.read()
     finished: set[str] = set()
     if not done.empty:
