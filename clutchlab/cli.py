@@ -154,10 +154,15 @@ def _cmd_params(args: argparse.Namespace) -> int:
     rows = [p.to_dict() for p in model.parameters]
     if args.json:
         write_json_output(args.json, json.dumps(rows, indent=2, ensure_ascii=False))
+    print(
+        f"{'name':18s} {'default':>10s} {'unit':14s} {'[lower, upper]':16s} {'fit scale':12s} "
+        "description"
+    )
     for p in model.parameters:
+        fit = f"{p.transform} {p.scale:g}"
         print(
-            f"{p.name:18s} {p.default:10.4g} {p.unit:14s} [{p.lower:g}, {p.upper:g}]  "
-            f"{p.description}"
+            f"{p.name:18s} {p.default:10.4g} {p.unit:14s} {f'[{p.lower:g}, {p.upper:g}]':16s} "
+            f"{fit:12s} {p.description}"
         )
     return 0
 

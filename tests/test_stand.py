@@ -254,3 +254,16 @@ def test_list_plants_says_the_effects_are_optional(capsys):
     out = capsys.readouterr().out
     assert "effects it carries" not in out
     assert out.count("effects it can carry (--effects; none by default): sensor_lag") == 4
+
+
+def test_cli_params_table_has_a_header_and_the_fit_scale(capsys):
+    """The table had no column names and no scale, though the README sends readers to it for
+    "a unit, a datasheet default, bounds and a scale"."""
+    from clutchlab.cli import main
+
+    assert main(["params"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].split() == ["name", "default", "unit", "[lower,", "upper]", "fit", "scale",
+                                "description"]  # fmt: skip
+    rho = next(line for line in lines if line.startswith("fluid_rho"))
+    assert rho.split()[:6] == ["fluid_rho", "850", "kg/m³", "[800,", "900]", "log"]
