@@ -362,3 +362,16 @@ def test_overwrite_without_figures_removes_the_discarded_results_figures(tmp_pat
     (figures / "notes.txt").write_text("mine")
     run_sweep(_spec(n=2), out, workers=1, progress=False, figures=False, overwrite=True)
     assert [p.name for p in figures.iterdir()] == ["notes.txt"]
+
+
+def test_run_sweep_takes_a_spec_file_and_refuses_anything_else(tmp_path):
+    """``run_sweep("spec.toml", out)`` died with AttributeError: 'str' object has no
+    attribute 'variable_names'."""
+    from clutchlab.physics.design import run_sweep
+
+    spec = short_spec(tmp_path, n=2)
+    res = run_sweep(str(spec), tmp_path / "r.parquet", workers=1, progress=False, figures=False)
+    assert res.n_run == 2 and res.spec.name == "short"
+    with pytest.raises(TypeError, match="spec must be a SweepSpec or a spec file"):
+        run_sweep({"name": "x"}, tmp_path / "s.parquet", workers=1)
+    assert not (tmp_path / "s.parquet.parts").exists()

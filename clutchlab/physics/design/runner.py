@@ -169,7 +169,7 @@ def _spec_doc(spec: SweepSpec) -> dict[str, Any]:
 
 
 def run_sweep(
-    spec: SweepSpec,
+    spec: SweepSpec | str | os.PathLike,
     out: str | Path,
     *,
     workers: int | None = None,
@@ -185,8 +185,8 @@ def run_sweep(
 
     Parameters
     ----------
-    spec : SweepSpec
-        The validated spec (:func:`load_spec`).
+    spec : SweepSpec or path
+        The validated spec (:func:`load_spec`), or the spec file (TOML) to load.
     out : path
         Consolidated results file (Parquet); part files go to ``<out>.parts/``, figures to
         ``<out>.figures/``.
@@ -229,6 +229,12 @@ def run_sweep(
         Ctrl-C (a ``KeyboardInterrupt``): the finished points are kept in ``<out>.parts/``,
         the lock is released, and the same call continues the sweep.
     """
+    if isinstance(spec, str | os.PathLike):
+        from .spec import load_spec
+
+        spec = load_spec(spec)
+    if not isinstance(spec, SweepSpec):
+        raise TypeError(f"run_sweep: spec must be a SweepSpec or a spec file, not {spec!r}")
     _check_run_arguments(workers, batch_size, flush_s)
     t0 = time.perf_counter()
     out = check_sweep_output(out, overwrite, figures=figures)
