@@ -94,3 +94,31 @@ def test_first_crossing_is_interpolated_per_direction_and_nan_when_absent():
     assert first_crossing(x, g, upward=True) == pytest.approx(15.0)
     assert first_crossing(x, g, upward=False) == pytest.approx(37.5)
     assert np.isnan(first_crossing(x, np.abs(g) + 0.1, upward=True))
+
+
+def test_metric_vs_variable_panels_share_the_x_axis_of_their_column():
+    """The tick labels are drawn on the bottom row only, but a panel whose metric is NaN for
+    some points had its own x range: points at vfs_d_orf = 0.6 were drawn at 0.475."""
+    import pandas as pd
+
+    from clutchlab.physics.design import SweepSpec, metric_names, plot_metrics_vs_variables
+
+    spec = SweepSpec.from_dict(
+        {
+            "sampling": {"method": "grid"},
+            "variables": [
+                {"name": "vfs_d_orf", "values": [0.35, 0.6]},
+                {"name": "vacc_V", "values": [1.0, 4.0], "scale": "log"},
+            ],
+        }
+    )
+    table = pd.DataFrame(
+        {"status": "ok", "vfs_d_orf": [0.35, 0.35, 0.6, 0.6], "vacc_V": [1.0, 4.0, 1.0, 4.0]}
+    )
+    for k, name in enumerate(metric_names(("fast",))):
+        table[name] = [np.nan, np.nan, 1.0 + k, 2.0 + k] if name == "latch_on_mA" else k + 0.0
+    fig = plot_metrics_vs_variables(table, spec)
+    grid = np.array(fig.axes).reshape(-1, 2)
+    for col in range(2):
+        limits = {tuple(np.round(ax.get_xlim(), 9)) for ax in grid[:, col]}
+        assert len(limits) == 1, limits

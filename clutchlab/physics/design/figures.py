@@ -112,7 +112,9 @@ def plot_metrics_vs_variables(table: pd.DataFrame, spec: SweepSpec) -> Figure:
     from matplotlib.ticker import NullFormatter
 
     fig = Figure(figsize=(w, h))  # fixed margins: constrained layout is slow for big grids
-    axes = fig.subplots(len(metrics), max(len(variables), 1), squeeze=False)
+    # One x axis per column: the tick labels are drawn on the bottom row only, so every
+    # panel above must share its range (a metric NaN for some points narrowed it).
+    axes = fig.subplots(len(metrics), max(len(variables), 1), squeeze=False, sharex="col")
     fig.subplots_adjust(
         left=1.2 / w, right=1 - 0.15 / w, bottom=0.55 / h, top=1 - 0.6 / h, wspace=0.3, hspace=0.25
     )
