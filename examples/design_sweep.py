@@ -1,7 +1,8 @@
 """Design study before hardware exists: sweep a spec, rank the designs by a metric.
 
 Runs every design point of a sweep spec (TOML, see ``sweep_vfs_design.toml``) through the
-physics model and prints the designs with the smallest fast-ramp hysteresis and their latch
+physics model and prints the designs with the smallest fast-ramp hysteresis width (in size:
+the width is negative when the rising branch lies below the falling one) and their latch
 currents.
 
 Usage::
@@ -21,7 +22,9 @@ def main() -> None:
     ap.add_argument("spec", help="sweep spec (TOML)")
     ap.add_argument("--out", required=True, help="results file (.parquet)")
     ap.add_argument("--workers", type=int, default=1)
-    ap.add_argument("--metric", default="hysteresis_fast_bar")
+    ap.add_argument(
+        "--metric", default="hysteresis_fast_bar", help="rank by the size of this metric column"
+    )
     args = ap.parse_args()
 
     spec = load_spec(args.spec)
@@ -29,7 +32,9 @@ def main() -> None:
     table = result.table
     print(result.summary())
     variables = [v.name for v in spec.variables]
-    best = table[table["status"] == "ok"].sort_values(args.metric).head(5)
+    # Smallest in size: a hysteresis width of -3 bar is wider than one of -0.9 bar.
+    ok = table[table["status"] == "ok"]
+    best = ok.sort_values(args.metric, key=lambda x: x.abs()).head(5)
     print(best[[*variables, args.metric, "latch_on_mA", "latch_off_mA"]].to_string(index=False))
 
 

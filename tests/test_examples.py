@@ -142,6 +142,13 @@ def test_design_sweep(tmp_path):
     )
     assert "'n_ok': 3" in stdout
     assert (tmp_path / "r.parquet").is_file()
+    # The designs with the smallest hysteresis *width* first: the widths are negative (the
+    # rising branch lags), and sorting them by value put the widest first.
+    lines = stdout.splitlines()
+    header = next(k for k, line in enumerate(lines) if "hysteresis_fast_bar" in line.split())
+    column = lines[header].split().index("hysteresis_fast_bar")
+    widths = [abs(float(line.split()[column])) for line in lines[header + 1 :] if line.strip()]
+    assert len(widths) == 3 and widths == sorted(widths), widths
 
 
 @pytest.fixture(scope="module", autouse=True)
