@@ -267,3 +267,22 @@ def test_cli_params_table_has_a_header_and_the_fit_scale(capsys):
                                 "description"]  # fmt: skip
     rho = next(line for line in lines if line.startswith("fluid_rho"))
     assert rho.split()[:6] == ["fluid_rho", "850", "kg/m³", "[800,", "900]", "log"]
+
+
+@pytest.mark.parametrize("out", [".", "..", "../here/.."])
+def test_cli_stand_refuses_the_current_folder_before_any_work(tmp_path, monkeypatch, capsys, out):
+    """``--out .`` was a ValueError traceback (truth_path of a path without a name);
+    ``--out here/..`` failed with "Device or resource busy" after the simulation."""
+    from clutchlab.cli import main
+    from clutchlab.physics.stand import truth_path
+
+    here = tmp_path / "here"
+    here.mkdir()
+    (here / "notes.txt").write_text("mine")
+    monkeypatch.chdir(here)
+    monkeypatch.setattr("clutchlab.physics.stand.stand.run_stand", _no_simulation)
+    args = ["stand", "--out", out, "--overwrite", "--settings", "1", "--ramps", "fast=0.5"]
+    assert main([*args, "--quiet"]) == 2
+    assert "is the current folder or holds it; name a folder to create" in capsys.readouterr().err
+    assert [p.name for p in here.iterdir()] == ["notes.txt"]
+    assert truth_path(".") == tmp_path / "here.truth.json"

@@ -20,7 +20,7 @@ from tqdm.auto import tqdm
 from ...data import Dataset, Trace, save_dataset
 from ...data.io_dataset import MANIFEST_NAME, experiment_name_problems
 from ...data.output import check_folder_files, check_output, write_file_atomic
-from ...errors import DataError, ModelError
+from ...errors import DataError, ModelError, OutputError
 from ..assembly import MODEL_INPUTS
 from ..effects import effect_names
 from ..model import CircuitModel
@@ -229,9 +229,30 @@ def run_stand(config: StandConfig | None = None, progress: bool = True) -> Stand
 
 
 def truth_path(out: str | Path) -> Path:
-    """Where the truth of a dataset written to ``out`` goes: ``<out>.truth.json`` beside it."""
+    """Where the truth of a dataset written to ``out`` goes: ``<out>.truth.json`` beside it.
+
+    ``out`` without a name of its own (``.``, ``data/..``) is resolved first.
+    """
     out = Path(out)
+    if out.name in ("", ".", ".."):
+        out = out.resolve()
     return out.with_name(out.name + ".truth.json")
+
+
+def _check_not_current(out: Path) -> None:
+    """Refuse the current folder or a folder holding it as a dataset folder.
+
+    The folder is replaced as a whole by an atomic swap: the shell (and this process) would
+    be left in the old, deleted folder, and the swap of a mount point fails only after the
+    simulation.
+    """
+    here = Path.cwd().resolve()
+    target = out.resolve()
+    if target == here or target in here.parents:
+        raise OutputError(
+            f"dataset folder {out}: is the current folder or holds it; name a folder to "
+            "create (e.g. --out stand)"
+        )
 
 
 def write_stand(
@@ -266,6 +287,7 @@ def write_stand(
     from .plants import PlantConfig, run_plant
 
     out = Path(out)
+    _check_not_current(out)
     config = StandConfig() if config is None else config
     if not isinstance(config, StandConfig | PlantConfig):
         raise TypeError(f"write_stand: config must be a StandConfig or PlantConfig, not {config!r}")
