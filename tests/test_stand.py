@@ -225,6 +225,16 @@ def test_plant_refuses_a_waveform_it_cannot_make():
         PlantConfig("quadratic_play", temperature="hot")
 
 
+def test_plant_refuses_an_effect_named_twice():
+    """``--effects sensor_lag,sensor_lag`` drew the effect twice (another unit than naming
+    it once) and listed it twice in the truth file."""
+    from clutchlab.errors import ModelError
+    from clutchlab.physics.stand.plants import PlantConfig
+
+    with pytest.raises(ModelError, match="effect\\(s\\) named twice: sensor_lag"):
+        PlantConfig("quadratic_play", effects=("sensor_lag", "sensor_lag"))
+
+
 @pytest.mark.parametrize(
     ("args", "needle"),
     [

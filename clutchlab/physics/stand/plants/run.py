@@ -83,6 +83,10 @@ class PlantConfig:
             self.noise,
             waveforms=PLANT_WAVEFORMS,
         )
+        effects = [self.effects] if isinstance(self.effects, str) else list(self.effects)
+        twice = sorted({e for e in effects if effects.count(e) > 1})
+        if twice:
+            problems.append(f"effect(s) named twice: {', '.join(map(str, twice))}")
         if self.temperature not in ("levels", "drift"):
             problems.append(f"temperature must be 'levels' or 'drift', not {self.temperature!r}")
         if problems:
