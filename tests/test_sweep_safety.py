@@ -351,6 +351,7 @@ def test_overwrite_without_figures_removes_the_discarded_results_figures(tmp_pat
     from test_sweep_run import _spec
 
     from clutchlab.physics.design import run_sweep
+    from clutchlab.physics.design.figures import FIGURE_FILES
 
     out = tmp_path / "r.parquet"
     figures = tmp_path / "r.parquet.figures"
@@ -361,7 +362,10 @@ def test_overwrite_without_figures_removes_the_discarded_results_figures(tmp_pat
     run_sweep(_spec(n=2), out, workers=1, progress=False, overwrite=True)
     (figures / "notes.txt").write_text("mine")
     run_sweep(_spec(n=2), out, workers=1, progress=False, figures=False, overwrite=True)
-    assert [p.name for p in figures.iterdir()] == ["notes.txt"]
+    assert sorted(p.name for p in figures.iterdir()) == [".clutchlab-owned.json", "notes.txt"]
+    res = run_sweep(_spec(n=2), out, workers=1, progress=False, overwrite=True)
+    assert sorted(p.name for p in res.figures) == sorted(FIGURE_FILES)  # drawn beside notes.txt
+    assert (figures / "notes.txt").read_text() == "mine"
 
 
 def test_run_sweep_takes_a_spec_file_and_refuses_anything_else(tmp_path):

@@ -12,7 +12,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
-from ...data.output import OWNED_NAME, has_ownership_record, owned_files, write_folder_atomic
+from ...data.output import (
+    OWNED_NAME,
+    has_ownership_record,
+    owned_files,
+    ownership_record,
+    write_file_atomic,
+    write_folder_atomic,
+)
 from ...errors import OutputError
 from .evaluate import STATUS_FAILED, STATUS_OK
 from .metrics import METRIC_UNITS, metric_names
@@ -182,8 +189,10 @@ def check_figures_folder(folder: str | Path, what: str = "figures") -> Path:
 def remove_figures(folder: str | Path) -> None:
     """Delete the figures clutchlab wrote in ``folder`` (an overwritten sweep's), nothing else.
 
-    Only the files of the folder's ownership record go, and the record; a user's file stays
-    (and with it the folder). A folder without clutchlab's record is left alone.
+    Only the files of the folder's ownership record go. A folder left empty goes too; one
+    with a user's file stays, still recorded as clutchlab's figures folder (owning no file),
+    so the next figures are written beside that file. A folder without clutchlab's record is
+    left alone.
     """
     folder = Path(folder)
     if folder.is_symlink() or not folder.is_dir() or not has_ownership_record(folder):
@@ -192,9 +201,12 @@ def remove_figures(folder: str | Path) -> None:
         target = folder / name
         if target.is_file() or target.is_symlink():
             target.unlink(missing_ok=True)
+    if any(p.name != OWNED_NAME for p in folder.iterdir()):
+        write_file_atomic(folder / OWNED_NAME, ownership_record([], "figures"), overwrite=True)
+        return
     (folder / OWNED_NAME).unlink(missing_ok=True)
     with contextlib.suppress(OSError):
-        folder.rmdir()  # only when nothing of the user's is left in it
+        folder.rmdir()
 
 
 def write_figures(table: pd.DataFrame, spec: SweepSpec, folder: str | Path) -> tuple[Path, ...]:
