@@ -122,3 +122,26 @@ def test_metric_vs_variable_panels_share_the_x_axis_of_their_column():
     for col in range(2):
         limits = {tuple(np.round(ax.get_xlim(), 9)) for ax in grid[:, col]}
         assert len(limits) == 1, limits
+
+
+def test_ripple_of_a_ramp_through_the_window_in_less_than_a_dither_period_is_nan():
+    """A 10 ms ramp crossed the 400-800 mA window in 4 samples of a 20 ms dither period and
+    reported ripple_rms_bar 0.011 > ripple_pp_bar 0.0098: no ripple can be measured there."""
+    spec = SweepSpec.from_dict(
+        {
+            "scenario": {
+                "ramps": [{"label": "x", "ramp_s": 0.01, "hold_s": 0.01}],
+                "step": {"hold_s": 0.005, "duration_s": 0.005},
+            },
+            "simulation": {"settle_s": 0.0},
+            "sampling": {"method": "grid"},
+            "variables": [{"name": "reg_k", "values": [10.0]}],
+        }
+    )
+    row = DesignEvaluator(spec).evaluate(DesignPoint(0, "p", {"reg_k": 10.0}))
+    assert row["status"] == "ok", row["error"]
+    assert np.isnan(row["ripple_pp_bar"]) and np.isnan(row["ripple_rms_bar"])
+    i, up, _ = _ramp()  # the default keeps every window of at least one sample
+    mean = _regulated(i, 0.0)
+    raw = mean + 0.2 * np.sin(np.arange(i.size) * 2 * np.pi / 20.0)
+    assert np.isnan(m.ripple(i, raw, mean, up, LINE, MetricSettings(), min_samples=10**6)[0])

@@ -104,7 +104,8 @@ class DesignEvaluator:
             )
             if ramp is slowest:
                 on, off = m.latch_currents(i, mean, rising, falling, line, ms.latch_margin_bar)
-                pp, rms = m.ripple(i, raw, mean, rising, line, ms)
+                period = int(np.ceil(fs / dither.freq_Hz))  # samples in one dither period
+                pp, rms = m.ripple(i, raw, mean, rising, line, ms, min_samples=period)
                 out |= {
                     "regulated_gain_bar_per_A": m.regulated_gain(i, mean, rising, line, ms),
                     "latch_on_mA": on,

@@ -196,18 +196,37 @@ def ripple(
     rising: np.ndarray,
     line_bar: float,
     settings: MetricSettings,
+    min_samples: int = 1,
 ) -> tuple[float, float]:
     """Dither ripple: raw minus period-mean pressure on the rising branch in the ripple window.
+
+    Parameters
+    ----------
+    current_mA : ndarray
+        Nominal current per sample (mA).
+    raw_bar, mean_bar : ndarray
+        Pressure and its dither-period mean per sample (bar).
+    rising : ndarray of bool
+        Samples of the up ramp.
+    line_bar : float
+        Line pressure (bar).
+    settings : MetricSettings
+        ``ripple_mA`` window and ``latch_margin_bar``.
+    min_samples : int
+        Fewest unlatched samples in the window: one dither period's worth, or the ripple of a
+        fraction of a period (a ramp crossing the window faster than one period) would be
+        reported as if it were the ripple.
 
     Returns
     -------
     pp_bar, rms_bar : float
-        Peak-to-peak and RMS of the ripple (bar); NaN without unlatched samples.
+        Peak-to-peak and RMS of the ripple (bar); NaN with fewer than ``min_samples``
+        unlatched samples in the window.
     """
     lo, hi = settings.ripple_mA
     sel = rising & (current_mA >= lo) & (current_mA <= hi)
     sel &= mean_bar < line_bar - settings.latch_margin_bar
-    if not sel.any():
+    if not sel.any() or sel.sum() < min_samples:
         return float("nan"), float("nan")
     r = raw_bar[sel] - mean_bar[sel]
     return float(r.max() - r.min()), float(np.sqrt(np.mean(r * r)))
