@@ -214,3 +214,12 @@ def test_cli_dry_run_writes_its_count_to_json_and_scheduler_with_workers_exits_2
         main([*args, "--scheduler", "tcp://127.0.0.1:8786", "--workers", "2"])
     assert exc.value.code == 2
     assert "clutchlab sweep: error: --workers is for local runs" in capsys.readouterr().err
+
+
+def test_load_spec_reads_a_file_saved_with_a_byte_order_mark(tmp_path):
+    """Notepad's "UTF-8" (with BOM, CRLF) gave "not valid TOML: Invalid statement (at line 1,
+    column 1)" for a spec that is valid."""
+    spec = tmp_path / "notepad.toml"
+    text = EXAMPLE.read_text(encoding="utf-8").replace("\n", "\r\n")
+    spec.write_bytes(b"\xef\xbb\xbf" + text.encode("utf-8"))
+    assert load_spec(spec).sampling.n == 1000

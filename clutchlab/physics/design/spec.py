@@ -310,7 +310,7 @@ def load_spec(path: str | Path) -> SweepSpec:
     """
     path = Path(path)
     try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        doc = tomllib.loads(path.read_text(encoding="utf-8-sig"))  # a BOM of Windows editors
     except FileNotFoundError:
         raise SpecError([f"file not found: {path}"], str(path)) from None
     except IsADirectoryError:
