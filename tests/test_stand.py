@@ -296,3 +296,17 @@ def test_cli_stand_refuses_the_current_folder_before_any_work(tmp_path, monkeypa
     assert "is the current folder or holds it; name a folder to create" in capsys.readouterr().err
     assert [p.name for p in here.iterdir()] == ["notes.txt"]
     assert truth_path(".") == tmp_path / "here.truth.json"
+
+
+def test_write_stand_never_replaces_a_users_file_where_the_truth_goes(tmp_path, monkeypatch):
+    """``--overwrite`` replaced any ``<out>.truth.json``, also one clutchlab did not write."""
+    from clutchlab.errors import OutputError
+    from clutchlab.physics.stand import StandConfig, write_stand
+
+    theirs = tmp_path / "bench.truth.json"
+    theirs.write_text('{"calibration": "rig 4, 2026-03-02"}')
+    monkeypatch.setattr("clutchlab.physics.stand.stand.run_stand", _no_simulation)
+    config = StandConfig(settings=(DitherSetting(30.0, "A"),), ramps=(RampProfile("fast", 0.5),))
+    with pytest.raises(OutputError, match="is not a truth file clutchlab wrote"):
+        write_stand(tmp_path / "bench", config, overwrite=True, progress=False)
+    assert theirs.read_text() == '{"calibration": "rig 4, 2026-03-02"}'

@@ -293,6 +293,7 @@ def write_stand(
         raise TypeError(f"write_stand: config must be a StandConfig or PlantConfig, not {config!r}")
     check_output(out, kind="folder", overwrite=overwrite, what="dataset folder")
     check_output(truth_path(out), kind="file", overwrite=overwrite, what="truth file")
+    _check_truth_is_ours(truth_path(out))
     _check_files(out, config, figure)  # before the (minutes long) simulation
     if isinstance(config, PlantConfig):
         run = run_plant(config, progress=progress)
@@ -323,3 +324,22 @@ def _check_files(out: Path, config, figure: bool) -> None:
     if figure:
         files.append("pressure_vs_current.png")
     check_folder_files(out, files, what="dataset folder")
+
+
+def _check_truth_is_ours(path: Path) -> None:
+    """Refuse to replace a ``<out>.truth.json`` that is not a truth file clutchlab wrote.
+
+    ``--overwrite`` replaces the dataset folder's files clutchlab wrote; a file of the user's
+    that happens to stand where the truth goes is not one of them.
+    """
+    if not path.is_file():
+        return
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        doc = None
+    if not (isinstance(doc, dict) and {"effects", "parameters", "seed", "noise"} <= set(doc)):
+        raise OutputError(
+            f"truth file {path}: exists and is not a truth file clutchlab wrote; move it "
+            "away or choose another --out"
+        )
