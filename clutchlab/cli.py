@@ -30,9 +30,18 @@ def usage_error(command: str, message: str) -> NoReturn:
     raise SystemExit(2)
 
 
-def _list_plants() -> int:
+def _list_plants(json_path: str | None = None) -> int:
     from .physics.stand.plants import PLANTS
 
+    if json_path:
+        doc = {
+            "stand": {"summary": "clutchlab's own synthetic stand (the default)"},
+            **{
+                name: {"summary": spec.summary, "laws": spec.laws, "effects": list(spec.effects)}
+                for name, spec in PLANTS.items()
+            },
+        }
+        write_json_output(json_path, json.dumps(doc, indent=2, ensure_ascii=False))
     print("stand                 clutchlab's own synthetic stand (the default)")
     for name, spec in PLANTS.items():
         print(f"{name:21s} {spec.summary}")
@@ -78,7 +87,7 @@ def _cmd_stand(args: argparse.Namespace) -> int:
     from .physics.stand.plants import PlantConfig, get_plant
 
     if args.list_plants:
-        return _list_plants()
+        return _list_plants(args.json)
     if not args.out:
         usage_error("stand", "--out is required (or --list-plants)")
     n = args.settings
@@ -268,7 +277,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--overwrite", action="store_true", help="replace an existing dataset folder")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.add_argument("--json", help="write a summary as JSON here")
+    p.add_argument("--json", help="write a summary (with --list-plants: the list) as JSON here")
     p.set_defaults(func=_cmd_stand)
 
     p = sub.add_parser("effects", help="list the effect library")

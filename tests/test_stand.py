@@ -310,3 +310,14 @@ def test_write_stand_never_replaces_a_users_file_where_the_truth_goes(tmp_path, 
     with pytest.raises(OutputError, match="is not a truth file clutchlab wrote"):
         write_stand(tmp_path / "bench", config, overwrite=True, progress=False)
     assert theirs.read_text() == '{"calibration": "rig 4, 2026-03-02"}'
+
+
+def test_list_plants_writes_the_list_to_json(tmp_path, capsys):
+    """``--list-plants --json X`` printed the list and wrote nothing to X."""
+    from clutchlab.cli import main
+
+    target = tmp_path / "plants.json"
+    assert main(["stand", "--list-plants", "--json", str(target)]) == 0
+    doc = json.loads(target.read_text())
+    assert next(iter(doc)) == "stand" and "quadratic_play" in doc
+    assert "sensor_lag" in doc["quadratic_play"]["effects"] and doc["quadratic_play"]["laws"]
