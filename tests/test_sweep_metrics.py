@@ -145,3 +145,19 @@ def test_ripple_of_a_ramp_through_the_window_in_less_than_a_dither_period_is_nan
     mean = _regulated(i, 0.0)
     raw = mean + 0.2 * np.sin(np.arange(i.size) * 2 * np.pi / 20.0)
     assert np.isnan(m.ripple(i, raw, mean, up, LINE, MetricSettings(), min_samples=10**6)[0])
+
+
+def test_tornado_says_what_its_colours_mean():
+    """Red and blue bars were not explained anywhere in tornado.png."""
+    import pandas as pd
+
+    from clutchlab.physics.design import metric_names, plot_tornado
+
+    spec = SweepSpec.from_dict(
+        {"sampling": {"method": "grid"}, "variables": [{"name": "reg_k", "values": [10, 20, 30]}]}
+    )
+    table = pd.DataFrame({"status": "ok", "reg_k": [10.0, 20.0, 30.0]})
+    for name in metric_names(("fast",)):
+        table[name] = [1.0, 2.0, 2.5]
+    title = plot_tornado(table, spec).get_suptitle()
+    assert "red: the metric rises, blue: it falls" in title

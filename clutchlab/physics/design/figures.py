@@ -97,7 +97,10 @@ def plot_tornado(table: pd.DataFrame, spec: SweepSpec) -> Figure:
         ax.grid(axis="x", alpha=0.3)
     for ax in axes[len(metrics) :]:
         ax.set_visible(False)
-    fig.suptitle(f"{spec.name}: sensitivity (linear effect over each variable's range)")
+    fig.suptitle(
+        f"{spec.name}: sensitivity (linear effect over each variable's range; "
+        "red: the metric rises, blue: it falls)"
+    )
     return fig
 
 
