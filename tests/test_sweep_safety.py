@@ -379,3 +379,31 @@ def test_run_sweep_takes_a_spec_file_and_refuses_anything_else(tmp_path):
     with pytest.raises(TypeError, match="spec must be a SweepSpec or a spec file"):
         run_sweep({"name": "x"}, tmp_path / "s.parquet", workers=1)
     assert not (tmp_path / "s.parquet.parts").exists()
+
+
+def test_new_points_that_succeed_do_not_exit_1_for_an_earlier_runs_failures(
+    tmp_path, monkeypatch, capsys
+):
+    """The exit status compared all failed points (earlier calls' too) with the points of
+    this call: 3 old failures + 1 new point that ran fine printed "every point failed (3)"
+    and exited 1."""
+    from clutchlab.cli import main
+    from clutchlab.physics.design.evaluate import DesignEvaluator
+
+    def grid(values):
+        spec = _write_toml(tmp_path / "grid.toml", 2, name="grid")
+        text = spec.read_text().replace('method = "lhs"\nn = 2\nseed = 5', 'method = "grid"')
+        text = text.split("[[variables]]")[0] + (
+            f'[[variables]]\nname = "reg_k"\nvalues = {values}\n'
+        )
+        spec.write_text(text)
+        return str(spec)
+
+    args = ["--out", str(tmp_path / "r.parquet"), "--quiet", "--workers", "1", "--no-figures"]
+    with monkeypatch.context() as m:
+        m.setattr(DesignEvaluator, "_metrics", lambda self, values: 1 / 0)
+        assert main(["sweep", grid([10.0, 12.0, 14.0]), *args]) == 1
+    assert "every point failed (3)" in capsys.readouterr().err
+    assert main(["sweep", grid([10.0, 12.0, 14.0, 16.0]), *args]) == 0
+    out = capsys.readouterr()
+    assert "1 run, 3 already done; 3 failed" in out.out and "every point failed" not in out.err

@@ -89,6 +89,8 @@ class SweepResult:
         Worker processes (local) or Dask workers at the start.
     figures : tuple of Path
         Figure files written.
+    n_failed_run : int
+        Points evaluated by this call that failed (``n_failed`` counts earlier calls' too).
     """
 
     spec: SweepSpec
@@ -101,6 +103,7 @@ class SweepResult:
     backend: str
     workers: int
     figures: tuple[Path, ...] = ()
+    n_failed_run: int = 0
 
     @property
     def n_skipped(self) -> int:
@@ -130,6 +133,7 @@ class SweepResult:
             "n_skipped": self.n_skipped,
             "n_ok": int((self.table["status"] == STATUS_OK).sum()) if len(self.table) else 0,
             "n_failed": self.n_failed,
+            "n_failed_run": self.n_failed_run,
             "wall_s": self.wall_s,
             "points_per_s": self.points_per_s,
             "backend": self.backend,
@@ -487,5 +491,6 @@ def _run_locked(
                 stacklevel=3,
             )
     return SweepResult(
-        spec, table, store.out, len(points), len(todo), n_failed, wall, backend, n_workers, written
-    )
+        spec, table, store.out, len(points), len(todo), n_failed, wall, backend, n_workers,
+        written, n_failed_now,
+    )  # fmt: skip
