@@ -223,3 +223,24 @@ def test_load_spec_reads_a_file_saved_with_a_byte_order_mark(tmp_path):
     text = EXAMPLE.read_text(encoding="utf-8").replace("\n", "\r\n")
     spec.write_bytes(b"\xef\xbb\xbf" + text.encode("utf-8"))
     assert load_spec(spec).sampling.n == 1000
+
+
+def test_run_sweep_checks_a_spec_changed_in_code_before_any_work(tmp_path):
+    """The dataclasses check nothing: ``dataclasses.replace`` with a negative line pressure
+    was simulated, and an unknown dither shape failed every point one by one."""
+    import dataclasses
+
+    from clutchlab.physics.design import run_sweep
+    from clutchlab.physics.design.spec_parse import parse_spec, spec_to_doc
+
+    spec = load_spec(EXAMPLE)
+    assert parse_spec(spec_to_doc(spec), spec.source) == spec  # the round trip is exact
+    bad = dataclasses.replace(
+        spec,
+        scenario=dataclasses.replace(spec.scenario, line_pressure_bar=-5.0, dither_shape="Z"),
+    )
+    with pytest.raises(SpecError) as err:
+        run_sweep(bad, tmp_path / "r.parquet", workers=1, progress=False)
+    assert "line_pressure_bar -5 bar not in (0, 60]" in str(err.value)
+    assert "unknown shape 'Z'" in str(err.value)
+    assert list(tmp_path.iterdir()) == []

@@ -239,6 +239,9 @@ def run_sweep(
         spec = load_spec(spec)
     if not isinstance(spec, SweepSpec):
         raise TypeError(f"run_sweep: spec must be a SweepSpec or a spec file, not {spec!r}")
+    from .spec_parse import check_spec
+
+    check_spec(spec)  # a spec built or changed in code is checked as a file is
     _check_run_arguments(workers, batch_size, flush_s)
     t0 = time.perf_counter()
     out = check_sweep_output(out, overwrite, figures=figures)

@@ -30,7 +30,7 @@ from .spec import (
     _model,
 )
 
-__all__ = ["parse_spec"]
+__all__ = ["check_spec", "parse_spec", "spec_to_doc"]
 
 _TOP = {"name", "model", "scenario", "simulation", "metrics", "sampling", "variables"}
 
@@ -441,3 +441,61 @@ def _check_dither(
                 f"{scenario.dither_shape} (peak {peak:g} mA) exceeds the {MAX_DITHER_MA:g} mA "
                 f"dither range; use high ≤ {MAX_DITHER_MA / peak:.4g}"
             )
+
+
+def spec_to_doc(spec: SweepSpec) -> dict[str, Any]:
+    """The TOML document (as parsed) that :func:`parse_spec` turns into ``spec``."""
+    sc = spec.scenario
+    scenario: dict[str, Any] = {
+        "ramps": [asdict(r) for r in sc.ramps],
+        "dither": {"freq_Hz": sc.dither_freq_Hz, "shape": sc.dither_shape},
+        "line_pressure_bar": sc.line_pressure_bar,
+        "prime_pressure_bar": sc.prime_pressure_bar,
+        "oil_temp_C": sc.oil_temp_C,
+    }
+    scenario["dither"]["waveform"] = sc.dither_waveform
+    scenario["step"] = asdict(sc.step) if sc.step is not None else False
+    metrics = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(spec.metrics).items()}
+    sampling: dict[str, Any] = {"method": spec.sampling.method, "seed": spec.sampling.seed}
+    if spec.sampling.method == "lhs":
+        sampling["n"] = spec.sampling.n
+    variables = []
+    for v in spec.variables:
+        item: dict[str, Any] = {"name": v.name, "scale": v.scale}
+        if v.values:
+            item["values"] = list(v.values)
+        else:
+            item |= {"low": v.low, "high": v.high}
+            if spec.sampling.method == "grid":
+                item["levels"] = v.levels
+        variables.append(item)
+    return {
+        "name": spec.name,
+        "model": {
+            "effects": list(spec.model.effects),
+            "baseline": spec.model.baseline,
+            "parameters": dict(spec.model.parameters),
+        },
+        "scenario": scenario,
+        "simulation": asdict(spec.simulation),
+        "metrics": metrics,
+        "sampling": sampling,
+        "variables": variables,
+    }
+
+
+def check_spec(spec: SweepSpec) -> None:
+    """Validate a spec built in code as :func:`load_spec` validates a file.
+
+    The dataclasses check nothing themselves; :func:`~.runner.run_sweep` calls this so that a
+    ``dataclasses.replace(spec, ...)`` with a negative line pressure or an unknown dither
+    shape is refused with every problem before any work, not simulated point by point.
+
+    Raises
+    ------
+    SpecError
+        Listing every problem found.
+    """
+    if not isinstance(spec, SweepSpec):
+        raise TypeError(f"expected a SweepSpec, not {spec!r}")
+    parse_spec(spec_to_doc(spec), spec.source)
