@@ -110,7 +110,7 @@ def register(sub) -> None:
         "--workers",
         type=positive_int,
         default=None,
-        help="local worker processes, ≥ 1 (default: CPU count; 1 = in this process)",
+        help="local worker processes, ≥ 1, at most one per batch (default: usable CPUs; 1 = here)",
     )
     p.add_argument(
         "--overwrite",

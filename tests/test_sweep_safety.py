@@ -407,3 +407,18 @@ def test_new_points_that_succeed_do_not_exit_1_for_an_earlier_runs_failures(
     assert main(["sweep", grid([10.0, 12.0, 14.0, 16.0]), *args]) == 0
     out = capsys.readouterr()
     assert "1 run, 3 already done; 3 failed" in out.out and "every point failed" not in out.err
+
+
+def test_workers_reported_are_the_workers_run(tmp_path, monkeypatch):
+    """``--workers 8`` on a 2-point sweep reported "on 8 local workers"; the default counted
+    every CPU of the machine, not those this process may use."""
+    from test_sweep_run import _spec
+
+    from clutchlab.physics.design import run_sweep, runner
+
+    res = run_sweep(_spec(n=2), tmp_path / "a.parquet", workers=8, progress=False, figures=False)
+    assert res.workers == 2 and res.summary()["workers"] == 2
+    monkeypatch.setattr(runner.os, "sched_getaffinity", lambda pid: {0}, raising=False)
+    monkeypatch.setattr(runner.os, "cpu_count", lambda: 64)
+    res = run_sweep(_spec(n=2), tmp_path / "b.parquet", progress=False, figures=False)
+    assert res.workers == 1

@@ -86,7 +86,7 @@ class SweepResult:
     backend : str
         ``local`` or ``dask``.
     workers : int
-        Worker processes (local) or Dask workers at the start.
+        Worker processes started (local: at most one per batch) or Dask workers at the start.
     figures : tuple of Path
         Figure files written.
     n_failed_run : int
@@ -195,8 +195,8 @@ def run_sweep(
         Consolidated results file (Parquet); part files go to ``<out>.parts/``, figures to
         ``<out>.figures/``.
     workers : int, optional
-        Local worker processes, ≥ 1 (default: CPU count; 1: in this process); ignored with
-        ``scheduler``.
+        Local worker processes, ≥ 1 (default: the CPUs this process may use; 1: in this
+        process), at most one per batch of points; ignored with ``scheduler``.
     scheduler : str or distributed.Client, optional
         Run on this Dask cluster (address such as ``tcp://10.0.0.5:8786``, or a client).
     progress : bool
@@ -309,6 +309,14 @@ def _connect(scheduler: Any) -> tuple[Any, bool]:
         raise SchedulerError(
             f"--scheduler {scheduler}: cannot connect to a Dask scheduler ({reason})"
         ) from None
+
+
+def _usable_cpus() -> int:
+    """CPUs this process may run on (its affinity mask; a container's limit), at least 1."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # no affinity on this platform
+        return max(1, os.cpu_count() or 1)
 
 
 def _check_run_arguments(workers: Any, batch_size: Any, flush_s: Any) -> None:
@@ -454,8 +462,10 @@ def _run_locked(
     if client is not None:
         backend, n_workers = "dask", len(client.nthreads())
     else:
-        backend, n_workers = "local", max(1, workers or os.cpu_count() or 1)
+        backend, n_workers = "local", max(1, workers or _usable_cpus())
     batches = _batches(todo, n_workers, batch_size)
+    if client is None:  # no more processes than batches: the count reported is the count run
+        n_workers = max(1, min(n_workers, len(batches)))
     stream = (
         run_dask(spec, batches, client)
         if client is not None
