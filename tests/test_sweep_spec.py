@@ -244,3 +244,15 @@ def test_run_sweep_checks_a_spec_changed_in_code_before_any_work(tmp_path):
     assert "line_pressure_bar -5 bar not in (0, 60]" in str(err.value)
     assert "unknown shape 'Z'" in str(err.value)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_scenario_dither_frequency_is_not_checked_when_a_variable_sets_it():
+    """With dither_freq_Hz a design variable, [scenario.dither] freq_Hz is used by no point,
+    yet 400 Hz there was refused as "not resolved at 1000 Hz sampling"."""
+    spec = _spec(
+        scenario={"ramps": ["fast"], "dither": {"freq_Hz": 400.0}},
+        variables=[{"name": "dither_freq_Hz", "low": 30.0, "high": 70.0}],
+    )
+    assert spec.variable_names == ("dither_freq_Hz",)
+    with pytest.raises(SpecError, match="up to 300 Hz is not resolved"):
+        _spec(variables=[{"name": "dither_freq_Hz", "low": 30.0, "high": 300.0}])

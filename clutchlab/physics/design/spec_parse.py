@@ -422,8 +422,8 @@ def _check_dither(
     problems: list[str],
 ) -> None:
     """The dither must be resolved: at least 4 samples per period."""
-    freqs = [scenario.dither_freq_Hz]
-    freqs += [v.high for v in variables if v.name == "dither_freq_Hz"]
+    swept = [v.high for v in variables if v.name == "dither_freq_Hz"]
+    freqs = swept or [scenario.dither_freq_Hz]  # the variable replaces freq_Hz in every point
     f_max = simulation.sample_rate_Hz / 4.0
     if max(freqs) > f_max:
         problems.append(
