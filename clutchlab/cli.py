@@ -93,7 +93,10 @@ def _cmd_stand(args: argparse.Namespace) -> int:
     n = args.settings
     if not 1 <= n <= len(DEFAULT_SETTINGS):
         usage_error("stand", f"--settings must be 1..{len(DEFAULT_SETTINGS)}")
-    # Spread the chosen settings over frequencies and shapes (3 → 30/A, 50/B, 70/C).
+    # Every (9 // n)-th setting in frequency-major order: 3 → 30/A, 50/A, 70/A (all three
+    # frequencies, shape A); 5 to 8 → the first n. Kept so, though it spreads the shapes
+    # less than it could: the recorded zoo studies (studies/discover_zoo.py, --settings 3)
+    # were drawn from exactly these datasets.
     step = max(len(DEFAULT_SETTINGS) // n, 1)
     settings = DEFAULT_SETTINGS[::step][:n] if n < len(DEFAULT_SETTINGS) else DEFAULT_SETTINGS
     ramps = _ramps(args.ramps)
@@ -267,7 +270,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--settings",
         type=int,
         default=9,
-        help="number of dither settings (1-9; default 9 = 3 frequencies × 3 shapes)",
+        help="number of dither settings (1-9; default 9 = 3 frequencies × 3 shapes); fewer "
+        "take every (9 // N)-th in frequency-major order: 3 = 30, 50, 70 Hz with shape A, "
+        "5 to 8 = the first N",
     )
     p.add_argument(
         "--ramps",

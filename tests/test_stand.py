@@ -321,3 +321,33 @@ def test_list_plants_writes_the_list_to_json(tmp_path, capsys):
     doc = json.loads(target.read_text())
     assert next(iter(doc)) == "stand" and "quadratic_play" in doc
     assert "sensor_lag" in doc["quadratic_play"]["effects"] and doc["quadratic_play"]["laws"]
+
+
+@pytest.mark.parametrize(
+    ("n", "expected"),
+    [
+        (1, ["30/A"]),
+        (2, ["30/A", "50/B"]),
+        (3, ["30/A", "50/A", "70/A"]),
+        (4, ["30/A", "30/C", "50/B", "70/A"]),
+        (5, ["30/A", "30/B", "30/C", "50/A", "50/B"]),
+    ],
+)
+def test_cli_stand_settings_are_the_documented_ones(tmp_path, monkeypatch, n, expected):
+    """What ``--settings N`` draws is what its help says, and stays so: the recorded zoo
+    studies' datasets (``--settings 3``) must be drawn again the same way. (The code's
+    comment promised 30/A, 50/B, 70/C for 3, which it never gave.)"""
+    import clutchlab.physics.stand as stand
+    from clutchlab.cli import build_parser, main
+
+    seen = {}
+
+    def fake_write_stand(out, config, **kwargs):
+        seen["settings"] = config.settings
+        raise KeyboardInterrupt  # stop before any work; main() returns 130
+
+    monkeypatch.setattr(stand, "write_stand", fake_write_stand)
+    assert main(["stand", "--out", str(tmp_path / "ds"), "--settings", str(n)]) == 130
+    assert [f"{s.freq_Hz:.0f}/{s.shape}" for s in seen["settings"]] == expected
+    helps = [a.help for a in build_parser()._subparsers._group_actions[0].choices["stand"]._actions]
+    assert any("3 = 30, 50, 70 Hz with shape A" in (h or "") for h in helps)
