@@ -110,6 +110,18 @@ def test_convert_onto_itself_is_refused_and_keeps_the_source(small_ds, tmp_path)
     assert snapshot(src) == before
 
 
+def test_convert_into_the_current_folder_is_refused_before_reading(small_ds, tmp_path, monkeypatch):
+    """``clutchlab data convert SRC . --overwrite`` read the whole dataset, then failed with
+    "Device or resource busy" (a folder is written by swapping it whole)."""
+    here = tmp_path / "here"
+    here.mkdir()
+    monkeypatch.chdir(here)
+    for dst in (".", str(tmp_path)):
+        with pytest.raises(OutputError, match="current folder"):
+            convert(small_ds, dst, overwrite=True)
+    assert list(here.iterdir()) == []
+
+
 def test_user_file_in_the_way_is_refused_not_overwritten(small_ds, tmp_path):
     dst = tmp_path / "dst"
     dst.mkdir()

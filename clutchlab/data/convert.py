@@ -91,6 +91,7 @@ def convert(
             f"{dst}: the destination overlaps the source dataset folder {src}; convert into "
             "a separate folder (nothing was written)"
         )
-    check_output(dst, kind="folder", overwrite=overwrite, what="destination")
+    # the folder is swapped in whole: not the current folder (nor one holding it)
+    check_output(dst, kind="folder", overwrite=overwrite, what="destination", whole=True)
     dataset = load_dataset(src, channel_map, options=options)
     return save_dataset(dataset, dst, format or "csv", overwrite=overwrite)
