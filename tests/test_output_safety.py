@@ -113,9 +113,15 @@ def test_convert_onto_itself_is_refused_and_keeps_the_source(small_ds, tmp_path)
 def test_convert_into_the_current_folder_is_refused_before_reading(small_ds, tmp_path, monkeypatch):
     """``clutchlab data convert SRC . --overwrite`` read the whole dataset, then failed with
     "Device or resource busy" (a folder is written by swapping it whole)."""
+    convert_module = sys.modules[convert.__module__]
+
+    def no_reading(*args, **kwargs):
+        raise AssertionError("the dataset was read before the destination was checked")
+
     here = tmp_path / "here"
     here.mkdir()
     monkeypatch.chdir(here)
+    monkeypatch.setattr(convert_module, "load_dataset", no_reading)
     for dst in (".", str(tmp_path)):
         with pytest.raises(OutputError, match="current folder"):
             convert(small_ds, dst, overwrite=True)
