@@ -355,15 +355,16 @@ def check_outputs(args: argparse.Namespace) -> None:
     out = getattr(args, "out", None)
     if out and getattr(args, "json", None):
         target, out_path = Path(os.path.abspath(args.json)), Path(os.path.abspath(out))
-        clash = target == out_path or (
+        if target == out_path:  # one wording for every command (stand and sweep use it too)
+            check_json_apart(args.json, [Path(out)])
+        if (
             target.parent == out_path
             and target.name in getattr(args, "report_files", ())
             and target.suffix != ".json"
-        )
-        if clash:
+        ):
             raise OutputError(
-                f"--json {args.json}: is what --out {out} writes; the one would be written "
-                "over the other; choose another name"
+                f"--json {args.json}: is a file of {out}, which this command writes (--out); "
+                "write the summary elsewhere"
             )
     folder = getattr(args, "report_out", False) or getattr(args, "folder_out", False)
     if out == "" and folder:

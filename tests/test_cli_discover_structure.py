@@ -297,7 +297,7 @@ def test_json_and_out_naming_the_same_file_are_refused_before_the_work(
 ):
     argv = [command, str(dataset_dir), "--out", str(tmp_path / out)]
     code = main([*argv, "--json", str(tmp_path / json_name), "--quiet"])
-    assert code == 2 and "the one would be written over the other" in capsys.readouterr().err
+    assert code == 2 and "which this command writes (--out)" in capsys.readouterr().err
     assert not (tmp_path / out).exists()
 
 
