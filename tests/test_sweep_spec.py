@@ -246,6 +246,25 @@ def test_run_sweep_checks_a_spec_changed_in_code_before_any_work(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_design_evaluator_and_evaluate_batch_check_a_spec_changed_in_code():
+    """Called without run_sweep, the evaluator simulated a negative line pressure."""
+    import dataclasses
+
+    from clutchlab.physics.design import STATUS_FAILED, DesignEvaluator, evaluate_batch
+    from clutchlab.physics.design.sampling import DesignPoint
+
+    spec = load_spec(EXAMPLE)
+    bad = dataclasses.replace(
+        spec, scenario=dataclasses.replace(spec.scenario, line_pressure_bar=-5.0)
+    )
+    with pytest.raises(SpecError, match="line_pressure_bar -5 bar not in"):
+        DesignEvaluator(bad)
+    values = {v.name: v.values[0] if v.values else v.low for v in spec.variables}
+    point = DesignPoint(index=0, point_id="p0", values=values)
+    (row,) = evaluate_batch(bad, [point])
+    assert row["status"] == STATUS_FAILED and "line_pressure_bar -5 bar not in" in row["error"]
+
+
 def test_scenario_dither_frequency_is_not_checked_when_a_variable_sets_it():
     """With dither_freq_Hz a design variable, [scenario.dither] freq_Hz is used by no point,
     yet 400 Hz there was refused as "not resolved at 1000 Hz sampling"."""

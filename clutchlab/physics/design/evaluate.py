@@ -33,10 +33,19 @@ class DesignEvaluator:
     Parameters
     ----------
     spec : SweepSpec
-        The validated sweep spec.
+        The sweep spec; validated here as a spec file is (a spec built or changed in code
+        is checked too).
+
+    Raises
+    ------
+    SpecError
+        Listing every problem of ``spec``, before any simulation.
     """
 
     def __init__(self, spec: SweepSpec) -> None:
+        from .spec_parse import check_spec
+
+        check_spec(spec)
         self.spec = spec
         self.model = spec.model.build()
         self.base = spec.model.base_params(self.model)
