@@ -134,9 +134,9 @@ def check_output(
         raise OutputError(f"{what} {path}: exists and is not a folder")
     elif whole and _holds_cwd(path):
         raise OutputError(
-            f"{what} {path or '.'}: is the current folder or holds it; a folder is written by "
-            "swapping it whole, which cannot be done to the folder you are in; choose a "
-            "subfolder (e.g. report)"
+            f"{what} {path or '.'}: is the current folder or holds it; name a folder to "
+            "create (a folder is written by swapping it whole, which cannot be done to the "
+            "folder you are in)"
         )
     elif path.is_dir() and not overwrite and any(path.iterdir()):
         raise OutputError(

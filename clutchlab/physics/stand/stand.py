@@ -98,16 +98,16 @@ class StandConfig:
         ROS2 steps per sample (finer than the fit model's default).
     overrides : dict
         Truth parameter values replacing the as-built ones (engineering units).
+    pressure_noise_bar, current_noise_mA : float
+        Standard deviation of sensor noise.
+    pressure_lsb_bar, current_lsb_mA : float
+        ADC quantization steps.
 
     Raises
     ------
     ModelError
         Listing every problem of the settings, ramps, seed, sample rate, substeps and noise
         (:func:`~clutchlab.physics.stand.environment.bench_problems`).
-    pressure_noise_bar, current_noise_mA : float
-        Standard deviation of sensor noise.
-    pressure_lsb_bar, current_lsb_mA : float
-        ADC quantization steps.
     """
 
     effects: tuple[str, ...] = ()
@@ -239,22 +239,6 @@ def truth_path(out: str | Path) -> Path:
     return out.with_name(out.name + ".truth.json")
 
 
-def _check_not_current(out: Path) -> None:
-    """Refuse the current folder or a folder holding it as a dataset folder.
-
-    The folder is replaced as a whole by an atomic swap: the shell (and this process) would
-    be left in the old, deleted folder, and the swap of a mount point fails only after the
-    simulation.
-    """
-    here = Path.cwd().resolve()
-    target = out.resolve()
-    if target == here or target in here.parents:
-        raise OutputError(
-            f"dataset folder {out}: is the current folder or holds it; name a folder to "
-            "create (e.g. --out stand)"
-        )
-
-
 def write_stand(
     out: str | Path,
     config=None,
@@ -287,11 +271,11 @@ def write_stand(
     from .plants import PlantConfig, run_plant
 
     out = Path(out)
-    _check_not_current(out)
     config = StandConfig() if config is None else config
     if not isinstance(config, StandConfig | PlantConfig):
         raise TypeError(f"write_stand: config must be a StandConfig or PlantConfig, not {config!r}")
-    check_output(out, kind="folder", overwrite=overwrite, what="dataset folder")
+    # the folder is swapped in whole: not the current folder or one holding it
+    check_output(out, kind="folder", overwrite=overwrite, what="dataset folder", whole=True)
     check_output(truth_path(out), kind="file", overwrite=overwrite, what="truth file")
     _check_truth_is_ours(truth_path(out))
     _check_files(out, config, figure)  # before the (minutes long) simulation
