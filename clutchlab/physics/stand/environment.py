@@ -230,6 +230,8 @@ def experiment_meta(ramp: RampProfile, setting: DitherSetting) -> dict:
 
 
 def _finite(v) -> bool:
+    """A finite int or float, not a bool. (``physics.settings.is_finite_real`` says the same,
+    but the zoo imports nothing of the fit model's modules: its independence rests on it.)"""
     return not isinstance(v, bool) and isinstance(v, int | float) and math.isfinite(v)
 
 
