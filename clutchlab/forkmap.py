@@ -16,7 +16,7 @@ import os
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
-__all__ = ["default_workers", "fork_imap", "fork_map"]
+__all__ = ["default_workers", "fork_imap", "fork_map", "usable_cpus"]
 
 #: The job of the running :func:`fork_imap`, inherited by its forked workers, and the
 #: process that runs the map.
@@ -24,10 +24,18 @@ _JOB: Callable[[int], Any] | None = None
 _OWNER: int | None = None
 
 
+def usable_cpus() -> int:
+    """CPUs this process may run on (its affinity mask; a container's limit), at least 1."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # no affinity on this platform
+        return max(1, os.cpu_count() or 1)
+
+
 def default_workers() -> int:
-    """Workers of the parallel sections that have no setting of their own: the machine's
-    cores, at most 2 (the budgets' machine; more rarely pays for the memory)."""
-    return min(2, os.cpu_count() or 1)
+    """Workers of the parallel sections that have no setting of their own: the CPUs this
+    process may use, at most 2 (the budgets' machine; more rarely pays for the memory)."""
+    return min(2, usable_cpus())
 
 
 def _run(i: int) -> Any:

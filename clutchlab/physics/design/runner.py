@@ -17,6 +17,7 @@ from tqdm.auto import tqdm
 
 from ...data.output import check_output
 from ...errors import ClutchlabError, OutputError
+from ...forkmap import usable_cpus
 from .evaluate import STATUS_FAILED, STATUS_OK
 from .executors import run_dask, run_local
 from .metrics import metric_names
@@ -311,14 +312,6 @@ def _connect(scheduler: Any) -> tuple[Any, bool]:
         ) from None
 
 
-def _usable_cpus() -> int:
-    """CPUs this process may run on (its affinity mask; a container's limit), at least 1."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):  # no affinity on this platform
-        return max(1, os.cpu_count() or 1)
-
-
 def _check_run_arguments(workers: Any, batch_size: Any, flush_s: Any) -> None:
     """Range checks of :func:`run_sweep`'s settings, every problem at once (``ValueError``)."""
     problems = []
@@ -462,7 +455,7 @@ def _run_locked(
     if client is not None:
         backend, n_workers = "dask", len(client.nthreads())
     else:
-        backend, n_workers = "local", max(1, workers or _usable_cpus())
+        backend, n_workers = "local", max(1, workers or usable_cpus())
     batches = _batches(todo, n_workers, batch_size)
     if client is None:  # no more processes than batches: the count reported is the count run
         n_workers = max(1, min(n_workers, len(batches)))
