@@ -12,6 +12,7 @@ from ...data import SIGNALS
 from ...errors import ModelError
 from ..effects import effect_names
 from ..model import CircuitModel
+from ..settings import is_finite_real
 from ..stand.scenarios import DITHER_SHAPES, RAMPS, RampProfile, dither_amplitude
 from .limits import SweepLimits
 from .metrics import MetricSettings
@@ -49,14 +50,9 @@ def _table(doc: dict, key: str, allowed: set[str], problems: list[str]) -> dict:
 MAX_CURRENT_MA = 1100.0
 
 
-def _is_finite(v: Any) -> bool:
-    """Whether ``v`` is a finite int or float (not a bool, a string or a list)."""
-    return not isinstance(v, bool) and isinstance(v, int | float) and math.isfinite(v)
-
-
 def _number(tab: dict, key: str, where: str, default: float, problems: list[str]) -> float:
     v = tab.get(key, default)
-    if not _is_finite(v):
+    if not is_finite_real(v):
         problems.append(f"{where} {key} must be a finite number, got {v!r}")
         return default
     return float(v)
@@ -288,7 +284,7 @@ def _parse_metrics(doc: dict, problems: list[str]) -> MetricSettings:
             continue
         v = tab[k]
         if isinstance(default, tuple):
-            numbers = isinstance(v, list) and len(v) == 2 and all(_is_finite(x) for x in v)
+            numbers = isinstance(v, list) and len(v) == 2 and all(is_finite_real(x) for x in v)
             if not (numbers and 0 <= v[0] < v[1] <= MAX_CURRENT_MA):
                 problems.append(
                     f"[metrics] {k} must be [low, high] with 0 ≤ low < high ≤ "
