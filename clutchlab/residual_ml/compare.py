@@ -201,7 +201,9 @@ def compare_classifiers(
     """
     traces = list(traces)
     if len(traces) < 2:
-        raise DataError(f"leave-one-experiment-out needs at least 2 experiments, got {len(traces)}")
+        raise DataError(
+            f"leave-one-experiment-out needs at least 2 training experiments, got {len(traces)}"
+        )
     names = list(names or CLASSIFIERS)
     builder = FeatureBuilder(tuple(features))
     Xs, ys = [], []
