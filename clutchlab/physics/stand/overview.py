@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from ...data import Dataset, dither_period_mean, dither_period_samples
+from .scenarios import DitherSetting
 
 __all__ = ["plot_pressure_vs_current"]
 
@@ -24,7 +25,7 @@ def _setting_tag(trace) -> str:
     """The dither tag (``50Hz_B``) of a stand experiment: from its metadata, else its name."""
     freq, shape = trace.meta.get("dither_freq_Hz"), trace.meta.get("dither_shape")
     if isinstance(freq, int | float) and isinstance(shape, str):
-        return f"{freq:g}Hz_{shape}"
+        return DitherSetting(float(freq), shape).tag
     return "_".join(trace.name.rsplit("_", 2)[1:])  # <ramp label>_<freq>Hz_<shape>
 
 
