@@ -81,6 +81,7 @@ def _cmd_discover(args: argparse.Namespace) -> int:
         max_effects=args.max_effects,
         alpha=args.alpha,
         alternatives=not args.no_alternatives,
+        time_limit_s=args.budget,
         progress=not args.quiet,
     )
     baseline = None
@@ -136,6 +137,14 @@ def register(sub) -> None:
     p.add_argument("--max-iter", type=int, default=50, help="solver iterations per fit (50)")
     p.add_argument(
         "--time-limit", type=positive_float, default=900.0, help="wall limit per fit (s)"
+    )
+    p.add_argument(
+        "--budget",
+        type=positive_float,
+        metavar="S",
+        help="wall-time budget of the whole discovery (s; default none): no refit starts "
+        "after it, a refit it stops is not judged, and the discovery ends with the model it "
+        "had and a warning, claiming nothing it did not confirm in full",
     )
     p.add_argument(
         "--substeps",

@@ -265,10 +265,10 @@ def test_a_candidate_that_fails_to_score_is_reported_not_raised(tiny, monkeypatc
 def test_a_candidate_whose_refit_fails_is_not_added(tiny, monkeypatch):
     real = loop.run_fit
 
-    def failing(model, train, settings, free, start, fit=None):
+    def failing(model, train, settings, free, start, fit=None, **kw):
         if "supply_droop" in model.effect_names:
             raise FitError("the model diverges at the start parameters")
-        return real(model, train, settings, free, start, fit)
+        return real(model, train, settings, free, start, fit, **kw)
 
     monkeypatch.setattr(loop, "run_fit", failing)
     res = discover(tiny, settings=_settings(candidates=("supply_droop",), max_effects=1))

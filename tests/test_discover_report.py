@@ -34,6 +34,7 @@ def _iteration(decision, candidates, effect=None, index=0):
         before=_state(),
         after=_state(),
         delta_bic=None,
+        time_limited=False,
     )
 
 

@@ -9,7 +9,14 @@
 - :func:`run_demo` is ``clutchlab demo``: the embedded stand end to end.
 """
 
-from .demo import DEMO_FIT_TIME_LIMIT_S, DemoResult, run_demo, stand_data
+from .demo import (
+    DEMO_BUDGET_S,
+    DEMO_FIT_TIME_LIMIT_S,
+    DEMO_RESERVE_S,
+    DemoResult,
+    run_demo,
+    stand_data,
+)
 from .evaluate import SCHEMA, Evaluation, evaluate, resolve_variants, versions
 from .figures import (
     VARIANT_COLORS,
@@ -85,7 +92,9 @@ from .variants import (
 
 __all__ = [
     "ACCURACY_KEYS",
+    "DEMO_BUDGET_S",
     "DEMO_FIT_TIME_LIMIT_S",
+    "DEMO_RESERVE_S",
     "DESIGN_VARIANTS",
     "FALLING",
     "METRIC_KEYS",

@@ -218,7 +218,8 @@ def fit_alternative(
     head = {"law": alt.law, "k": alt.k}
     try:
         start = _start(alt, current.fit.values, traces, settings)
-        res_fit = run_fit(alt.model, traces, settings, alt.free, start, fit=fit)
+        what = f"the refit of the flexible alternative {alt.law}"
+        res_fit = run_fit(alt.model, traces, settings, alt.free, start, fit=fit, what=what)
         res = residual_at(res_fit.model(), res_fit.params(), res_fit.free, traces, settings)
     except _FAILURES as exc:
         return head | {"status": f"failed: {exc}", "wall_s": time.perf_counter() - t0}

@@ -25,18 +25,20 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from dataclasses import asdict
 
 import numpy as np
 from tqdm.auto import tqdm
 
 from ...data import Dataset, Trace, dither_period_mean, dither_period_samples, pressure_metrics
-from ...errors import ClutchlabError, FitError
+from ...errors import ClutchlabError, FitError, FitWarning
 from ...physics import CircuitModel, simulate
 from ...physics.effects import EFFECTS
 from ...physics.fit import FitResult, at_fit_rate, resolve_free
 from ...physics.parameters import ParameterSet
 from .alternatives import alternatives_for, beats, broke_down, fit_alternative
+from .deadline import DiscoveryTimeLimit, check_budget, discovery_budget
 from .diagnostics import diagnose
 from .refit import by_criterion, candidate_free, judge, refit_start, residual_at, run_fit
 from .residuals import ResidualSet, loeo_evidence
@@ -133,7 +135,10 @@ def _reference(
     t0 = time.perf_counter()
     _say(settings, "continuing the current fit (not converged) as the reference")
     try:
-        fit = run_fit(current.model, train, settings, tuple(current.fit.free), current.params)
+        what = "the current fit's continuation (the reference)"
+        fit = run_fit(
+            current.model, train, settings, tuple(current.fit.free), current.params, what=what
+        )
         again = residual_at(fit.model(), fit.params(), tuple(fit.free), train, settings)
     except (ClutchlabError, ArithmeticError, ValueError) as exc:
         kind = f"current fit (its continuation failed: {exc})"
@@ -174,10 +179,13 @@ def _confirm(
         if screened is None:
             keep = current.residual.keep
             start = refit_start(cand, current.fit.values, score, train, settings, keep)
-            fit = run_fit(cand, train, settings, free, start)
+            fit = run_fit(cand, train, settings, free, start, what=f"the refit with {score.effect}")
         else:
             start = cand.params(**screened.values)
-            fit = run_fit(cand, train, settings, free, start, confirm_settings(settings.fit))
+            what = f"the confirmation of {score.effect} on every training experiment"
+            fit = run_fit(
+                cand, train, settings, free, start, confirm_settings(settings.fit), what=what
+            )
         state = _state(fit, train, test, settings, jacobian=True)
     except (ClutchlabError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
         score.refit = {"status": f"failed: {exc}", "wall_s": time.perf_counter() - t0, **screen}
@@ -257,7 +265,7 @@ def _iteration(
     states: dict[str, ModelState] = {}
     expansions = ["zero"]
 
-    def record(effect, decision, scores, after, delta=None) -> IterationRecord:
+    def record(effect, decision, scores, after, delta=None, limited=False) -> IterationRecord:
         if screen is not None and screen.info:
             reference["screening"] = screen.info
         return IterationRecord(
@@ -275,13 +283,22 @@ def _iteration(
             threshold_p=level,
             wall_s=time.perf_counter() - t_it,
             expansions=tuple(expansions),
+            time_limited=limited,
         )
+
+    def stopped(stop: DiscoveryTimeLimit, scores) -> IterationRecord:
+        _say(settings, f"{stop}: no effect claimed in iteration {index}")
+        return record(None, f"stopped: {stop}; no effect claimed", scores, current, limited=True)
 
     screen: Screening | None = None
     if not names:
         return record(None, "no candidates left", [], current)
     if n_added >= settings.max_effects:
         return record(None, "effect limit reached", [], current)
+    try:
+        check_budget(f"iteration {index}")
+    except DiscoveryTimeLimit as stop:
+        return stopped(stop, [])
 
     # Long training data: the evidence is gathered on the pre-fit subset and only the
     # candidate chosen there is refitted on every training experiment (see .screen).
@@ -456,18 +473,22 @@ def _iteration(
                 return s, "added"
         return None, _matched_decision(matched, "all training experiments")
 
-    chosen, decision = attempt(scores)
-    if chosen is None and not diag.whiteness.get("white", True):
-        # about to leave a structured (non-white) residual unexplained: look again, with
-        # each candidate's strength profiled over multiples of its default (see the
-        # scoring module). Not gated on the signature: a smooth residual has few
-        # effective samples, and its bias-corrected η² can stay below the signature
-        # threshold even where it follows dI/dt with r = 0.5.
-        _say(settings, f"{decision} at zero strength; profiling the strengths")
-        expansions.append("profile")
-        scores = score("profile", previous=scores)
-        chosen, again = attempt(scores)
-        decision = decision if again == "no new candidate" else again
+    try:  # the refits run in attempt(): where the discovery's time limit can stop it
+        chosen, decision = attempt(scores)
+        if chosen is None and not diag.whiteness.get("white", True):
+            # about to leave a structured (non-white) residual unexplained: look again, with
+            # each candidate's strength profiled over multiples of its default (see the
+            # scoring module). Not gated on the signature: a smooth residual has few
+            # effective samples, and its bias-corrected η² can stay below the signature
+            # threshold even where it follows dI/dt with r = 0.5.
+            _say(settings, f"{decision} at zero strength; profiling the strengths")
+            expansions.append("profile")
+            scores = score("profile", previous=scores)
+            check_budget("the refits after the profile look")
+            chosen, again = attempt(scores)
+            decision = decision if again == "no new candidate" else again
+    except DiscoveryTimeLimit as stop:
+        return stopped(stop, scores)
     if chosen is None:
         return record(None, decision, scores, current)
     new = states[chosen.effect]
@@ -527,32 +548,40 @@ def discover(
     unknown = [c for c in pool if c not in EFFECTS]
     if unknown:
         raise FitError(f"unknown candidate effect(s) {unknown}; known: {sorted(EFFECTS)}")
-    if baseline is None:
-        what = model.effect_names or "the base model"
-        _say(settings, f"fitting {what} on {len(train)} experiments")
-        free0 = resolve_free(model, settings.fit)
-        baseline = run_fit(model, train, settings, free0, start)
-    else:
+    if baseline is not None:
         _check_baseline(baseline, model, train)
-        _say(settings, f"starting from the given fit ({baseline.status})")
-    current = _state(baseline, train, test, settings, jacobian=False)
-    baseline = current
-    iterations: list[IterationRecord] = []
-    for index in range(settings.max_effects + 1):
-        record = _iteration(index, current, pool, train, test, settings, len(iterations))
-        iterations.append(record)
-        if record.effect is None:
-            break
-        current = record.after
+    with discovery_budget(settings.time_limit_s, t_start):
+        if baseline is None:
+            what = model.effect_names or "the base model"
+            _say(settings, f"fitting {what} on {len(train)} experiments")
+            free0 = resolve_free(model, settings.fit)
+            baseline = run_fit(
+                model, train, settings, free0, start, what="the baseline fit", budget_ok=True
+            )
+        else:
+            _say(settings, f"starting from the given fit ({baseline.status})")
+        current = _state(baseline, train, test, settings, jacobian=False)
+        baseline = current
+        iterations: list[IterationRecord] = []
+        for index in range(settings.max_effects + 1):
+            record = _iteration(index, current, pool, train, test, settings, len(iterations))
+            iterations.append(record)
+            if record.effect is None:
+                break
+            current = record.after
     final_diag = diagnose(current.residual, settings.max_lag_s)
     last = iterations[-1]
     # "Unexplained" needs structure that follows an examined signal: a residual that is
-    # not white but follows none of them (line-pressure wander, noise) names nothing.
+    # not white but follows none of them (line-pressure wander, noise) names nothing; and a
+    # look that the time limit cut short does not get to call anything unexplained.
     structured = not final_diag.whiteness.get("white", True)
-    follows = bool(final_diag.signature)
+    follows = bool(final_diag.signature) and not last.time_limited
     unexplained = last.effect is None and bool(last.candidates) and structured and follows
     signature = final_diag.signature if unexplained else []
     summary = _summary(iterations, unexplained, final_diag, settings.fit.substeps)
+    if last.time_limited:
+        message = f"discovery: {last.decision}; the model is the one it had"
+        warnings.warn(message, FitWarning, stacklevel=2)
     return DiscoveryResult(
         iterations=iterations,
         baseline=baseline,
@@ -564,6 +593,7 @@ def discover(
         test=[t.name for t in test],
         wall_s=time.perf_counter() - t_start,
         settings=_settings_dict(settings),
+        time_limited=last.time_limited,
     )
 
 
@@ -618,6 +648,8 @@ def _summary(iterations: list[IterationRecord], unexplained: bool, diag, substep
                 "unexplained residual: no library effect explains a significant share of it "
                 f"({last.decision}); it follows {follows}; no effect claimed for it"
             )
+    elif last.time_limited:
+        parts.append(f"{last.decision}; the rest of the search did not run")
     elif last.decision == "effect limit reached" and not added:
         parts.append("no effect was looked for (the effect limit is 0)")
     elif last.decision == "effect limit reached":
@@ -630,7 +662,7 @@ def _summary(iterations: list[IterationRecord], unexplained: bool, diag, substep
             "none of the examined signals"
         )
     if not added and not unexplained and last.decision != "effect limit reached":
-        parts.insert(0, "no missing effect found")
+        parts.insert(0, "no effect added" if last.time_limited else "no missing effect found")
     ramp = diag.ramp_note()
     if ramp and not diag.whiteness.get("white", True):
         parts.append(ramp)

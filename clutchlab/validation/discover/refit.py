@@ -7,6 +7,7 @@ screening refits on the pre-fit subset (:mod:`.screen`).
 from __future__ import annotations
 
 import math
+import time
 import warnings
 from dataclasses import replace
 
@@ -18,6 +19,7 @@ from ...physics import CircuitModel
 from ...physics.effects import EFFECTS
 from ...physics.fit import FitResult, FitSettings, PhysicsFitter
 from ...physics.parameters import ParameterSet
+from .deadline import DiscoveryTimeLimit, capped_fit, check_budget, cut_by_budget
 from .residuals import (
     ResidualSet,
     loeo_evidence,
@@ -52,24 +54,38 @@ def run_fit(
     free: tuple[str, ...],
     start: ParameterSet | None,
     fit: FitSettings | None = None,
+    *,
+    what: str = "a refit",
+    budget_ok: bool = False,
 ) -> FitResult:
     """Fit; a fit that stops short returns its best iterate (discovery's refits are short by
     design, so the FitWarning saying so is not shown; the status is in the result).
 
-    ``fit`` replaces ``settings.fit`` (a screening or refinement stage's settings).
+    ``fit`` replaces ``settings.fit`` (a screening or refinement stage's settings). Inside
+    a discovery with a time budget (:mod:`.deadline`) the fit's time limit is at most the
+    budget left, and a fit the budget stopped raises :class:`.DiscoveryTimeLimit` naming
+    ``what`` — it is not judged against complete refits — unless ``budget_ok`` (the
+    baseline fit, whose best iterate is the model whatever stopped it).
     """
+    if not budget_ok:
+        check_budget(what)
     fit = fit or settings.fit
     warm_sensitivities(model, traces, fit, len(free))
+    fit, capped = capped_fit(fit)
     fitter = PhysicsFitter(model, replace(fit, free=free), start)
+    t0 = time.perf_counter()
+    error: FitError | None = None
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", FitWarning)
-            return fitter.fit(traces).result_
+            result = fitter.fit(traces).result_
     except FitError as exc:
-        best = getattr(exc, "result", None)
-        if best is None:
-            raise
-        return best
+        error, result = exc, getattr(exc, "result", None)
+    if not budget_ok and cut_by_budget(fit, capped, result, time.perf_counter() - t0):
+        raise DiscoveryTimeLimit(f"the end of {what}", settings.time_limit_s) from error
+    if result is None:
+        raise error
+    return result
 
 
 def residual_at(

@@ -118,6 +118,9 @@ class IterationRecord:
         Strengths the candidates' outputs were linearized at: ``("zero",)``, or
         ``("zero", "profile")`` when the second look (strengths profiled over multiples
         of their defaults) before leaving a structured residual unexplained ran.
+    time_limited : bool
+        The discovery's time limit (``DiscoverySettings.time_limit_s``) ended this
+        iteration before it decided: no effect added, the evidence as far as it got.
     """
 
     index: int
@@ -134,6 +137,7 @@ class IterationRecord:
     reference: dict = field(default_factory=dict)
     refits: dict[str, ModelState] = field(default_factory=dict)
     expansions: tuple[str, ...] = ("zero",)
+    time_limited: bool = False
 
     def to_dict(self) -> dict:
         """JSON-ready dict (the issue's keys first)."""
@@ -149,6 +153,7 @@ class IterationRecord:
             "test_fit_pct_before": self.before.test["fit_pct"],
             "test_fit_pct_after": self.after.test["fit_pct"],
             "decision": self.decision,
+            "time_limited": self.time_limited,
             "delta_bic": self.delta_bic,
             "threshold_p": self.threshold_p,
             "expansions": list(self.expansions),
@@ -188,7 +193,8 @@ class DiscoveryResult:
         The fitted model after the last effect added.
     unexplained : bool
         True when the final residual is still structured (not white), follows at least
-        one examined signal, and no library effect explains a significant share of it.
+        one examined signal, and no library effect explains a significant share of it
+        (never when the discovery stopped at its time limit: it did not look far enough).
     signature : list of str
         Signals the unexplained residual follows (empty unless ``unexplained``).
     summary : str
@@ -199,6 +205,9 @@ class DiscoveryResult:
         Wall time of the discovery (s).
     settings : dict
         The discovery settings used.
+    time_limited : bool
+        Stopped at its time limit (``DiscoverySettings.time_limit_s``) before its last
+        iteration decided; the effects added before stay (each was confirmed in full).
     """
 
     iterations: list[IterationRecord]
@@ -211,6 +220,7 @@ class DiscoveryResult:
     test: list[str]
     wall_s: float
     settings: dict = field(default_factory=dict)
+    time_limited: bool = False
 
     @property
     def added(self) -> list[str]:
@@ -253,6 +263,7 @@ class DiscoveryResult:
                     "values": self.final.fit.values,
                 },
                 "wall_s": self.wall_s,
+                "time_limited": self.time_limited,
                 "settings": self.settings,
             }
         )

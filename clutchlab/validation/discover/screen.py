@@ -85,6 +85,7 @@ class Screening:
                 tuple(current.fit.free),
                 current.params,
                 fit=screen_settings(settings),
+                what="the current fit's continuation on the screening subset",
             )
             again = residual_at(fit.model(), fit.params(), fit.free, self.traces, settings)
         except _FAILURES as exc:
@@ -158,7 +159,15 @@ def screen_refit(
         free = candidate_free(tuple(current.fit.free), score.effect)
         keep = screen.residual.keep
         start = refit_start(cand, current.fit.values, score, screen.traces, settings, keep)
-        fit = run_fit(cand, screen.traces, settings, free, start, fit=screen_settings(settings))
+        fit = run_fit(
+            cand,
+            screen.traces,
+            settings,
+            free,
+            start,
+            fit=screen_settings(settings),
+            what=f"the screening refit with {score.effect}",
+        )
         res = residual_at(fit.model(), fit.params(), fit.free, screen.traces, settings)
     except _FAILURES as exc:
         score.refit = {

@@ -81,6 +81,12 @@ class DiscoverySettings:
         way (:mod:`.alternatives`): on the screening subset when there is one, else on
         every training experiment. False: the library effects compete only with each
         other and the current model (discovery before issue 17).
+    time_limit_s : float or None
+        Wall-time budget of the whole discovery (s), baseline fit included; None: none
+        (each fit still has ``fit.time_limit_s``). No refit starts once it is spent, each
+        refit's time limit is at most what is left, and a refit it stops is not judged: the
+        discovery ends with the model it has, claims nothing it did not confirm in full,
+        and says that it stopped at its time limit (:mod:`.deadline`).
     progress : bool
         Show a progress bar per stage.
     """
@@ -100,6 +106,7 @@ class DiscoverySettings:
     screen_samples: int | None = None
     screen_max_iter: int = 10
     alternatives: bool = True
+    time_limit_s: float | None = None
     progress: bool = True
 
     def __post_init__(self) -> None:
@@ -122,6 +129,8 @@ class DiscoverySettings:
             problems.append("screen_samples must be ≥ 0")
         if self.screen_max_iter < 1:
             problems.append("screen_max_iter must be ≥ 1")
+        if self.time_limit_s is not None and not self.time_limit_s > 0:
+            problems.append("time_limit_s must be > 0 s (or None: no limit)")
         if self.max_lag_s <= 0:
             problems.append("max_lag_s must be > 0")
         overlap = set(self.test_ramps) & set(self.fit.train_ramps)

@@ -9,6 +9,7 @@ variant to :mod:`clutchlab.validation.variants`.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any
@@ -164,11 +165,18 @@ class AugmentedHybrid(BaseEstimator):
 def _build(ctx: VariantContext) -> AugmentedHybrid:
     options = dict(ctx.options.get("augmented_hybrid", {}))
     settings = options.pop("settings", None)
+    # a moment on time.perf_counter by which the discovery must end (the demo's budget):
+    # its time limit is what is left when the variant is built, just before it runs
+    deadline = options.pop("discovery_deadline", None)
     if settings is None:
         fit = ctx.physics_settings
         settings = DiscoverySettings(progress=ctx.progress)
         if fit is not None:
             settings = replace(settings, fit=fit)
+    if deadline is not None:
+        left = max(float(deadline) - time.perf_counter(), 1.0)
+        own = settings.time_limit_s
+        settings = replace(settings, time_limit_s=left if own is None else min(own, left))
     hybrid = ctx.fitted.get("hybrid")
     physics = getattr(hybrid, "physics", None)
     baseline = getattr(physics, "result_", None)
