@@ -60,9 +60,27 @@ def _budget(stand) -> int:
     return sum(len(t) for t in stand if t.ramp in ("fast", "slow")) - 1
 
 
+def _train(stand) -> list:
+    return [t for t in stand if t.ramp in ("fast", "slow")]
+
+
 @pytest.fixture(scope="module")
-def screened(stand):
-    return discover(stand, settings=_settings(screen_samples=_budget(stand)))
+def base_fit(stand):
+    """The base model fitted on the training experiments with the discoveries' fit settings
+    (what ``discover`` fits first when it is given no fit; see
+    ``test_a_discovery_fits_its_baseline_as_given_fits_are_fitted``)."""
+    return PhysicsFitter(CircuitModel(), _settings().fit).fit(_train(stand)).result_
+
+
+@pytest.fixture(scope="module")
+def other_fit(stand):
+    """The same fit on half of the training experiments."""
+    return PhysicsFitter(CircuitModel(), _settings().fit).fit(_train(stand)[:3]).result_
+
+
+@pytest.fixture(scope="module")
+def screened(stand, base_fit):
+    return discover(stand, settings=_settings(screen_samples=_budget(stand)), baseline=base_fit)
 
 
 def test_the_subset_takes_every_ramp_and_is_all_data_within_the_budget(stand):
@@ -106,9 +124,10 @@ def test_screening_refits_on_the_subset_and_decides_on_every_training_experiment
     assert it.after.test["rmse_bar"] < it.before.test["rmse_bar"]
 
 
-def test_the_training_jacobian_is_computed_only_where_it_is_used(stand, screened):
+def test_the_training_jacobian_is_computed_only_where_it_is_used(stand, base_fit, screened):
     # no candidate to score: nothing needs the sensitivities on every training experiment
-    res = discover(stand, settings=_settings(screen_samples=_budget(stand), candidates=()))
+    settings = _settings(screen_samples=_budget(stand), candidates=())
+    res = discover(stand, settings=settings, baseline=base_fit)
     assert res.iterations[0].decision == "no candidates left"
     assert res.baseline.residual.jacobian is None
     # a confirmation on every training experiment is judged against them
@@ -116,28 +135,33 @@ def test_the_training_jacobian_is_computed_only_where_it_is_used(stand, screened
     assert before.jacobian is not None and before.jacobian.shape[0] == before.n
 
 
-def test_no_screening_when_the_data_fit_in_the_budget(stand):
-    res = discover(stand, settings=_settings(screen_samples=0))
+def test_no_screening_when_the_data_fit_in_the_budget(stand, base_fit):
+    res = discover(stand, settings=_settings(screen_samples=0), baseline=base_fit)
     it = res.iterations[0]
     assert "screening" not in it.reference
     assert all("scope" not in c.refit and "screen" not in c.refit for c in it.candidates)
 
 
-def test_a_discovery_starts_from_a_given_fit_and_refuses_one_made_on_other_data(stand, screened):
+def test_a_discovery_starts_from_a_given_fit_and_refuses_one_made_on_other_data(
+    stand, base_fit, other_fit, screened
+):
     settings = _settings(screen_samples=_budget(stand))
-    train = [t for t in stand if t.ramp in ("fast", "slow")]
-    fit = PhysicsFitter(CircuitModel(), settings.fit).fit(train).result_
-    res = discover(stand, settings=settings, baseline=fit)
-    assert res.baseline.fit is fit
-    assert res.added == screened.added
+    assert screened.baseline.fit is base_fit  # no second baseline fit
+    assert screened.added == ["supply_droop"]
     with pytest.raises(FitError, match="other experiments"):
-        discover(
-            stand,
-            settings=settings,
-            baseline=PhysicsFitter(CircuitModel(), settings.fit).fit(train[:3]).result_,
-        )
+        discover(stand, settings=settings, baseline=other_fit)
     with pytest.raises(FitError, match="lacks the model's effect"):
-        discover(stand, CircuitModel().with_effects("sensor_lag"), settings, baseline=fit)
+        discover(stand, CircuitModel().with_effects("sensor_lag"), settings, baseline=base_fit)
+
+
+def test_a_discovery_fits_its_baseline_as_given_fits_are_fitted(stand, base_fit):
+    """Given no fit, ``discover`` fits the base model itself: the same fit as ``base_fit``
+    (so the discoveries above, which start from it, are the ones it would run)."""
+    res = discover(stand, settings=_settings(max_effects=0))
+    assert res.iterations[0].decision == "effect limit reached"
+    assert res.baseline.fit.free == base_fit.free
+    for name, value in base_fit.values.items():
+        assert res.baseline.fit.values[name] == pytest.approx(value, rel=1e-9, abs=1e-12)
 
 
 class _FittedHybrid:
@@ -153,10 +177,9 @@ class _FittedHybrid:
         raise AssertionError
 
 
-def test_the_augmented_hybrid_is_the_hybrid_when_nothing_is_added(stand):
+def test_the_augmented_hybrid_is_the_hybrid_when_nothing_is_added(stand, base_fit):
     settings = _settings(screen_samples=_budget(stand), candidates=("latch_threshold_drift",))
-    train = [t for t in stand if t.ramp in ("fast", "slow")]
-    fit = PhysicsFitter(CircuitModel(), settings.fit).fit(train).result_
+    train, fit = _train(stand), base_fit
     hybrid = _FittedHybrid((t.name for t in train), fit)
     model = AugmentedHybrid(AugmentedPhysics(None, settings, baseline=fit), hybrid=hybrid)
     model.fit(train)
@@ -172,11 +195,10 @@ def test_the_augmented_hybrid_is_the_hybrid_when_nothing_is_added(stand):
     assert not model._unchanged(train)
 
 
-def test_cli_discover_starts_from_a_fit_physics_json(stand, stand_dir, tmp_path, capsys):
-    settings = _settings()
-    train = [t for t in stand if t.ramp in ("fast", "slow")]
-    fitter = PhysicsFitter(CircuitModel(), settings.fit).fit(train)
-    fitter.save(tmp_path / "fit.json")
+def test_cli_discover_starts_from_a_fit_physics_json(
+    base_fit, other_fit, stand_dir, tmp_path, capsys
+):
+    base_fit.to_json(tmp_path / "fit.json")
     argv = ["discover", str(stand_dir), "--out", str(tmp_path / "rep"), "--quiet"]
     argv += ["--candidates", "latch_threshold_drift", "--max-effects", "0", "--max-iter", "3"]
     argv += ["--free", "vfs_K_m,reg_F0", "--json", str(tmp_path / "d.json")]
@@ -184,10 +206,9 @@ def test_cli_discover_starts_from_a_fit_physics_json(stand, stand_dir, tmp_path,
     doc = json.loads((tmp_path / "d.json").read_text())
     # no effect may be added (--max-effects 0): the final model is the given fit, not a refit
     assert doc["added"] == []
-    for name, value in fitter.result_.values.items():
+    for name, value in base_fit.values.items():
         assert doc["final"]["values"][name] == pytest.approx(value, rel=1e-12, abs=1e-12)
-    other = PhysicsFitter(CircuitModel(), settings.fit).fit(train[:3])
-    other.save(tmp_path / "other.json")
+    other_fit.to_json(tmp_path / "other.json")
     argv[3] = str(tmp_path / "rep2")
     assert main([*argv, "--physics-model", str(tmp_path / "other.json")]) != 0
     assert "other experiments" in capsys.readouterr().err

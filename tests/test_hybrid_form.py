@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
 
@@ -49,6 +51,14 @@ def truth_physics(stand_run):
     )
 
 
+@pytest.fixture(scope="module")
+def auto_truth(split, truth_physics):
+    """The hybrid on the stand's own truth model, its form chosen on forked workers (shared:
+    each such fit runs twelve fold fits)."""
+    train, _ = split
+    return HybridModel(physics=truth_physics).fit(train)
+
+
 def test_wrong_physics_gives_the_standalone_form_and_never_sees_the_test_ramp(split):
     train, test = split
     phys = _Recording()
@@ -62,20 +72,21 @@ def test_wrong_physics_gives_the_standalone_form_and_never_sees_the_test_ramp(sp
     assert _rmse(model, test) == pytest.approx(_rmse(paper, test), rel=1e-6)
 
 
-def test_exact_physics_gives_the_physics_form(split, truth_physics):
+def test_exact_physics_gives_the_physics_form(auto_truth):
     """The stand's own truth model: nothing is left for a residual model to learn."""
-    train, _ = split
-    model = HybridModel(physics=truth_physics).fit(train)
+    model = auto_truth
     assert model.form_ == "physics"
     assert model.form_scores_["physics"] < 0.05 < model.form_scores_["standalone"]
 
 
-def test_the_form_scores_are_the_same_on_worker_processes(split, truth_physics, monkeypatch):
+def test_the_form_scores_are_the_same_on_worker_processes(
+    split, truth_physics, auto_truth, monkeypatch
+):
     """The folds' fits run on forked workers; in this process they give the same numbers."""
     import clutchlab.residual_ml.hybrid as hybrid_module
 
     train, _ = split
-    forked = HybridModel(physics=truth_physics).fit(train).form_scores_
+    forked = auto_truth.form_scores_
     monkeypatch.setattr(hybrid_module, "default_workers", lambda: 1)
     here = HybridModel(physics=truth_physics).fit(train).form_scores_
     assert forked == here
@@ -108,14 +119,16 @@ def test_form_round_trips_and_a_bad_form_is_refused(split, tmp_path):
     np.testing.assert_allclose(loaded.predict(test[0]), model.predict(test[0]), atol=1e-9)
 
 
-def test_physics_form_predicts_the_physics_with_its_loeo_error_as_std(split, truth_physics):
+def test_physics_form_predicts_the_physics_with_its_loeo_error_as_std(
+    split, truth_physics, auto_truth
+):
     train, test = split
     model = HybridModel(physics=truth_physics, form="physics").fit(train)
     trace = test[0]
     np.testing.assert_array_equal(model.predict(trace), truth_physics.predict(trace))
     comp = model.predict_components(trace)
     assert np.all(comp["residual_bar"] == 0)
-    auto = HybridModel(physics=truth_physics).fit(train)
+    auto = copy.copy(auto_truth)  # its form is set below: the shared fit stays as it was
     assert set(auto.form_scores_) == {"residual", "standalone", "physics"}
     auto.form_ = "physics"  # as if chosen: its std is the physics form's LOEO RMSE
     _, std = auto.predict(trace, return_std=True)
