@@ -194,6 +194,77 @@ def test_sweep_with_worker_processes_killed_and_restarted(tmp_path):
     _kill_midway_then_restart(tmp_path, workers=2, n=60)
 
 
+def test_read_results_of_an_extended_sweep_killed_before_consolidating_reads_its_parts(
+    tmp_path, monkeypatch
+):
+    """A complete sweep, then a bigger design of the same spec on the same --out stopped
+    before it consolidated: the consolidated file is the old run's, so read_results reads the
+    parts (with a warning) rather than the stale table."""
+    import warnings
+
+    from clutchlab.physics.design import ResultStore, UnfinishedSweepWarning
+    from clutchlab.physics.design.runner import SweepInterrupted
+
+    out = tmp_path / "res.parquet"
+    small, big = _spec(n=2, seed=3), _spec(n=4, seed=3)
+    run_sweep(small, out, workers=1, progress=False, figures=False, flush_s=0.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a finished sweep reads without a warning
+        assert len(read_results(out)) == 2
+
+    def killed(self, point_ids):
+        raise KeyboardInterrupt
+
+    with monkeypatch.context() as m:
+        m.setattr(ResultStore, "consolidate", killed)
+        with pytest.raises(SweepInterrupted):
+            run_sweep(big, out, workers=1, progress=False, figures=False, flush_s=0.0)
+    with pytest.warns(UnfinishedSweepWarning, match=r"older than \d+ part files? of an unfinished"):
+        df = read_results(out)
+    big_ids = {p.point_id for p in design_points(big)}
+    assert big_ids <= set(df["point_id"])  # the new points are there, not only the old two
+    assert df["point_id"].is_unique
+    # Running it again finishes and consolidates: the file is current again.
+    run_sweep(big, out, workers=1, progress=False, figures=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        df = read_results(out)
+    assert set(df["point_id"]) == big_ids
+
+
+def _part_name(ns: int, seq: int = 1) -> str:
+    return f"part-{ns:020d}-4242-{seq:06d}.parquet"
+
+
+def test_read_results_compares_parts_with_a_consolidated_file_of_an_earlier_version(tmp_path):
+    """A consolidated file without the record of its newest part (written before it existed):
+    a part counts as newer if its name's time is clearly after the file's mtime."""
+    import warnings
+
+    from clutchlab.physics.design import UnfinishedSweepWarning
+
+    out = tmp_path / "old.parquet"
+    parts = out.with_name(out.name + ".parts")
+    parts.mkdir()
+    row = {"point_id": "a", "index": 0, "status": "ok", "error": "", "x": 1.0}
+    pd.DataFrame([row]).to_parquet(parts / _part_name(1_000_000_000_000_000_000))
+    pd.DataFrame([row]).to_parquet(out, index=False)
+    t_file = 1_000_000_000_500_000_000  # the consolidated file: 0.5 s after the part
+    os.utime(out, ns=(t_file, t_file))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert list(read_results(out)["x"]) == [1.0]
+    # A later run's parts: point a again (newer row) and a new point b, minutes later.
+    later = t_file + 60_000_000_000
+    pd.DataFrame([row | {"x": 2.0}]).to_parquet(parts / _part_name(later, 1))
+    pd.DataFrame([row | {"point_id": "b", "index": 1, "x": 3.0}]).to_parquet(
+        parts / _part_name(later, 2)
+    )
+    with pytest.warns(UnfinishedSweepWarning, match="older than 2 part files"):
+        df = read_results(out)
+    assert list(df["point_id"]) == ["a", "b"] and list(df["x"]) == [2.0, 3.0]
+
+
 def test_one_level_variable_gives_an_undefined_sensitivity_without_numpy_warnings(tmp_path):
     """Issue 17: ``values = [12.0]`` printed 6 RuntimeWarnings and wrote n = 0 for 1 ok point."""
     import warnings

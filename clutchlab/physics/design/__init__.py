@@ -30,7 +30,7 @@ from .spec import (
     Variable,
     load_spec,
 )
-from .store import ResultStore, read_results
+from .store import ResultStore, UnfinishedSweepWarning, read_results
 
 __all__ = [
     "METRIC_UNITS",
@@ -50,6 +50,7 @@ __all__ = [
     "StepSpec",
     "SweepResult",
     "SweepSpec",
+    "UnfinishedSweepWarning",
     "Variable",
     "design_points",
     "evaluate_batch",

@@ -9,7 +9,10 @@ Layout for ``--out results.parquet``::
 A part file is written to a temporary name, flushed to disk and renamed into place, so a
 killed sweep leaves only complete part files (and perhaps a stray temporary file, removed on
 the next start). A restarted sweep reads the parts, skips the points already there and
-appends new parts; consolidation keeps one row per point id (the newest).
+appends new parts; consolidation keeps one row per point id (the newest) and records in the
+consolidated file's Parquet metadata the newest part it was built from, so that
+:func:`read_results` can tell a consolidated file left behind by a later, unfinished run (an
+extended sweep that was killed) and read the parts instead.
 
 Only what clutchlab wrote is touched (:mod:`clutchlab.data.output`): the parts folder carries
 the ownership record ``.clutchlab-owned.json``, and within it clutchlab reads, replaces and
@@ -25,6 +28,7 @@ import json
 import os
 import re
 import time
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -41,7 +45,13 @@ from ...data.output import (
 from ...errors import OutputError
 from .spec import SpecError
 
-__all__ = ["OtherSpecResultsError", "ResultStore", "check_parts_folder", "read_results"]
+__all__ = [
+    "OtherSpecResultsError",
+    "ResultStore",
+    "UnfinishedSweepWarning",
+    "check_parts_folder",
+    "read_results",
+]
 
 #: Part files clutchlab writes (``part-<time ns>-<pid>-<seq>.parquet``), and their temporaries.
 _PART = re.compile(r"part-\d{20}-\d+-\d{6}\.parquet")
@@ -50,6 +60,20 @@ _PART_TMP = re.compile(r"part-\d{20}-\d+-\d{6}\.parquet\.\d+\.tmp")
 _META_TMP = re.compile(
     r"(\.spec\.json\..+\.tmp|\.\.clutchlab-owned\.json\..+\.tmp|spec\.json\.tmp)"
 )
+
+#: Key of the consolidated file's Parquet metadata: the name of the newest part it holds.
+NEWEST_PART_KEY = b"clutchlab.newest_part"
+#: For a consolidated file without that record (an earlier clutchlab): a part counts as newer
+#: only if its name's time is this much after the file's modification time (ns), as the two
+#: come from different clocks (file times from a coarse kernel tick or a file server).
+_MTIME_SLACK_NS = 2_000_000_000
+
+
+class UnfinishedSweepWarning(UserWarning):
+    """The consolidated results file is older than part files of a later, unfinished run.
+
+    :func:`read_results` then reads the parts (the newest row per point), not the file.
+    """
 
 
 class OtherSpecResultsError(SpecError):
@@ -208,9 +232,9 @@ class ResultStore:
         """Complete part files, oldest first."""
         return sorted(f for f in self.parts.glob("part-*.parquet") if _PART.fullmatch(f.name))
 
-    def read(self) -> pd.DataFrame:
-        """Every row of every part (duplicates kept, oldest first)."""
-        files = self.part_files()
+    def read(self, files: list[Path] | None = None) -> pd.DataFrame:
+        """Every row of every part (duplicates kept, oldest first); of ``files`` if given."""
+        files = self.part_files() if files is None else files
         if not files:
             return pd.DataFrame()
         return pd.concat([pq.read_table(f).to_pandas() for f in files], ignore_index=True)
@@ -229,14 +253,16 @@ class ResultStore:
         """Write ``out``: one row per id in ``point_ids`` that has a result, design order.
 
         Rows of points not in ``point_ids`` (another sampling of the same spec core) stay in
-        the parts but are left out; of repeated ids the newest row is kept.
+        the parts but are left out; of repeated ids the newest row is kept. The name of the
+        newest part read is recorded in the file's metadata (``NEWEST_PART_KEY``).
 
         Returns
         -------
         pandas.DataFrame
             The table written.
         """
-        df = self.read()
+        files = self.part_files()
+        df = self.read(files)
         if df.empty:
             return df
         df = df.drop_duplicates("point_id", keep="last")
@@ -245,12 +271,33 @@ class ResultStore:
         df["index"] = df["point_id"].map(order).astype("int64")
         df = df.sort_values("index").reset_index(drop=True)
         table = pa.Table.from_pandas(df, preserve_index=False)
+        meta = dict(table.schema.metadata or {})
+        meta[NEWEST_PART_KEY] = files[-1].name.encode("ascii")
+        table = table.replace_schema_metadata(meta)
         write_file_atomic(self.out, lambda tmp: _write_table_synced(table, tmp), overwrite=True)
         return df
 
 
+def _newer_parts(path: Path, files: list[Path]) -> list[Path]:
+    """The part files (of ``files``, oldest first) written after ``path`` was consolidated."""
+    try:
+        newest = (pq.read_schema(path).metadata or {}).get(NEWEST_PART_KEY)
+    except (OSError, pa.ArrowException):
+        newest = None  # not readable as Parquet: pandas reports that below
+    if newest is not None:
+        newest_name = newest.decode("ascii", errors="replace")
+        return [f for f in files if f.name > newest_name]  # names sort by their time (ns)
+    limit = path.stat().st_mtime_ns + _MTIME_SLACK_NS
+    return [f for f in files if int(f.name.split("-")[1]) > limit]
+
+
 def read_results(path: str | Path) -> pd.DataFrame:
     """Read a sweep's results: the consolidated file, else the parts of an unfinished sweep.
+
+    The consolidated file is read unless part files newer than it lie beside it: a later run
+    (an extended sweep of the same spec, or one with ``retry_failed``) was stopped before it
+    consolidated. Then the parts are read as for an unfinished sweep, with an
+    :class:`UnfinishedSweepWarning`; running that sweep again finishes and consolidates it.
 
     Parameters
     ----------
@@ -261,13 +308,33 @@ def read_results(path: str | Path) -> pd.DataFrame:
     -------
     pandas.DataFrame
         One row per point (``point_id``, ``index``, ``status``, ``error``, design variables,
-        metrics, ``wall_s`` and ``cpu_s``: wall and CPU time of the point, s).
+        metrics, ``wall_s`` and ``cpu_s``: wall and CPU time of the point, s); read from the
+        parts, the newest row of each point, in ``index`` order.
+
+    Raises
+    ------
+    FileNotFoundError
+        Neither the file nor any part file exists.
+
+    Warns
+    -----
+    UnfinishedSweepWarning
+        The consolidated file is older than part files of an unfinished run.
     """
     path = Path(path)
-    if path.exists():
-        return pd.read_parquet(path)
     parts = path.with_name(path.name + ".parts")
     files = sorted(f for f in parts.glob("part-*.parquet") if _PART.fullmatch(f.name))
+    if path.exists():
+        newer = _newer_parts(path, files) if files else []
+        if not newer:
+            return pd.read_parquet(path)
+        warnings.warn(
+            f"{path} is older than {len(newer)} part file{'s' if len(newer) > 1 else ''} of "
+            f"an unfinished run in {parts}: read the parts instead (the newest row of each "
+            "point); run that sweep again to finish and consolidate it",
+            UnfinishedSweepWarning,
+            stacklevel=2,
+        )
     if not files:
         raise FileNotFoundError(f"no results at {path} (nor parts in {parts})")
     df = pd.concat([pd.read_parquet(f) for f in files], ignore_index=True)
