@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
 from . import __version__
-from .cli_types import nonnegative_int
+from .cli_types import add_map_argument, nonnegative_int
 from .errors import ClutchlabError, OutputError
 
 if TYPE_CHECKING:
@@ -217,7 +217,7 @@ def _cmd_data_convert(args: argparse.Namespace) -> int:
 
 
 def _add_read_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--map", help="channel map (TOML): source channel → canonical signal, units")
+    add_map_argument(p)
     p.add_argument(
         "--interpolate-gaps",
         type=int,

@@ -6,7 +6,7 @@ import argparse
 import shlex
 import sys
 
-from .cli_types import positive_float
+from .cli_types import add_map_argument, positive_float
 
 __all__ = ["REPORT_FILES", "register"]
 
@@ -60,7 +60,7 @@ def _cmd_discover(args: argparse.Namespace) -> int:
     from .physics.fit import FitSettings
     from .validation.discover import DiscoverySettings, discover, write_report
 
-    dataset = load_dataset(args.dataset)
+    dataset = load_dataset(args.dataset, channel_map=args.map)
     train_ramps, test_ramps = _split_labels(dataset, args.train, args.test)
     model = CircuitModel().with_effects(*_csv(args.effects))
     fit = FitSettings(
@@ -110,6 +110,7 @@ def register(sub) -> None:
         help="find the effects the physics model lacks from its residual, add them, report",
     )
     p.add_argument("dataset", help="dataset folder (manifest.json + experiments)")
+    add_map_argument(p)
     p.add_argument("--out", required=True, help="report folder (report.html, figures, JSON)")
     p.add_argument("--json", help="also write the discovery result (JSON) here")
     p.add_argument("--max-effects", type=int, default=3, help="add at most N effects (3)")

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from .budgets import FIT_BUDGET_S
-from .cli_types import positive_float
+from .cli_types import add_map_argument, positive_float
 
 __all__ = ["REPORT_FILES", "command_line", "register", "run_demo_command"]
 
@@ -156,7 +156,7 @@ def register(sub) -> None:
     )
     p.add_argument("--train", default="fast,slow", help="training ramp labels (fast,slow)")
     p.add_argument("--test", default="medium", help="test ramp labels (medium)")
-    p.add_argument("--map", help="channel map (TOML) for logs with other channel names / units")
+    add_map_argument(p)
     p.add_argument("--effects", default="", help="effects of the fitted physics model")
     p.add_argument(
         "--fit-time-limit",

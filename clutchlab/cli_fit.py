@@ -8,7 +8,7 @@ import warnings
 from pathlib import Path
 
 from .budgets import FIT_BUDGET_S
-from .cli_types import positive_float
+from .cli_types import add_map_argument, positive_float
 
 __all__ = ["register"]
 
@@ -80,7 +80,7 @@ def _cmd_fit_physics(args: argparse.Namespace) -> int:
     from .physics import CircuitModel
     from .physics.fit import FitSettings, PhysicsFitter
 
-    dataset = load_dataset(args.dataset)
+    dataset = load_dataset(args.dataset, channel_map=args.map)
     model = CircuitModel().with_effects(*_csv(args.effects))
     kw = {
         "train_ramps": _csv(args.train) or ("fast", "slow"),
@@ -157,6 +157,7 @@ def register(sub) -> None:
     """Add the ``fit-physics`` subcommand to the ``clutchlab`` parser."""
     p = sub.add_parser("fit-physics", help="fit the physics model to training experiments")
     p.add_argument("dataset", help="dataset folder (manifest.json + experiments)")
+    add_map_argument(p)
     p.add_argument("--out", required=True, help="fitted model JSON to write")
     p.add_argument("--effects", default="", help="effects switched on, comma separated")
     p.add_argument("--free", default="", help="free parameters (default: the standard set)")

@@ -8,6 +8,8 @@ import sys
 import time
 from pathlib import Path
 
+from .cli_types import add_map_argument
+
 __all__ = ["register"]
 
 
@@ -33,7 +35,7 @@ def _cmd_classifiers(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     _check_classifiers_out(out)
-    dataset = load_dataset(args.dataset)
+    dataset = load_dataset(args.dataset, channel_map=args.map)
     train = _training(dataset, _csv(args.train))
     names = list(dict.fromkeys(_csv(args.classifiers))) or None  # each one once
     unknown = sorted(set(names or []) - set(CLASSIFIERS))
@@ -107,7 +109,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     from .residual_ml.features import PHYSICS_FEATURES, causal_features
     from .residual_ml.hybrid import HYBRID_FEATURES
 
-    dataset = load_dataset(args.dataset)
+    dataset = load_dataset(args.dataset, channel_map=args.map)
     train = _training(dataset, _csv(args.train))
     params = {}
     if args.variant == "hybrid":
@@ -202,6 +204,7 @@ def register(sub) -> None:
         help="compare the six latch classifiers by leave-one-experiment-out (table + figure)",
     )
     p.add_argument("dataset", help="dataset folder (manifest.json + experiments)")
+    add_map_argument(p)
     p.add_argument("--out", default="classifiers", help="folder for classifiers.csv/.png")
     p.add_argument(
         "--classifiers",
@@ -215,6 +218,7 @@ def register(sub) -> None:
 
     p = sub.add_parser("train", help="train a paper-pipeline model variant on training ramps")
     p.add_argument("dataset", help="dataset folder (manifest.json + experiments)")
+    add_map_argument(p)
     p.add_argument("--variant", required=True, choices=list(VARIANTS), help="model variant")
     p.add_argument("--out", required=True, help="folder for model.json + model.npz")
     p.add_argument("--train", default="fast,slow", help="training ramp labels (fast,slow)")

@@ -7,7 +7,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from .cli_types import positive_float
+from .cli_types import add_map_argument, positive_float
 
 __all__ = ["register"]
 
@@ -43,7 +43,7 @@ def _cmd_select_structure(args: argparse.Namespace) -> int:
     from .data import load_dataset
     from .physics.fit import FitSettings, StructureSelector
 
-    dataset = load_dataset(args.dataset)
+    dataset = load_dataset(args.dataset, channel_map=args.map)
     train_ramps = _csv(args.train) or ("fast", "slow")
     dataset.select(ramps=train_ramps)  # an unknown label is an error, not a dropped ramp
     settings = FitSettings(
@@ -101,6 +101,7 @@ def register(sub) -> None:
         ),
     )
     p.add_argument("dataset", help="dataset folder (manifest.json + experiments)")
+    add_map_argument(p)
     p.add_argument(
         "--candidates",
         default="",

@@ -1,4 +1,7 @@
-"""argparse value types shared by the ``clutchlab`` subcommands: range errors before any work."""
+"""argparse value types and arguments shared by the ``clutchlab`` subcommands.
+
+The types give range errors before any work.
+"""
 
 from __future__ import annotations
 
@@ -6,7 +9,21 @@ import argparse
 import math
 from collections.abc import Callable
 
-__all__ = ["nonnegative_float", "nonnegative_int", "positive_float", "positive_int"]
+__all__ = [
+    "MAP_HELP",
+    "add_map_argument",
+    "nonnegative_float",
+    "nonnegative_int",
+    "positive_float",
+    "positive_int",
+]
+
+#: Help of ``--map`` on every command that reads test-stand logs.
+MAP_HELP = (
+    "channel map (TOML) for logs with other channel names or units: source channel → "
+    "canonical signal, unit; applied to every experiment (over a dataset manifest's own "
+    "channel_map)"
+)
 
 
 def _parse(text: str, cast: Callable[[str], float], what: str) -> float:
@@ -46,3 +63,19 @@ def positive_int(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be ≥ 1, not {value}")
     return value
+
+
+def add_map_argument(parser: argparse.ArgumentParser) -> None:
+    """Add ``--map MAP.toml``, the channel map of the logs a command reads.
+
+    The command passes it on as ``load_dataset(..., channel_map=args.map)`` (or to the
+    check or conversion of one log), which reads the map before any experiment: a missing
+    or malformed map is a :class:`~clutchlab.errors.DataError` naming the file (exit
+    status 2), before any fit or other long work.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+        The subcommand's parser.
+    """
+    parser.add_argument("--map", metavar="MAP.toml", help=MAP_HELP)
