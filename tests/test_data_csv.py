@@ -187,6 +187,75 @@ def test_read_csv_array_index_header_is_a_name_not_a_unit(tmp_path):
     np.testing.assert_array_equal(tr.get("line_pressure_bar"), [17.0, 17.0])
 
 
+def test_read_csv_unit_in_parentheses_is_the_columns_unit(tmp_path):
+    """``name (unit)`` headers, as many loggers write them, carry the unit like ``name [unit]``."""
+    path = write_text(
+        tmp_path / "paren.csv",
+        "time (ms),current(mA),clutch_pressure (kPa),line (bar),T ( degF )\n"
+        "0,100,150,17,104\n1,200,250,17,104\n",
+    )
+    raw = decode_csv(path)
+    assert [(c.name, c.unit) for c in raw.channels] == [
+        ("time", "ms"),
+        ("current", "mA"),
+        ("clutch_pressure", "kPa"),
+        ("line", "bar"),
+        ("T", "degF"),
+    ]
+    cmap = {
+        "signals": {
+            "time_s": "time",
+            "current_mA": "current",
+            "clutch_pressure_bar": "clutch_pressure",
+            "line_pressure_bar": "line",
+            "oil_temp_C": "T",
+        }
+    }
+    tr = read_csv(path, channel_map=cmap)  # the units come from the header
+    np.testing.assert_allclose(tr.time_s, [0.0, 0.001])
+    np.testing.assert_allclose(tr.get("clutch_pressure_bar"), [1.5, 2.5])
+    np.testing.assert_allclose(tr.get("oil_temp_C"), [40.0, 40.0])
+    # Canonical names need no map; a unit other than the canonical one is named.
+    ok = write_text(
+        tmp_path / "canon.csv",
+        "time_s (s),current_mA (mA),clutch_pressure_bar (bar)\n0,100,1\n0.001,200,2\n",
+    )
+    np.testing.assert_array_equal(read_csv(ok).get("clutch_pressure_bar"), [1.0, 2.0])
+    kpa = write_text(tmp_path / "kpa.csv", "time_s,current_mA,clutch_pressure_bar (kPa)\n0,1,2\n")
+    with pytest.raises(DataError, match="is in 'kPa' but the canonical unit is 'bar'"):
+        read_csv(kpa)
+
+
+def test_read_csv_parentheses_without_a_known_unit_stay_in_the_name(tmp_path):
+    path = write_text(
+        tmp_path / "names.csv",
+        "time_s,current_mA,P(clutch),pressure (gauge),T(),current(mA)\n"
+        "0,100,1,17,40,100\n0.001,200,2,17,40,200\n",
+    )
+    # A map written for a header as it stands keeps it whole: current(mA) here.
+    wanted = {"P(clutch)", "pressure (gauge)", "current(mA)"}.__contains__
+    raw = decode_csv(path, wanted)
+    assert [(c.name, c.unit) for c in raw.channels] == [
+        ("time_s", None),
+        ("current_mA", None),
+        ("P(clutch)", None),
+        ("pressure (gauge)", None),
+        ("T()", None),
+        ("current(mA)", None),
+    ]
+    cmap = {
+        "signals": {
+            "clutch_pressure_bar": "P(clutch)",
+            "line_pressure_bar": "pressure (gauge)",
+            "current_cmd_mA": "current(mA)",
+        }
+    }
+    tr = read_csv(path, channel_map=cmap)
+    np.testing.assert_array_equal(tr.get("clutch_pressure_bar"), [1.0, 2.0])
+    np.testing.assert_array_equal(tr.get("line_pressure_bar"), [17.0, 17.0])
+    np.testing.assert_array_equal(tr.get("current_cmd_mA"), [100.0, 200.0])
+
+
 def test_read_csv_tolerates_trailing_blank_lines(tmp_path):
     path = write_text(tmp_path / "ok.csv", HEADER + "\n0,100,1\n0.001,200,2\n0.002, 300 ,4\n\n\n")
     tr = read_csv(path)

@@ -17,9 +17,9 @@ A channel map is a TOML file (read with :mod:`tomllib`)::
     dither_freq_Hz = 50.0
 
 Entry fields: ``channel`` (source name, required), ``unit`` (source unit; when omitted, the
-unit stored in the file — MF4 channel unit, Parquet field metadata, ``name [unit]`` CSV
-header — or else the canonical unit), ``scale`` and ``offset`` (applied after the unit
-conversion, offset in the canonical unit:
+unit stored in the file — MF4 channel unit, Parquet field metadata, ``name [unit]`` or
+``name (unit)`` CSV header — or else the canonical unit), ``scale`` and ``offset`` (applied
+after the unit conversion, offset in the canonical unit:
 ``canonical = convert_units(raw, unit, canonical_unit) * scale + offset``) and, for MF4 files
 whose channel name occurs in several groups, ``group`` (0-based group index).
 

@@ -4,7 +4,8 @@ File layout: one header line of column names, then one line per sample, comma-se
 Files written here carry canonical signal names (see
 :data:`~clutchlab.data.signals.CANONICAL_ORDER`) in canonical units. Files read here may carry
 any names (mapped by a :class:`~clutchlab.data.channel_map.ChannelMap`), optionally with a
-unit in brackets (``P_clutch [kPa]``). Line numbers in messages are the file's line numbers
+unit in brackets (``P_clutch [kPa]``) or in parentheses (``P_clutch (kPa)``, only a known
+unit: ``P(clutch)`` is a name). Line numbers in messages are the file's line numbers
 (the header is line 1, the first data row is line 2).
 """
 
@@ -28,6 +29,7 @@ from .paths import check_input_file
 from .rawlog import RawChannel, RawLog
 from .signals import CANONICAL_ORDER
 from .trace import _MAX_ROWS_LISTED, Trace
+from .units import parse_unit
 
 if TYPE_CHECKING:
     from .channel_map import ChannelMap
@@ -42,6 +44,8 @@ _EXACT_FORMAT = "%.17g"
 _NA_VALUES = ("", "nan", "NaN", "NAN")
 #: ``name [unit]`` column header.
 _UNIT_HEADER = re.compile(r"^(?P<name>.*?)\s*\[(?P<unit>[^\[\]]*)\]$")
+#: ``name (unit)`` column header (a unit only if :func:`~.units.parse_unit` knows it).
+_PAREN_UNIT_HEADER = re.compile(r"^(?P<name>.*?)\s*\((?P<unit>[^()]*)\)$")
 
 
 def _line_label(i: int) -> str:
@@ -178,11 +182,23 @@ def _read_header(path: Path, limits: CsvLimits) -> list[str]:
     return [c.strip() for c in row]
 
 
-def _split_unit(header: str) -> tuple[str, str | None]:
-    """``"P_CL [kPa]"`` → ``("P_CL", "kPa")``; an array index (``"P[0]"``) stays in the name."""
+def _split_unit(header: str, wanted: Callable[[str], bool] | None = None) -> tuple[str, str | None]:
+    """Column name and unit of a header: ``"P_CL [kPa]"`` or ``"P_CL (kPa)"`` → ``("P_CL", "kPa")``.
+
+    An array index (``"P[0]"``) stays in the name, as does text in parentheses that is not a
+    known unit (``"P(clutch)"``, ``"pressure (gauge)"``), and a header in parentheses that a
+    channel map names whole (``wanted(header)``, a map written for the header as it stands).
+    """
     match = _UNIT_HEADER.match(header)
     if match and match["name"] and not match["unit"].strip().isdigit():
         return match["name"], match["unit"].strip() or None
+    match = _PAREN_UNIT_HEADER.match(header)
+    if match and match["name"] and not (wanted is not None and wanted(header)):
+        try:
+            parse_unit(match["unit"])
+        except DataError:
+            return header, None
+        return match["name"], match["unit"].strip()
     return header, None
 
 
@@ -228,7 +244,7 @@ def decode_csv(path: str | Path, wanted: Callable[[str], bool] | None = None) ->
 
     header = _read_header(path, CsvLimits.from_env())
     problems: list[str] = []
-    names_units = [_split_unit(h) for h in header]
+    names_units = [_split_unit(h, wanted) for h in header]
     names = [n for n, _ in names_units]
     dupes = sorted(c for c, k in Counter(names).items() if k > 1)
     if dupes:
@@ -242,7 +258,9 @@ def decode_csv(path: str | Path, wanted: Callable[[str], bool] | None = None) ->
         raise DataError(f"{path}: bad CSV header", problems)
 
     try:
-        columns, by_column, unparseable = _parse_values(path, header)
+        columns, by_column, unparseable = _parse_values(
+            path, header, dict(zip(header, names, strict=True))
+        )
         n = next(iter(columns.values())).size
         fields = len(next(csv.reader([_last_line(path)]), []))
         short = _short_rows(path, len(header), n)
@@ -361,9 +379,11 @@ def _long_rows(path: Path, n_fields: int) -> list[str]:
 
 
 def _parse_values(
-    path: Path, header: list[str]
+    path: Path, header: list[str], labels: Mapping[str, str]
 ) -> tuple[dict[str, np.ndarray], dict[str, str], dict[str, np.ndarray]]:
     """Parse the data rows of ``path`` into float64 columns named by ``header``.
+
+    ``labels`` names each header's column in messages (its name without the unit).
 
     Unparseable cells become NaN and are listed, by line, in the returned problems (one per
     column, keyed by header) and flagged in the returned masks, by column.
@@ -425,7 +445,7 @@ def _parse_values(
                 f"{_line_label(int(i))} {cells.iloc[int(i)]!r}" for i in bad[:_MAX_ROWS_LISTED]
             )
             more = f" … ({bad.size} in total)" if bad.size > _MAX_ROWS_LISTED else ""
-            label = _split_unit(col)[0]
+            label = labels[col]
             problems[col] = f"{path}: column {label!r}: unparseable number at {shown}{more}"
         signals[col] = values
     return signals, problems, masks

@@ -53,7 +53,7 @@ class RawChannel:
         or was not loaded.
     unit : str or None
         Unit stored in the file (MF4 channel unit, Parquet field metadata, CSV ``name [unit]``
-        header), or None.
+        or ``name (unit)`` header), or None.
     base : int or None
         Index into :attr:`RawLog.bases` (MF4); None for tabular formats, whose time is a column.
     where : str
