@@ -83,7 +83,7 @@ def _ramps(text: str | None):
 
 
 def _cmd_stand(args: argparse.Namespace) -> int:
-    from .physics.stand import DEFAULT_SETTINGS, StandConfig, truth_path, write_stand
+    from .physics.stand import DEFAULT_SETTINGS, StandConfig, order_ramps, truth_path, write_stand
     from .physics.stand.plants import PlantConfig, get_plant
 
     if args.list_plants:
@@ -126,9 +126,10 @@ def _cmd_stand(args: argparse.Namespace) -> int:
         get_plant(config.plant).check_effects(config.effects)  # refused before any work
     run = write_stand(args.out, config, overwrite=args.overwrite, progress=not args.quiet)
     out = Path(args.out)
+    listed = order_ramps(run.dataset.ramps, {r.label: r.rate_mA_s for r in ramps})
     print(
         f"wrote {len(run.dataset)} experiments to {out} "
-        f"(ramps: {', '.join(run.dataset.ramps)}); overview {out / 'pressure_vs_current.png'}"
+        f"(ramps: {', '.join(listed)}); overview {out / 'pressure_vs_current.png'}"
     )
     print(f"truth (effects, parameters) beside it: {truth_path(out)}")
     if args.json:

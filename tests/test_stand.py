@@ -185,9 +185,67 @@ def test_overview_draws_every_ramp_of_the_setting_in_a_colour_of_its_own():
     labels = ["warm_up", "fast", "r5", "medium", "r20", "slow"]
     ds = Dataset([trace(label) for label in labels] + [trace("fast", 50.0)])
     lines = plot_pressure_vs_current(ds).axes[0].get_lines()
-    assert [line.get_label() for line in lines] == [f"{x} ({x}_30Hz_A)" for x in labels]
+    # one ramp rate for all: alphabetical (see the test of the ramp order below)
+    assert [line.get_label() for line in lines] == [f"{x} ({x}_30Hz_A)" for x in sorted(labels)]
     colours = [to_hex(line.get_color()) for line in lines]
     assert len(set(colours)) == len(labels), colours
+
+
+def _ramp_trace(label: str, ramp_s: float, freq: float = 30.0):
+    """A stand-like experiment: 0 → 1100 → 0 mA in ``ramp_s`` each way, 0.1 s holds."""
+    from synthetic import make_trace
+
+    from clutchlab.data import Trace
+
+    h, r = 0.1, ramp_s
+    knots = [0, h, h + r, 2 * h + r, 2 * h + 2 * r, 3 * h + 2 * r]
+    tr = make_trace(knots, [0, 0, 1100, 1100, 0, 0], dither_Hz=freq, ramp=label)
+    tr = tr.with_signals(clutch_pressure_bar=tr.get("current_cmd_mA") / 100.0)
+    tr.meta |= {"dither_freq_Hz": freq, "dither_shape": "A"}
+    return Trace(f"{label}_{freq:g}Hz_A", tr.signals, meta=tr.meta)
+
+
+#: Ramp labels and their ramp times (s), in dataset order: neither alphabetical nor by rate.
+RAMP_TIMES = {"slow": 1.6, "medium": 0.8, "r0": 0.2, "fast": 0.4, "other": 0.4}
+
+
+def test_order_ramps_is_fastest_first_then_alphabetical():
+    from clutchlab.physics.stand import order_ramps
+
+    rates = {"fast": 440.0, "medium": 110.0, "slow": 27.5, "a": 110.0, "nan": float("nan")}
+    labels = ["slow", "x", "medium", "nan", "fast", "a", "fast"]
+    assert order_ramps(labels, rates) == ["fast", "a", "medium", "slow", "nan", "x"]
+    assert order_ramps(["slow", "medium", "fast"], {}) == ["fast", "medium", "slow"]
+
+
+def test_overview_lists_the_ramps_fastest_first():
+    """The legend listed the ramps in dataset order, not by ramp rate."""
+    from clutchlab.data import Dataset
+    from clutchlab.physics.stand import plot_pressure_vs_current
+
+    ds = Dataset([_ramp_trace(label, r) for label, r in RAMP_TIMES.items()])
+    lines = plot_pressure_vs_current(ds).axes[0].get_lines()
+    order = ["r0", "fast", "other", "medium", "slow"]  # fast and other: one rate, alphabetical
+    assert [line.get_label() for line in lines] == [f"{x} ({x}_30Hz_A)" for x in order]
+
+
+def test_cli_stand_lists_the_ramps_fastest_first(tmp_path, monkeypatch, capsys):
+    """``clutchlab stand`` printed the ramps alphabetically (``fast, r0, slow``)."""
+    from types import SimpleNamespace
+
+    import clutchlab.physics.stand as stand
+    from clutchlab.cli import main
+    from clutchlab.data import Dataset
+
+    def write(out, config, **kwargs):  # the dataset of config's ramps, without simulating
+        traces = [_ramp_trace(r.label, r.ramp_s) for r in config.ramps]
+        return SimpleNamespace(dataset=Dataset(traces))
+
+    monkeypatch.setattr(stand, "write_stand", write)
+    ramps = ",".join(f"{label}={r}" for label, r in RAMP_TIMES.items())
+    out = tmp_path / "ds"
+    assert main(["stand", "--out", str(out), "--settings", "1", "--ramps", ramps, "--quiet"]) == 0
+    assert "(ramps: r0, fast, other, medium, slow)" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize(

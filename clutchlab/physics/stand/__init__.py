@@ -1,7 +1,14 @@
 """The synthetic test stand: the embedded, higher-fidelity data source."""
 
 from .overview import plot_pressure_vs_current
-from .scenarios import DITHER_SHAPES, RAMPS, DitherSetting, RampProfile, dither_amplitude
+from .scenarios import (
+    DITHER_SHAPES,
+    RAMPS,
+    DitherSetting,
+    RampProfile,
+    dither_amplitude,
+    order_ramps,
+)
 from .stand import (
     BUILTIN_EFFECTS,
     DEFAULT_SETTINGS,
@@ -24,6 +31,7 @@ __all__ = [
     "StandRun",
     "as_built_values",
     "dither_amplitude",
+    "order_ramps",
     "plot_pressure_vs_current",
     "run_stand",
     "truth_path",

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from ...data import Dataset, dither_period_mean, dither_period_samples
-from .scenarios import DitherSetting
+from .scenarios import DitherSetting, order_ramps
 
 __all__ = ["plot_pressure_vs_current"]
 
@@ -29,6 +31,22 @@ def _setting_tag(trace) -> str:
     return "_".join(trace.name.rsplit("_", 2)[1:])  # <ramp label>_<freq>Hz_<shape>
 
 
+def _command_ramp_rate(trace) -> float | None:
+    """Ramp rate of an experiment (mA/s), from its current command ``current_cmd_mA``.
+
+    The 95th percentile of |dI/dt| over the samples where the command changes, to 6
+    significant digits: the rate of a piecewise-linear ramp (the holds left out), equal for
+    equal ramps; None when the command never changes.
+    """
+    t, cmd = trace.time_s, trace.get("current_cmd_mA")
+    if len(t) < 2:
+        return None
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slope = np.abs(np.gradient(cmd, t))
+    moving = slope[np.isfinite(slope) & (slope > 0)]
+    return float(f"{np.percentile(moving, 95):.6g}") if moving.size else None
+
+
 def plot_pressure_vs_current(dataset: Dataset, setting: str | None = None):
     """Clutch pressure (dither-period averaged, bar) vs nominal current (mA), per ramp.
 
@@ -43,8 +61,9 @@ def plot_pressure_vs_current(dataset: Dataset, setting: str | None = None):
     Returns
     -------
     matplotlib.figure.Figure
-        One line per ramp; ``fast`` / ``medium`` / ``slow`` in blue / black / green, every
-        other ramp label in a colour of its own.
+        One line per ramp, fastest ramp first (the rate of its current command;
+        alphabetical among equal rates, ramps without one last); ``fast`` / ``medium`` /
+        ``slow`` in blue / black / green, every other ramp label in a colour of its own.
     """
     from matplotlib.figure import Figure  # imported on use: simulation workers never draw
 
@@ -52,9 +71,13 @@ def plot_pressure_vs_current(dataset: Dataset, setting: str | None = None):
     ax = fig.subplots()
     tag = setting or (_setting_tag(dataset[0]) if len(dataset) else "")
     others: dict[str, str] = {}
-    for trace in dataset:
-        if _setting_tag(trace) != tag or not trace.has("current_cmd_mA"):
-            continue
+    shown = [t for t in dataset if _setting_tag(t) == tag and t.has("current_cmd_mA")]
+    rates: dict[str, float | None] = {}
+    for trace in shown:  # a label's fastest experiment (one each, in a stand dataset)
+        label, rate = str(trace.ramp), _command_ramp_rate(trace)
+        rates[label] = max(filter(None, (rates.get(label), rate)), default=None)
+    rank = {label: k for k, label in enumerate(order_ramps(rates, rates))}
+    for trace in sorted(shown, key=lambda t: rank[str(t.ramp)]):  # stable sort
         if trace.ramp not in _COLORS and trace.ramp not in others:
             others[trace.ramp] = _OTHER_COLORS[len(others) % len(_OTHER_COLORS)]
         p = dither_period_mean(trace.get("clutch_pressure_bar"), dither_period_samples(trace))
