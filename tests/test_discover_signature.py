@@ -315,7 +315,9 @@ def test_a_residual_left_unexplained_names_the_signal_it_cannot_be_told_from():
     res = _oil_with_the_ramp()
     diag = diagnose(res)
     assert not diag.whiteness["white"]
-    last = SimpleNamespace(effect=None, decision="no significant effect", candidates=[])
+    last = SimpleNamespace(
+        effect=None, decision="no significant effect", candidates=[], time_limited=False
+    )
     text = loop._summary([last], False, diag, 2)
     assert text.startswith("no missing effect found; stopped: no significant effect")
     assert "oil_temp_C (" in text and "moves with the ramp in every run" in text

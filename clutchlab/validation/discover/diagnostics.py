@@ -359,7 +359,8 @@ class Diagnostics:
         p = self.whiteness.get("p_value", 1.0)
         ramp = self.ramp_note()
         return (
-            f"RMS {self.rms_bar:.4f} bar, {white} (Ljung–Box p {p:.2g}, "
+            f"RMS {self.rms_bar:.4f} bar without the samples near latch snaps (the training "
+            f"RMSE includes them), {white} (Ljung–Box p {p:.2g}, "
             f"τ {self.tau_samples:.1f}); follows {follows}; {xc}" + (f"; {ramp}" if ramp else "")
         )
 
