@@ -73,6 +73,36 @@ def _fmu_params(items: list[str] | None, fmu: str | None) -> dict[str, float]:
     return out
 
 
+def _fmu_ports(
+    items: list[str] | None, output: str | None, fmu: str | None
+) -> tuple[dict[str, str], str | None]:
+    """``--fmu-input FMU_INPUT=SIGNAL`` options as a dict, and ``--fmu-output``.
+
+    Raises
+    ------
+    ModelError
+        A malformed ``--fmu-input`` (its text), or either option without ``--physics-fmu``
+        (it would be ignored): a usage error, exit status 2.
+    """
+    from .errors import ModelError
+
+    out = {}
+    for item in items or ():
+        name, sep, signal = item.partition("=")
+        if not sep or not name.strip() or not signal.strip():
+            raise ModelError(
+                f"--fmu-input {item!r}: expected FMU_INPUT=SIGNAL, e.g. I_cmd=current_cmd_mA"
+            )
+        out[name.strip()] = signal.strip()
+    given = [o for o, v in (("--fmu-input", out), ("--fmu-output", output)) if v]
+    if given and not fmu:
+        raise ModelError(
+            f"{' and '.join(given)} name(s) a port of the --physics-fmu FMU, and no "
+            "--physics-fmu was given"
+        )
+    return out, output
+
+
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from .data import load_dataset
     from .physics import CircuitModel
@@ -80,6 +110,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     from .validation import evaluate, write_report
 
     fmu_params = _fmu_params(args.fmu_param, args.physics_fmu)  # fails before any work
+    input_map, output = _fmu_ports(args.fmu_input, args.fmu_output, args.physics_fmu)
     dataset = load_dataset(args.dataset, channel_map=args.map)
     fmu = None
     if args.physics_fmu:
@@ -90,6 +121,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
             timeout_s=args.fmu_timeout,
             isolate=args.fmu_isolate,
             parameters=fmu_params,
+            input_map=input_map or None,
+            output=output,
         )
     kw = {"progress": not args.quiet, "time_limit_s": args.fit_time_limit}
     if args.fit_max_iter is not None:
@@ -192,6 +225,20 @@ def register(sub) -> None:
         metavar="NAME=VALUE",
         help="set an FMU parameter before initialization (in the FMU's unit); repeat for "
         "more. Parameters left at the FMU's start value are listed in the report",
+    )
+    p.add_argument(
+        "--fmu-input",
+        action="append",
+        metavar="FMU_INPUT=SIGNAL",
+        help="feed the FMU input FMU_INPUT from the canonical signal SIGNAL (e.g. "
+        "I_cmd=current_cmd_mA); repeat for more. Inputs named like a canonical signal are "
+        "fed without it; the others keep their start values",
+    )
+    p.add_argument(
+        "--fmu-output",
+        metavar="NAME",
+        help="the FMU's Real output with the clutch pressure (default clutch_pressure_bar, "
+        "else its only Real output)",
     )
     p.add_argument(
         "--fmu-timeout",

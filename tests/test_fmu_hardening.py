@@ -159,3 +159,59 @@ def test_limits_are_raised_by_their_environment_variables(feedthrough, tmp_path,
     physics = FmuPhysics(fmu, **MAP, **OUT)
     assert physics.interface_.output.name == "Float64_continuous_output"
     assert os.environ["CLUTCHLAB_FMU_MAX_RATIO"] == "100000"
+
+
+class _Stop(BaseException):
+    """Ends a command at the evaluation (neither an error nor Ctrl-C to the command line)."""
+
+
+def test_evaluate_maps_a_vendor_fmus_input_and_output_from_the_command_line(
+    feedthrough, trace, tmp_path, monkeypatch, capsys
+):
+    """``clutchlab evaluate --physics-fmu`` on an FMU with other port names: before
+    ``--fmu-input`` / ``--fmu-output`` it could not be used from the command line at all, and
+    the error pointed at ``input_map`` / ``output=``, which exist in Python only."""
+    import clutchlab.validation as validation
+    from clutchlab.cli import main
+    from clutchlab.data import Dataset, save_dataset
+
+    save_dataset(Dataset([trace]), tmp_path / "data")
+    seen = {}
+
+    def capture(*args, physics_fmu=None, **kwargs):
+        seen["fmu"] = physics_fmu
+        raise _Stop  # before any fit
+
+    monkeypatch.setattr(validation, "evaluate", capture)
+    argv = ["evaluate", str(tmp_path / "data"), "--out", str(tmp_path / "r"), "--quiet"]
+    argv += ["--physics-fmu", str(feedthrough)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "--fmu-input NAME=SIGNAL" in err and "--fmu-output NAME" in err
+    ports = ["--fmu-input", "Float64_continuous_input=current_mA"]
+    ports += ["--fmu-output", "Float64_continuous_output"]
+    with pytest.raises(_Stop):
+        main([*argv, *ports])
+    interface = seen["fmu"].interface_
+    assert [(p.name, p.signal) for p in interface.inputs] == [
+        ("Float64_continuous_input", "current_mA")
+    ]
+    assert interface.output.name == "Float64_continuous_output"
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--fmu-input", "I_cmd", "--physics-fmu", "x.fmu"], "expected FMU_INPUT=SIGNAL"),
+        (["--fmu-input", "I_cmd=current_cmd_mA"], "no --physics-fmu was given"),
+        (["--fmu-output", "p_out"], "no --physics-fmu was given"),
+    ],
+)
+def test_a_bad_fmu_port_option_is_a_usage_error(tmp_path, capsys, extra, message):
+    from clutchlab.cli import main
+
+    out = tmp_path / "report"
+    code = main(["evaluate", str(tmp_path / "no-data"), "--out", str(out), "--quiet", *extra])
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith("clutchlab evaluate: error: --fmu-") and message in err
+    assert not out.exists()

@@ -350,7 +350,8 @@ def inspect_fmu(
                 problems.append(
                     f"input {var.name!r} has no source: it is not a canonical signal name "
                     f"and has no start value; map it with input_map={{{var.name!r}: "
-                    f"'<signal>'}} (signals: {', '.join(s for s in SIGNALS if s != 'time_s')})"
+                    f"'<signal>'}} (clutchlab evaluate: --fmu-input {var.name}=SIGNAL; signals: "
+                    f"{', '.join(s for s in SIGNALS if s != 'time_s')})"
                 )
             else:
                 unfed[var.name] = f"Real, not mapped to a signal, kept at its {start_text}"
@@ -369,7 +370,11 @@ def inspect_fmu(
         problems.append(
             "missing input: no FMU input takes the solenoid current (current_mA or "
             f"current_cmd_mA); its inputs are {', '.join(sorted(names))}"
-            + ("" if input_map else " — map one with input_map")
+            + (
+                ""
+                if input_map
+                else " — map one with input_map (clutchlab evaluate: --fmu-input NAME=SIGNAL)"
+            )
             + (f" (left at their start values: {', '.join(unfed)})" if unfed else "")
         )
     elif not fmu_inputs:
@@ -385,7 +390,8 @@ def inspect_fmu(
     if output is None or output not in outs:
         problems.append(
             f"no output {output or 'clutch_pressure_bar'!r} for the clutch pressure; "
-            f"Real outputs: {', '.join(outs) or 'none'} (choose one with output=...)"
+            f"Real outputs: {', '.join(outs) or 'none'} (choose one with output=..., "
+            "clutchlab evaluate: --fmu-output NAME)"
         )
     else:
         var = outs[output]
