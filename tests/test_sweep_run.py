@@ -265,6 +265,25 @@ def test_read_results_compares_parts_with_a_consolidated_file_of_an_earlier_vers
     assert list(df["point_id"]) == ["a", "b"] and list(df["x"]) == [2.0, 3.0]
 
 
+def test_read_results_of_a_folder_or_a_non_parquet_file_names_it(tmp_path):
+    """The parts folder or another file passed by mistake: one error naming it and what to
+    pass, not pyarrow's 'Parquet magic bytes not found' about a file inside the folder."""
+    from clutchlab.errors import DataError
+
+    out = tmp_path / "res.parquet"
+    parts = out.with_name(out.name + ".parts")
+    parts.mkdir()
+    (parts / "spec.json").write_text("{}")
+    with pytest.raises(
+        DataError, match=r"res\.parquet\.parts: is a folder.*--out file .*res\.parquet\)"
+    ):
+        read_results(parts)
+    spec = tmp_path / "spec.toml"
+    spec.write_text('name = "x"\n')
+    with pytest.raises(DataError, match=r"spec\.toml: not a sweep's results file"):
+        read_results(spec)
+
+
 def test_one_level_variable_gives_an_undefined_sensitivity_without_numpy_warnings(tmp_path):
     """Issue 17: ``values = [12.0]`` printed 6 RuntimeWarnings and wrote n = 0 for 1 ok point."""
     import warnings

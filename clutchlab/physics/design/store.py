@@ -42,7 +42,7 @@ from ...data.output import (
     ownership_record,
     write_file_atomic,
 )
-from ...errors import OutputError
+from ...errors import DataError, OutputError
 from .spec import SpecError
 
 __all__ = [
@@ -315,6 +315,8 @@ def read_results(path: str | Path) -> pd.DataFrame:
     ------
     FileNotFoundError
         Neither the file nor any part file exists.
+    DataError
+        ``path`` is a folder (e.g. the ``.parts`` folder) or a file that is not Parquet.
 
     Warns
     -----
@@ -322,12 +324,25 @@ def read_results(path: str | Path) -> pd.DataFrame:
         The consolidated file is older than part files of an unfinished run.
     """
     path = Path(path)
+    if path.is_dir():
+        hint = (
+            f"pass the sweep's --out file ({path.with_name(path.name[: -len('.parts')])}), "
+            "not its parts folder"
+            if path.name.endswith(".parts")
+            else "pass the --out file (.parquet) of a sweep"
+        )
+        raise DataError(f"{path}: is a folder, not a sweep's results file; {hint}")
     parts = path.with_name(path.name + ".parts")
     files = sorted(f for f in parts.glob("part-*.parquet") if _PART.fullmatch(f.name))
     if path.exists():
         newer = _newer_parts(path, files) if files else []
         if not newer:
-            return pd.read_parquet(path)
+            try:
+                return pd.read_parquet(path)
+            except (OSError, pa.ArrowException) as exc:
+                raise DataError(
+                    f"{path}: not a sweep's results file (not readable as Parquet: {exc})"
+                ) from None
         warnings.warn(
             f"{path} is older than {len(newer)} part file{'s' if len(newer) > 1 else ''} of "
             f"an unfinished run in {parts}: read the parts instead (the newest row of each "
