@@ -265,6 +265,21 @@ def test_read_results_compares_parts_with_a_consolidated_file_of_an_earlier_vers
     assert list(df["point_id"]) == ["a", "b"] and list(df["x"]) == [2.0, 3.0]
 
 
+def test_read_results_of_a_first_run_stopped_before_consolidating_warns(tmp_path):
+    """No consolidated file, only parts: the rows are those of an unfinished run, which a
+    user was not told (the warning came only when an older consolidated file lay beside)."""
+    from clutchlab.physics.design import UnfinishedSweepWarning
+
+    out = tmp_path / "first.parquet"
+    parts = out.with_name(out.name + ".parts")
+    parts.mkdir()
+    row = {"point_id": "a", "index": 0, "status": "ok", "error": "", "x": 1.0}
+    pd.DataFrame([row]).to_parquet(parts / _part_name(1_000_000_000_000_000_000))
+    with pytest.warns(UnfinishedSweepWarning, match=r"does not exist: the sweep was stopped"):
+        df = read_results(out)
+    assert list(df["x"]) == [1.0]
+
+
 def test_read_results_of_a_folder_or_a_non_parquet_file_names_it(tmp_path):
     """The parts folder or another file passed by mistake: one error naming it and what to
     pass, not pyarrow's 'Parquet magic bytes not found' about a file inside the folder."""

@@ -70,7 +70,9 @@ _MTIME_SLACK_NS = 2_000_000_000
 
 
 class UnfinishedSweepWarning(UserWarning):
-    """The consolidated results file is older than part files of a later, unfinished run.
+    """The results read are those of an unfinished run: the consolidated results file is
+    missing (the sweep was stopped before it consolidated) or older than part files of a
+    later, unfinished run.
 
     :func:`read_results` then reads the parts (the newest row per point), not the file.
     """
@@ -296,8 +298,9 @@ def read_results(path: str | Path) -> pd.DataFrame:
 
     The consolidated file is read unless part files newer than it lie beside it: a later run
     (an extended sweep of the same spec, or one with ``retry_failed``) was stopped before it
-    consolidated. Then the parts are read as for an unfinished sweep, with an
-    :class:`UnfinishedSweepWarning`; running that sweep again finishes and consolidates it.
+    consolidated. Then, and when there is no consolidated file, the parts are read as for an
+    unfinished sweep, with an :class:`UnfinishedSweepWarning`; running that sweep again
+    finishes and consolidates it.
 
     Parameters
     ----------
@@ -321,7 +324,7 @@ def read_results(path: str | Path) -> pd.DataFrame:
     Warns
     -----
     UnfinishedSweepWarning
-        The consolidated file is older than part files of an unfinished run.
+        The consolidated file is missing, or older than part files of an unfinished run.
     """
     path = Path(path)
     if path.is_dir():
@@ -352,5 +355,14 @@ def read_results(path: str | Path) -> pd.DataFrame:
         )
     if not files:
         raise FileNotFoundError(f"no results at {path} (nor parts in {parts})")
+    if not path.exists():
+        warnings.warn(
+            f"{path} does not exist: the sweep was stopped before it consolidated; read the "
+            f"{len(files)} part file{'s' if len(files) > 1 else ''} in {parts} instead (the "
+            "newest row of each point, not every point of the design); run that sweep again "
+            "to finish and consolidate it",
+            UnfinishedSweepWarning,
+            stacklevel=2,
+        )
     df = pd.concat([pd.read_parquet(f) for f in files], ignore_index=True)
     return df.drop_duplicates("point_id", keep="last").sort_values("index", ignore_index=True)
