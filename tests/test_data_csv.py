@@ -232,7 +232,8 @@ def test_read_csv_parentheses_without_a_known_unit_stay_in_the_name(tmp_path):
         "time_s,current_mA,P(clutch),pressure (gauge),T(),current(mA)\n"
         "0,100,1,17,40,100\n0.001,200,2,17,40,200\n",
     )
-    # A map written for a header as it stands keeps it whole: current(mA) here.
+    # A map written for a header as it stands keeps it whole, with the file's unit:
+    # current(mA) here.
     wanted = {"P(clutch)", "pressure (gauge)", "current(mA)"}.__contains__
     raw = decode_csv(path, wanted)
     assert [(c.name, c.unit) for c in raw.channels] == [
@@ -241,7 +242,7 @@ def test_read_csv_parentheses_without_a_known_unit_stay_in_the_name(tmp_path):
         ("P(clutch)", None),
         ("pressure (gauge)", None),
         ("T()", None),
-        ("current(mA)", None),
+        ("current(mA)", "mA"),
     ]
     cmap = {
         "signals": {
@@ -254,6 +255,20 @@ def test_read_csv_parentheses_without_a_known_unit_stay_in_the_name(tmp_path):
     np.testing.assert_array_equal(tr.get("clutch_pressure_bar"), [1.0, 2.0])
     np.testing.assert_array_equal(tr.get("line_pressure_bar"), [17.0, 17.0])
     np.testing.assert_array_equal(tr.get("current_cmd_mA"), [100.0, 200.0])
+
+
+def test_a_map_naming_a_unit_header_whole_cannot_give_it_another_unit(tmp_path):
+    """``P_clutch (bar)`` named whole by a map that says kPa was read as kPa: 100 × off."""
+    path = write_text(
+        tmp_path / "p.csv", "time_s,current_mA,P_clutch (bar)\n0,100,1\n0.001,200,2\n"
+    )
+    whole = {"signals": {"clutch_pressure_bar": {"channel": "P_clutch (bar)", "unit": "kPa"}}}
+    with pytest.raises(DataError, match=r"says unit 'kPa' but the file says 'bar'"):
+        read_csv(path, channel_map=whole)
+    same = {"signals": {"clutch_pressure_bar": {"channel": "P_clutch (bar)"}}}
+    np.testing.assert_array_equal(
+        read_csv(path, channel_map=same).get("clutch_pressure_bar"), [1, 2]
+    )
 
 
 def test_read_csv_tolerates_trailing_blank_lines(tmp_path):

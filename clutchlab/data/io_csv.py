@@ -186,19 +186,23 @@ def _split_unit(header: str, wanted: Callable[[str], bool] | None = None) -> tup
     """Column name and unit of a header: ``"P_CL [kPa]"`` or ``"P_CL (kPa)"`` → ``("P_CL", "kPa")``.
 
     An array index (``"P[0]"``) stays in the name, as does text in parentheses that is not a
-    known unit (``"P(clutch)"``, ``"pressure (gauge)"``), and a header in parentheses that a
-    channel map names whole (``wanted(header)``, a map written for the header as it stands).
+    known unit (``"P(clutch)"``, ``"pressure (gauge)"``). A header in parentheses that a
+    channel map names whole (``wanted(header)``, a map written for the header as it stands)
+    keeps its name whole, and its unit is still the file's: a map that gives another unit
+    for it is refused as for ``name [unit]``, not applied to values logged in the header's
+    unit (``"P_clutch (bar)"`` read as kPa would be 100 × off).
     """
     match = _UNIT_HEADER.match(header)
     if match and match["name"] and not match["unit"].strip().isdigit():
         return match["name"], match["unit"].strip() or None
     match = _PAREN_UNIT_HEADER.match(header)
-    if match and match["name"] and not (wanted is not None and wanted(header)):
+    if match and match["name"]:
         try:
             parse_unit(match["unit"])
         except DataError:
             return header, None
-        return match["name"], match["unit"].strip()
+        named_whole = wanted is not None and wanted(header)
+        return (header if named_whole else match["name"]), match["unit"].strip()
     return header, None
 
 
