@@ -63,7 +63,9 @@ def test_a_budget_caps_the_time_limit_of_a_fit_and_stops_when_spent():
         assert capped and 29.0 < fit.time_limit_s <= 30.0
         check_budget("a refit")  # budget left: no stop
     with discovery_budget(10.0, time.perf_counter() - 11.0):
-        with pytest.raises(DiscoveryTimeLimit, match=r"time limit \(10 s\).*before a refit"):
+        with pytest.raises(
+            DiscoveryTimeLimit, match=r"time budget \(10 s\) was spent before a refit"
+        ):
             check_budget("a refit")
     with discovery_budget(5000.0, time.perf_counter()):  # the fit's own limit binds
         fit, capped = capped_fit(FIT)
@@ -82,11 +84,16 @@ def test_a_refit_the_budget_stops_is_not_returned_as_a_result(tiny):  # noqa: F8
 
 def test_a_spent_budget_ends_the_discovery_before_its_first_iteration(tiny, base_fit):  # noqa: F811
     settings = _settings(candidates=CANDIDATES, max_effects=1, time_limit_s=1e-3)
-    with pytest.warns(FitWarning, match="time limit"):
+    with pytest.warns(FitWarning, match="time budget") as recorded:
         res = discover(tiny, settings=settings, baseline=base_fit)
     (it,) = res.iterations
     assert it.time_limited and res.time_limited and it.effect is None and res.added == []
-    assert it.decision.startswith("stopped: the discovery's time limit (0.001 s)")
+    assert it.decision.startswith("stopped: the discovery's time budget (0.001 s)")
+    assert (
+        recorded[0]
+        .message.args[0]
+        .endswith(f"the model is its baseline fit ({base_fit.status}, not converged)")
+    )
     assert "before iteration 0" in it.decision
     assert res.summary.startswith("no effect added; stopped:")
     assert "the rest of the search did not run" in res.summary
@@ -120,7 +127,7 @@ def test_a_refit_stopped_by_the_budget_keeps_the_evidence_and_claims_nothing(
     (cand,) = it.candidates
     assert cand.significant  # scored as far as it got: the evidence is kept
     assert it.decision == (
-        "stopped: the discovery's time limit (600 s) was reached before the refit with "
+        "stopped: the discovery's time budget (600 s) was spent before the refit with "
         "supply_droop; no effect claimed"
     )
     assert not res.unexplained
@@ -176,11 +183,11 @@ def test_the_terminal_summary_says_the_discovery_stopped_at_its_limit():
     }
     lines = summary_lines(doc)
     assert any(
-        line.startswith("augmented_hybrid: its discovery stopped at its time limit (194")
+        line.startswith("augmented_hybrid: its discovery stopped at its time budget (194")
         for line in lines
     )
     doc["discovery"]["time_limited"] = False
-    assert not any("time limit" in line for line in summary_lines(doc))
+    assert not any("time budget" in line for line in summary_lines(doc))
 
 
 def test_cli_budget_ends_the_discovery_with_a_warning_and_exit_0(tiny_dir, tmp_path, capsys):  # noqa: F811
@@ -190,7 +197,7 @@ def test_cli_budget_ends_the_discovery_with_a_warning_and_exit_0(tiny_dir, tmp_p
     code = main([*argv, "--budget", "0.001", "--quiet"])
     captured = capsys.readouterr()
     assert code == 0, captured.err
-    assert "warning: discovery: stopped: the discovery's time limit (0.001 s)" in captured.err
+    assert "warning: discovery: stopped: the discovery's time budget (0.001 s)" in captured.err
     doc = json.loads((tmp_path / "d.json").read_text(encoding="utf-8"))
     assert doc["time_limited"] is True and doc["added"] == []
     assert (out / "report.html").is_file()

@@ -265,7 +265,7 @@ def summary_lines(doc: dict[str, Any]) -> list[str]:
     disc = doc.get("discovery") or {}
     if disc.get("time_limited") and "augmented_hybrid" in rows:
         out.append(
-            f"augmented_hybrid: its discovery stopped at its time limit "
+            f"augmented_hybrid: its discovery stopped at its time budget "
             f"({fmt(disc.get('time_limit_s'))} s) before it decided; it claims no effect it "
             "did not confirm in full (the summary in the report says where it stopped)"
         )

@@ -473,7 +473,7 @@ def _iteration(
                 return s, "added"
         return None, _matched_decision(matched, "all training experiments")
 
-    try:  # the refits run in attempt(): where the discovery's time limit can stop it
+    try:  # the refits run in attempt(): where the discovery's time budget can stop it
         chosen, decision = attempt(scores)
         if chosen is None and not diag.whiteness.get("white", True):
             # about to leave a structured (non-white) residual unexplained: look again, with
@@ -573,14 +573,22 @@ def discover(
     last = iterations[-1]
     # "Unexplained" needs structure that follows an examined signal: a residual that is
     # not white but follows none of them (line-pressure wander, noise) names nothing; and a
-    # look that the time limit cut short does not get to call anything unexplained.
+    # look that the time budget cut short does not get to call anything unexplained.
     structured = not final_diag.whiteness.get("white", True)
     follows = bool(final_diag.signature) and not last.time_limited
     unexplained = last.effect is None and bool(last.candidates) and structured and follows
     signature = final_diag.signature if unexplained else []
     summary = _summary(iterations, unexplained, final_diag, settings.fit.substeps)
     if last.time_limited:
-        message = f"discovery: {last.decision}; the model is the one it had"
+        fit, added = current.fit, [it.effect for it in iterations if it.effect]
+        had = (
+            f"the model is the one it had ({', '.join(added)} added)"
+            if added
+            else f"the model is its baseline fit ({fit.status}"
+            + ("" if fit.success else ", not converged")
+            + ")"
+        )
+        message = f"discovery: {last.decision}; {had}"
         warnings.warn(message, FitWarning, stacklevel=2)
     return DiscoveryResult(
         iterations=iterations,

@@ -86,7 +86,7 @@ class DiscoverySettings:
         (each fit still has ``fit.time_limit_s``). No refit starts once it is spent, each
         refit's time limit is at most what is left, and a refit it stops is not judged: the
         discovery ends with the model it has, claims nothing it did not confirm in full,
-        and says that it stopped at its time limit (:mod:`.deadline`).
+        and says that it stopped at its time budget (:mod:`.deadline`).
     progress : bool
         Show a progress bar per stage.
     """
