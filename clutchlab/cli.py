@@ -348,7 +348,7 @@ def check_outputs(args: argparse.Namespace) -> None:
     - ``--json`` must not name ``--out`` itself, nor a non-JSON file written in the ``--out``
       folder (``report_files``): one would be written over the other.
     """
-    from .data.output import check_folder_kind, check_output
+    from .data.output import check_output
 
     if getattr(args, "json", None):
         check_output(args.json, kind="file", overwrite=True, what="--json")
@@ -379,13 +379,11 @@ def check_outputs(args: argparse.Namespace) -> None:
         check_output(out, kind="folder", overwrite=True, what="--out")
         _check_replaceable(Path(out) / "model.json", args, "--out", "json")
     if getattr(args, "report_out", False):
-        check_output(out, kind="folder", overwrite=True, what="--out", whole=True)
-        from .data.output import check_folder_files
+        from .data.output import check_report_out
         from .validation.report import REPORT_FOLDER
 
-        check_folder_kind(out, REPORT_FOLDER)
         # a user's report.html there is refused now, not after an hour of fitting
-        check_folder_files(out, getattr(args, "report_files", ()), what=REPORT_FOLDER)
+        check_report_out(out, getattr(args, "report_files", ()), kind=REPORT_FOLDER)
 
 
 #: Arguments that name what a command writes, not what it reads.

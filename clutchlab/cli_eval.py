@@ -9,12 +9,12 @@ from pathlib import Path
 
 from .budgets import FIT_BUDGET_S
 from .cli_types import add_map_argument, positive_float
+from .report_files import REPORT_FILES
 
 __all__ = ["REPORT_FILES", "command_line", "register", "run_demo_command"]
 
 #: The fixed files of an evaluation report (figures/ beside them vary with the variants);
 #: a user's file of one of these names in --out is refused before any work.
-REPORT_FILES = ("report.html", "report.md", "metrics.json", "metrics.csv")
 
 
 def _csv(text: str | None) -> tuple[str, ...]:

@@ -83,3 +83,25 @@ def test_demo_end_to_end_from_the_console_script(tmp_path):
     )
     assert "report:" in again.stdout
     assert json.loads((out / "metrics.json").read_text())["stand_data_cached"] is True
+
+
+def test_the_demo_refuses_its_output_folder_before_any_work(tmp_path, monkeypatch):
+    """``run_demo`` (the Python API, which the CLI's own checks do not cover) refused the
+    current folder only when writing the report, after the whole run (session 41)."""
+    import clutchlab.validation.demo as demo
+    from clutchlab.errors import OutputError
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("the demo started its work")
+
+    monkeypatch.setattr(demo, "stand_data", no_work)
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(OutputError, match="is the current folder or holds it"):
+        run_demo(tmp_path, progress=False)
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "report.html").write_text("my own report")
+    with pytest.raises(OutputError, match=r"report\.html"):
+        run_demo(mine, progress=False)
+    assert (mine / "report.html").read_text() == "my own report"
+    assert sorted(p.name for p in mine.iterdir()) == ["report.html"]

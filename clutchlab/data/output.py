@@ -44,6 +44,7 @@ __all__ = [
     "check_folder_files",
     "check_folder_kind",
     "check_output",
+    "check_report_out",
     "has_ownership_record",
     "owned_files",
     "ownership_record",
@@ -412,6 +413,33 @@ def check_folder_kind(path: str | Path, what: str) -> None:
             f"{what} {path}: holds a {kind} clutchlab wrote ({len(owned)} files); writing a "
             f"{what} there would replace it; choose another folder"
         )
+
+
+def check_report_out(
+    path: str | Path, names: Iterable[str], *, kind: str, what: str = "--out"
+) -> None:
+    """Refuse, before any work, a report folder that writing the report would refuse.
+
+    Parameters
+    ----------
+    path : path-like
+        The report folder (nothing but its parents need exist yet).
+    names : iterable of str
+        The report's fixed files (relative POSIX paths).
+    kind : str
+        The folder's kind in its ownership record (e.g. ``"report folder"``).
+    what : str
+        How the folder is named in messages (the option, ``--out``).
+
+    Raises
+    ------
+    OutputError
+        A file, the current folder or one holding it (the folder is swapped whole), another
+        kind of clutchlab output, or a user's file where one of ``names`` would go.
+    """
+    check_output(path, kind="folder", overwrite=True, what=what, whole=True)
+    check_folder_kind(path, kind)
+    check_folder_files(path, names, what=kind)
 
 
 def check_folder_files(

@@ -16,8 +16,10 @@ from typing import Any
 
 from ..budgets import FIT_BUDGET_S
 from ..data import Dataset, load_dataset
+from ..data.output import check_report_out
+from ..report_files import REPORT_FILES
 from .evaluate import Evaluation, evaluate
-from .report import ReportFiles, write_report
+from .report import REPORT_FOLDER, ReportFiles, write_report
 from .variants import available_variants
 
 __all__ = [
@@ -152,6 +154,8 @@ def run_demo(
     from ..physics.fit import FitSettings
 
     out = Path(out)
+    # refused now, not after ten minutes of fitting: the folder is written by swapping it
+    check_report_out(out, REPORT_FILES, kind=REPORT_FOLDER, what="demo output folder")
     out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
     _say(progress, f"[1/3] stand data in {out / 'stand_data'}")
