@@ -48,7 +48,7 @@ class DiscoveryTimeLimit(Exception):
     """
 
     def __init__(self, before: str, limit_s: float) -> None:
-        super().__init__(f"the discovery's time budget ({limit_s:g} s) was spent before {before}")
+        super().__init__(f"the discovery's time budget ({limit_s:.3g} s) was spent before {before}")
         self.before = before
         self.limit_s = limit_s
 
