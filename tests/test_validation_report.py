@@ -323,6 +323,11 @@ def test_evaluate_cli_on_parquet_with_renamed_channels(tiny, tmp_path):
         f"{pm['rmse_regulated_bar']:.4f}",
     ]
     assert json.loads(js.read_text()) == doc
+    # how the measured signals were read is in the report (found by session 41's hunt: only
+    # the command line said so, and not at all for a manifest's own map)
+    assert doc["dataset"]["channel_maps"] == [str(pq / "stand_b.toml")]
+    html = (out / "report.html").read_text(encoding="utf-8")
+    assert f"read through channel map {pq / 'stand_b.toml'}" in html
     assert doc["command"].startswith("clutchlab evaluate ") and "--variants" in doc["command"]
     # Same numbers as the in-process evaluation of the canonical CSV dataset.
     csv_dir = tmp_path / "csv"

@@ -228,6 +228,14 @@ def _region_table(doc: dict[str, Any]) -> tuple[str, list[str], list[list[str]]]
     return caption, head, rows
 
 
+def _maps_text(data: dict[str, Any]) -> str:
+    """``", read through channel map X"`` for the dataset line ("" without one)."""
+    maps = data.get("channel_maps") or []  # absent in reports before session 41
+    if not maps:
+        return ""
+    return f", read through channel map{'s' if len(maps) > 1 else ''} {', '.join(maps)}"
+
+
 def summary_lines(doc: dict[str, Any]) -> list[str]:
     """A terminal summary of a report document: per variant its test RMSE (bar, dither-period
     mean), the share of its squared error within the latch window, and its RMSE in the
@@ -356,7 +364,8 @@ def render_markdown(doc: dict[str, Any], figure_files: list[tuple[str, str, str]
         f"Created {doc['created_utc']} · clutchlab {doc['versions']['clutchlab']} · "
         f"total {fmt(doc['timings'].get('total_s', doc['timings'].get('evaluate_s')))} s",
         "",
-        f"Dataset: {data['experiments']} experiments ({_md_text(data['root'] or 'in memory')}); "
+        f"Dataset: {data['experiments']} experiments ({_md_text(data['root'] or 'in memory')}"
+        f"{_md_text(_maps_text(data))}); "
         f"train = {_md_text(', '.join(split['train_ramps']))} ({len(split['train'])} "
         f"experiments), test = {_md_text(', '.join(split['test_ramps']))} "
         f"({len(split['test'])} experiments, never "
@@ -615,7 +624,8 @@ def render_html(
         f"Created {_e(doc['created_utc'])} · clutchlab {_e(doc['versions']['clutchlab'])} · "
         f"total {_e(fmt(total))} s</p>",
         f"<p>Dataset: {data['experiments']} experiments "
-        f"(<code>{_e(data['root'] or 'in memory')}</code>), {data['samples']} samples, "
+        f"(<code>{_e(data['root'] or 'in memory')}</code>{_e(_maps_text(data))}), "
+        f"{data['samples']} samples, "
         f"{_e(fmt(data['duration_s']))} s. Train ramps: <b>{_e(', '.join(split['train_ramps']))}"
         f"</b> ({len(split['train'])} experiments); test ramps: "
         f"<b>{_e(', '.join(split['test_ramps']))}</b> ({len(split['test'])} experiments) — "
