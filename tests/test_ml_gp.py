@@ -236,7 +236,11 @@ def test_hyperparameters_on_a_bound_are_reported():
     x = rng.uniform(0, 10, (400, 1))
     y = np.sin(x[:, 0]) + rng.normal(0, 0.3, 400)  # noise far above the allowed range
     gp = LocalGPRegressor(kernel="rq", noise_var_bounds=(1e-8, 1e-4), noise_var=1e-5).fit(x, y)
-    assert any(e.startswith("noise_var (upper bound 0.0001)") for e in gp.at_bounds_)
+    # the bound holds for the standardized target: also given in target units² (session 41)
+    target = f"{1e-4 * gp.y_scale_**2:.3g}"
+    assert f"noise_var (upper bound 0.0001 standardized = {target} in target units²)" in (
+        gp.at_bounds_
+    )
     h = gp.hyperparameters()
     assert h["at_bounds"] == gp.at_bounds_ and h["alpha"] is not None
     json.dumps(h, allow_nan=False)  # JSON-ready

@@ -605,20 +605,37 @@ class LocalGPRegressor(RegressorMixin, BaseEstimator):
         A hyperparameter on its bound means the likelihood wanted a value outside the
         range (an RQ α on its lower bound: a heavier-tailed mixture of length scales than
         allowed; a noise variance on its lower bound: the bins look noise-free). Entries
-        read ``"alpha (lower bound 0.01)"``; length scales are named by input index.
+        read ``"alpha (lower bound 0.01)"``; length scales are named by input index. The
+        bounds (``*_bounds``) hold for the standardized inputs and target; where that is
+        not the unit :meth:`hyperparameters` reports in, the entry also gives the bound in
+        input units (length scales) or target units squared (variances):
+        ``"length_scale[1] (upper bound 1e+03 standardized = 4.71e+04 in input units)"``.
         """
         check_is_fitted(self, "theta_")
         spec = self.kernel_
         names = ["signal_var"] + [f"length_scale[{j}]" for j in range(spec.n_length)]
+        # what a standardized value is in the units of hyperparameters(): None where the same
+        y2 = float(self.y_scale_) ** 2
+        x_scale = np.atleast_1d(np.asarray(self.x_scale_, dtype=float))
+        units = [(y2, "target units²")]
+        if len(x_scale) == spec.n_length:  # one length scale per input
+            units += [(float(s), "input units") for s in x_scale]
+        else:  # isotropic on standardized inputs: no single value in input units
+            units += [None] * spec.n_length
         if spec.name == "rq":
             names.append("alpha")
+            units.append(None)
         names.append("noise_var")
+        units.append((y2, "target units²"))
         bounds = self._bounds(spec)
         out = []
-        for name, th, (lo, hi) in zip(names, self.theta_, bounds, strict=True):
+        for name, th, (lo, hi), unit in zip(names, self.theta_, bounds, units, strict=True):
             for side, b in (("lower", lo), ("upper", hi)):
                 if abs(th - b) <= math.log(1.01):
-                    out.append(f"{name} ({side} bound {math.exp(b):.3g})")
+                    text = f"{name} ({side} bound {math.exp(b):.3g}"
+                    if unit is not None and unit[0] != 1.0:
+                        text += f" standardized = {math.exp(b) * unit[0]:.3g} in {unit[1]}"
+                    out.append(text + ")")
         return out
 
     def hyperparameters(self) -> dict[str, float | list[float]]:
