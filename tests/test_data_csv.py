@@ -271,6 +271,15 @@ def test_a_map_naming_a_unit_header_whole_cannot_give_it_another_unit(tmp_path):
     )
 
 
+def test_a_duplicate_column_is_named_by_the_headers_that_clash(tmp_path):
+    path = write_text(
+        tmp_path / "d.csv", "time_s,current_mA,P (bar),P [bar]\n0,100,1,1\n0.001,200,2,2\n"
+    )
+    with pytest.raises(DataError) as err:
+        read_csv(path, channel_map={"signals": {"clutch_pressure_bar": "P"}})
+    assert "duplicate column 'P' (headers 'P (bar)', 'P [bar]')" in str(err.value.problems)
+
+
 def test_read_csv_tolerates_trailing_blank_lines(tmp_path):
     path = write_text(tmp_path / "ok.csv", HEADER + "\n0,100,1\n0.001,200,2\n0.002, 300 ,4\n\n\n")
     tr = read_csv(path)

@@ -251,8 +251,10 @@ def decode_csv(path: str | Path, wanted: Callable[[str], bool] | None = None) ->
     names_units = [_split_unit(h, wanted) for h in header]
     names = [n for n, _ in names_units]
     dupes = sorted(c for c, k in Counter(names).items() if k > 1)
-    if dupes:
-        problems.append(f"{path}: duplicate column(s) {', '.join(map(repr, dupes))}")
+    for name in dupes:  # named by the headers that clash: they may differ only in the unit
+        clash = [h for h, n in zip(header, names, strict=True) if n == name]
+        shown = "" if len(set(clash)) == 1 else f" (headers {', '.join(map(repr, clash))})"
+        problems.append(f"{path}: duplicate column {name!r}{shown}")
     empty = [i + 1 for i, c in enumerate(names) if not c]
     if empty:
         problems.append(f"{path}: empty column name at position(s) {', '.join(map(str, empty))}")
