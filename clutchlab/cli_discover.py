@@ -137,7 +137,10 @@ def register(sub) -> None:
     )
     p.add_argument("--max-iter", type=int, default=50, help="solver iterations per fit (50)")
     p.add_argument(
-        "--time-limit", type=positive_float, default=900.0, help="wall limit per fit (s)"
+        "--time-limit",
+        type=positive_float,
+        default=900.0,
+        help="wall-time limit of each fit (s; default 900); --budget bounds the whole discovery",
     )
     p.add_argument(
         "--budget",
