@@ -94,7 +94,7 @@ class CheckResult:
         problems = list(self.problems) + [p for r in self.reports for p in r.problems]
         notes = [_named(r.file, n) for r in self.reports for n in (*r.filled, *r.notes)]
         notes += [
-            f"{r.file.name}: resampled onto a uniform grid at {r.rate_Hz:.6g} Hz ({r.resampled});"
+            f"{r.file}: resampled onto a uniform grid at {r.rate_Hz:.6g} Hz ({r.resampled});"
             f" jitter up to {r.jitter_max_s * 1e6:.3g} µs"
             for r in self.reports
             if r.resampled and r.rate_Hz
@@ -109,10 +109,13 @@ class CheckResult:
 
 
 def _named(file: Path, text: str) -> str:
-    """``text`` led by the file's name, unless it already names the file."""
-    if text.startswith((f"{file}: ", f"{file.name}: ")):
+    """``text`` led by the file's path as given (as the problems are), unless it already
+    names the file."""
+    if text.startswith(f"{file}: "):
         return text
-    return f"{file.name}: {text}"
+    if text.startswith(f"{file.name}: "):
+        text = text[len(file.name) + 2 :]
+    return f"{file}: {text}"
 
 
 def check_path(
