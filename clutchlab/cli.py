@@ -11,7 +11,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
 from . import __version__
-from .cli_types import add_map_argument, nonnegative_int
+from .budgets import DEMO_BUDGET_S
+from .cli_types import add_map_argument, nonnegative_int, positive_float
 from .errors import ClutchlabError, OutputError
 
 if TYPE_CHECKING:
@@ -300,6 +301,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--variants", default="", help="comma separated (default: every available)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--json", help="also write metrics.json here")
+    budget = p.add_mutually_exclusive_group()
+    budget.add_argument(
+        "--budget",
+        type=positive_float,
+        default=DEMO_BUDGET_S,
+        metavar="S",
+        help=f"wall-time budget of the demo (s; default {DEMO_BUDGET_S:g}): the closing-the-"
+        "loop discovery ends early enough for the rest to finish within it, keeping the "
+        "model it had and saying so; give more on a slower machine to see it whole",
+    )
+    budget.add_argument(
+        "--no-budget", action="store_true", help="no budget: the discovery runs to its end"
+    )
     from .cli_eval import REPORT_FILES
 
     p.set_defaults(func=_cmd_demo, report_out=True, report_files=REPORT_FILES)

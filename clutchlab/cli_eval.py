@@ -163,6 +163,7 @@ def run_demo_command(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         command=command_line(),
         variants=_csv(getattr(args, "variants", "")) or None,
+        time_budget_s=None if args.no_budget else args.budget,
     )
     return _finish(result.files, result.failed, args.json)
 

@@ -105,3 +105,34 @@ def test_the_demo_refuses_its_output_folder_before_any_work(tmp_path, monkeypatc
         run_demo(mine, progress=False)
     assert (mine / "report.html").read_text() == "my own report"
     assert sorted(p.name for p in mine.iterdir()) == ["report.html"]
+
+
+@pytest.mark.parametrize(
+    ("argv", "budget"),
+    [([], 600.0), (["--budget", "900"], 900.0), (["--no-budget"], None)],
+    ids=["default", "given", "none"],
+)
+def test_cli_demo_budget_reaches_run_demo(argv, budget, monkeypatch, tmp_path):
+    import clutchlab.validation as validation
+    from clutchlab.cli import main
+
+    seen = {}
+
+    def record(out, **kwargs):
+        seen.update(kwargs)
+        raise SystemExit(0)
+
+    monkeypatch.setattr(validation, "run_demo", record)
+    with pytest.raises(SystemExit):
+        main(["demo", "--out", str(tmp_path / "d"), "--quiet", *argv])
+    assert seen["time_budget_s"] == budget
+
+
+def test_cli_demo_budget_is_checked_before_any_work(tmp_path, capsys):
+    from clutchlab.cli import main
+
+    for argv in (["--budget", "0"], ["--budget", "600", "--no-budget"]):
+        with pytest.raises(SystemExit) as refused:
+            main(["demo", "--out", str(tmp_path / "d"), "--quiet", *argv])
+        assert refused.value.code == 2
+    assert not (tmp_path / "d").exists()
