@@ -222,7 +222,7 @@ class Evaluation:
             "summary": result.summary,
             "added": list(result.added),
             "wall_s": result.wall_s,
-            "time_limited": bool(getattr(result, "time_limited", False)),
+            "time_limited": result.time_limited,
             "time_limit_s": result.settings.get("time_limit_s"),
             "baseline_reused": getattr(model.physics_, "baseline", None) is not None,
             "hybrid_reused": bool(getattr(model, "reused_hybrid_", False)),

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import math
 import time
 from collections.abc import Iterator
 from dataclasses import replace
@@ -26,6 +27,7 @@ from ...physics.fit.nlp import WALL_TIME_LIMIT
 
 __all__ = [
     "DiscoveryTimeLimit",
+    "budget_spent",
     "capped_fit",
     "check_budget",
     "cut_by_budget",
@@ -96,7 +98,24 @@ def check_budget(before: str) -> None:
     """
     left = _left()
     if left is not None and left[0] <= 0:
-        raise DiscoveryTimeLimit(before, left[1])
+        raise budget_spent(before)
+
+
+def budget_spent(before: str) -> DiscoveryTimeLimit:
+    """The :class:`DiscoveryTimeLimit` of the running discovery's budget, before ``before``.
+
+    Parameters
+    ----------
+    before : str
+        The step that did not run, or was cut short.
+
+    Returns
+    -------
+    DiscoveryTimeLimit
+        Naming the running budget (s); raised by the caller.
+    """
+    budget = _BUDGET.get()
+    return DiscoveryTimeLimit(before, math.nan if budget is None else budget[1])
 
 
 def capped_fit(fit: FitSettings) -> tuple[FitSettings, bool]:

@@ -19,7 +19,7 @@ from ...physics import CircuitModel
 from ...physics.effects import EFFECTS
 from ...physics.fit import FitResult, FitSettings, PhysicsFitter
 from ...physics.parameters import ParameterSet
-from .deadline import DiscoveryTimeLimit, capped_fit, check_budget, cut_by_budget
+from .deadline import budget_spent, capped_fit, check_budget, cut_by_budget
 from .residuals import (
     ResidualSet,
     loeo_evidence,
@@ -82,7 +82,7 @@ def run_fit(
     except FitError as exc:
         error, result = exc, getattr(exc, "result", None)
     if not budget_ok and cut_by_budget(fit, capped, result, time.perf_counter() - t0):
-        raise DiscoveryTimeLimit(f"the end of {what}", settings.time_limit_s) from error
+        raise budget_spent(f"the end of {what}") from error
     if result is None:
         raise error
     return result

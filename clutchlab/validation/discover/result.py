@@ -119,7 +119,7 @@ class IterationRecord:
         ``("zero", "profile")`` when the second look (strengths profiled over multiples
         of their defaults) before leaving a structured residual unexplained ran.
     time_limited : bool
-        The discovery's time limit (``DiscoverySettings.time_limit_s``) ended this
+        The discovery's time budget (``DiscoverySettings.time_limit_s``) ended this
         iteration before it decided: no effect added, the evidence as far as it got.
     """
 
@@ -194,7 +194,7 @@ class DiscoveryResult:
     unexplained : bool
         True when the final residual is still structured (not white), follows at least
         one examined signal, and no library effect explains a significant share of it
-        (never when the discovery stopped at its time limit: it did not look far enough).
+        (never when the discovery stopped at its time budget: it did not look far enough).
     signature : list of str
         Signals the unexplained residual follows (empty unless ``unexplained``).
     summary : str
@@ -206,7 +206,7 @@ class DiscoveryResult:
     settings : dict
         The discovery settings used.
     time_limited : bool
-        Stopped at its time limit (``DiscoverySettings.time_limit_s``) before its last
+        Stopped at its time budget (``DiscoverySettings.time_limit_s``) before its last
         iteration decided; the effects added before stay (each was confirmed in full).
     """
 
