@@ -37,6 +37,7 @@ from .io_parquet import read_parquet, write_parquet
 from .metrics import pressure_metrics
 from .options import ReadOptions
 from .output import OWNED_NAME, check_output, owned_files, write_file_atomic, write_folder_atomic
+from .ramps import order_ramps, ramp_rate_mA_s, ramps_fastest_first
 from .reading import check_log, read_log
 from .report import LoadReport
 from .signals import CANONICAL_ORDER, SIGNALS, SignalSpec, unit_of
@@ -80,9 +81,12 @@ __all__ = [
     "load_dataset",
     "nominal_current",
     "nominal_didt",
+    "order_ramps",
     "owned_files",
     "parse_unit",
     "pressure_metrics",
+    "ramp_rate_mA_s",
+    "ramps_fastest_first",
     "read_csv",
     "read_log",
     "read_mf4",

@@ -31,6 +31,7 @@ __all__ = [
     "plot_pressure_vs_current",
     "plot_residuals",
     "plot_uncertainty",
+    "ramps_in_summary_order",
     "report_figures",
 ]
 
@@ -149,6 +150,15 @@ def _band(curves: list[HysteresisCurve]) -> tuple[np.ndarray, np.ndarray, np.nda
         return grid, np.nanmean(rows, 0), np.nanmin(rows, 0), np.nanmax(rows, 0)
 
 
+def ramps_in_summary_order(ramps: dict[str, list[str]], summary: dict) -> dict[str, list[str]]:
+    """``ramps`` (label → experiment names) in the order of the dataset summary's ramps
+    (fastest first, :func:`~clutchlab.data.ramps_fastest_first`); labels it does not list
+    follow, alphabetically."""
+    rank = {label: k for k, label in enumerate(summary.get("ramps", {}))}
+    order = sorted(ramps, key=lambda label: (rank.get(label, len(rank)), label))
+    return {label: ramps[label] for label in order}
+
+
 def plot_hysteresis_bands(ev: Evaluation) -> Figure | None:
     """Hysteresis width vs current per ramp rate, measured and modelled (paper Fig. 5).
 
@@ -166,13 +176,14 @@ def plot_hysteresis_bands(ev: Evaluation) -> Figure | None:
     summary = {row["name"]: row["ramp"] for row in p.dataset_summary["table"]}
     for n in names:
         ramps.setdefault(summary.get(n, "?"), []).append(n)
+    ramps = ramps_in_summary_order(ramps, p.dataset_summary)
     sources = list(ev.curves)
     ncol = 2 if len(sources) > 1 else 1
     nrow = int(np.ceil(len(sources) / ncol))
     fig = Figure(figsize=(9.0, 3.3 * nrow + 0.4), layout="constrained")
     axes = np.atleast_1d(fig.subplots(nrow, ncol, sharex=True, sharey=True, squeeze=False))
     for ax, src in zip(axes.flat, sources, strict=False):
-        for k, (ramp, exps) in enumerate(sorted(ramps.items())):
+        for k, (ramp, exps) in enumerate(ramps.items()):
             curves = [ev.curves[src][n] for n in exps if n in ev.curves[src]]
             if not curves:
                 continue

@@ -30,7 +30,7 @@ from .._plotly import (
     thin,
 )
 from .._plotly import f32 as _f32
-from .figures import VARIANT_COLORS, _band, featured_experiment
+from .figures import VARIANT_COLORS, _band, featured_experiment, ramps_in_summary_order
 
 if TYPE_CHECKING:
     import plotly.graph_objects as go
@@ -252,7 +252,7 @@ def _ramps(ev: Evaluation) -> dict[str, list[str]]:
     ramps: dict[str, list[str]] = {}
     for n in [*p.train_names, *p.test_names]:
         ramps.setdefault(summary.get(n, "?"), []).append(n)
-    return dict(sorted(ramps.items()))
+    return ramps_in_summary_order(ramps, p.dataset_summary)
 
 
 def iplot_hysteresis_bands(ev: Evaluation) -> go.Figure | None:

@@ -32,6 +32,7 @@ from ..data import (
     dither_period_samples,
     nominal_current,
     nominal_didt,
+    ramps_fastest_first,
 )
 from ..errors import ClutchlabError, DataError
 from .hysteresis import branch_direction
@@ -543,9 +544,8 @@ class Protocol:
 
 def _summary(dataset: Dataset) -> dict[str, Any]:
     """Dataset summary for the report: size, ramps, durations, rates, signals, metadata."""
-    ramps: dict[str, int] = {}
-    for t in dataset:
-        ramps[str(t.ramp)] = ramps.get(str(t.ramp), 0) + 1
+    # fastest first: a user's labels ("r5s", "r20s", …) say nothing in alphabetical order
+    ramps = {label: len(exps) for label, exps in ramps_fastest_first(dataset).items()}
     present = {s for t in dataset for s in t.signals}
     signals = [s for s in CANONICAL_ORDER if s in present]
     return {

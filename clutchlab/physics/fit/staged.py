@@ -45,7 +45,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ...data import Trace, dither_period_mean, dither_period_samples
+from ...data import Trace, dither_period_mean, dither_period_samples, ramp_rate_mA_s
 from ...errors import FitError, FitWarning
 from ..model import CircuitModel
 from ..parameters import ParameterSet
@@ -198,9 +198,9 @@ def fastest_traces(traces: list[Trace]) -> list[Trace]:
 
 
 def ramp_rate(trace: Trace) -> float:
-    """Ramp rate (mA/s): the 95th percentile of |dI/dt| of the period-mean current."""
-    i = _period_mean(trace, _current(trace))
-    return float(np.percentile(np.abs(np.gradient(i, trace.time_s)), 95))
+    """Ramp rate (mA/s): the 95th percentile of |dI/dt| of the period-mean current
+    (:func:`~clutchlab.data.ramps.ramp_rate_mA_s`; 0 when it cannot be measured)."""
+    return ramp_rate_mA_s(trace) or 0.0
 
 
 def _line(trace: Trace, n: int) -> np.ndarray:

@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import math
-from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
+from ...data.ramps import order_ramps
 from ...errors import ModelError
 
 __all__ = [
@@ -64,33 +63,6 @@ RAMPS: dict[str, RampProfile] = {
     "medium": RampProfile("medium", 10.0),
     "slow": RampProfile("slow", 40.0),
 }
-
-
-def order_ramps(labels: Iterable[str], rates: Mapping[str, float | None]) -> list[str]:
-    """Ramp labels fastest first, as summaries and overviews list them.
-
-    Parameters
-    ----------
-    labels : iterable of str
-        Ramp labels (each listed once).
-    rates : mapping of str to float or None
-        Ramp rate of a label (mA/s); a label missing here, or with None or a value that is
-        not a finite number > 0, has no known rate.
-
-    Returns
-    -------
-    list of str
-        Labels with a known rate by rate, fastest first, then the others; alphabetical
-        among equal rates and among the labels without one.
-    """
-
-    def key(label: str) -> tuple[int, float, str]:
-        rate = rates.get(label)
-        if rate is not None and math.isfinite(rate) and rate > 0:
-            return 0, -float(rate), label
-        return 1, 0.0, label
-
-    return sorted(dict.fromkeys(labels), key=key)
 
 
 def _shape_a(i):  # flat: 100 mA, faded in over the first 100 mA
