@@ -180,6 +180,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
             "causal": bool(args.causal),
             "features": list(model.feature_names_),
             "dataset": str(args.dataset),
+            # how the logs were read (a manifest's map or --map), for repeating the training
+            "channel_maps": dataset.channel_maps,
             "train": train.names,
             "fit_s": fit_s,
             "predict_s": overall["predict_s"],

@@ -158,3 +158,16 @@ def test_data_and_evaluate_and_fit_share_one_map_help(capsys):
             main([*argv, "--help"])
         text = " ".join(capsys.readouterr().out.split())
         assert f"--map MAP.toml {MAP_HELP}" in text, argv
+
+
+def test_train_json_records_the_channel_map(logger_dataset, tmp_path, capsys):
+    """``train --json`` said which dataset was read but not through which map (session 41)."""
+    import json
+
+    root, _ = logger_dataset
+    cmap = tmp_path / "logger.toml"
+    cmap.write_text(MAP_TOML, encoding="utf-8")
+    js = tmp_path / "train.json"
+    argv = _argv("train", root, tmp_path, "--map", str(cmap), "--json", str(js))
+    assert main(argv) == 0
+    assert json.loads(js.read_text(encoding="utf-8"))["channel_maps"] == [str(cmap)]

@@ -146,6 +146,12 @@ class Dataset:
         return MappingProxyType(self._reports)
 
     @property
+    def channel_maps(self) -> list[str]:
+        """The channel map files the experiments were read through (a manifest's or one
+        given on loading), sorted; empty when every log had canonical channel names."""
+        return sorted({str(r.channel_map) for r in self._reports.values() if r.channel_map})
+
+    @property
     def names(self) -> list[str]:
         """Experiment names, in order."""
         return [t.name for t in self._experiments]

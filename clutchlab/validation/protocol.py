@@ -552,9 +552,7 @@ def _summary(dataset: Dataset) -> dict[str, Any]:
         "root": str(dataset.root) if dataset.root is not None else None,
         # the channel map(s) the logs were read through (a manifest's or --map): how the
         # measured signals came about, for the report's reader to repeat it
-        "channel_maps": sorted(
-            {str(r.channel_map) for r in dataset.reports.values() if r.channel_map}
-        ),
+        "channel_maps": dataset.channel_maps,
         "experiments": len(dataset),
         "ramps": ramps,
         "samples": int(sum(len(t) for t in dataset)),
