@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, NoReturn
 from . import __version__
 from .budgets import DEMO_BUDGET_S
 from .cli_types import add_map_argument, nonnegative_int, positive_float
-from .errors import ClutchlabError, OutputError
+from .errors import ClutchlabError, DataError, OutputError
 
 if TYPE_CHECKING:
     from .data import ReadOptions
@@ -196,6 +196,8 @@ def _read_options(args: argparse.Namespace) -> ReadOptions:
 def _cmd_data_check(args: argparse.Namespace) -> int:
     from .data.check import check_path
 
+    if not Path(args.path).exists():  # an error of the call, not a finding in the data
+        raise DataError(f"{args.path}: no such file or folder")
     result = check_path(args.path, args.map, options=_read_options(args))
     if args.json:
         write_json_output(args.json, json.dumps(result.to_dict(), indent=2, ensure_ascii=False))
@@ -323,13 +325,22 @@ def build_parser() -> argparse.ArgumentParser:
     q = data.add_parser(
         "check",
         help="check a dataset folder or a log; table per experiment; exit 1 if anything is wrong",
+        description="Check a dataset folder or one log: a table per experiment with every "
+        "problem found. Exit status 0: everything readable and plausible; 1: problems found "
+        "(listed, nothing written but --json); 2: the call could not be taken (no such path, "
+        "a bad option or channel map).",
     )
     q.add_argument("path", help="dataset folder, manifest.json, or one .csv/.parquet/.mf4 log")
     _add_read_options(q)
     q.add_argument("--json", help="write the check result as JSON here")
     q.set_defaults(func=_cmd_data_check)
     q = data.add_parser(
-        "convert", help="convert a dataset folder (or a log) to canonical names and units"
+        "convert",
+        help="convert a dataset folder (or a log) to canonical names and units",
+        description="Convert a dataset folder (or one log) to canonical names and units. Exit "
+        "status 0: written; 2: refused, nothing written — the data's problems are listed "
+        "(`clutchlab data check SRC` tabulates them per experiment) or the call could not be "
+        "taken.",
     )
     q.add_argument("src", help="dataset folder, manifest.json, or one log file")
     q.add_argument("dst", help="destination folder (dataset) or file (single log)")

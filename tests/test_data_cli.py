@@ -149,3 +149,15 @@ def test_check_into_a_closed_pipe_stops_quietly(stand_ds):
     err = proc.stderr.read().decode()
     assert proc.wait(timeout=120) == 141
     assert "Traceback" not in err and "BrokenPipeError" not in err
+
+
+@pytest.mark.parametrize("command", ["check", "convert"])
+def test_a_path_that_does_not_exist_is_an_error_of_the_call(tmp_path, command):
+    """``data check`` printed an empty table and exit 1 (a finding in the data); a path that
+    is not there is an error of the call, exit 2, as ``data convert`` has it."""
+    missing = tmp_path / "no_such_dataset"
+    args = [str(missing)] + ([str(tmp_path / "out")] if command == "convert" else [])
+    res = cli(command, *args)
+    assert res.returncode == 2, res.stdout + res.stderr
+    assert str(missing) in res.stderr and "file  ramp" not in res.stdout
+    assert not (tmp_path / "out").exists()
