@@ -71,3 +71,48 @@ def test_the_terminal_summary_says_when_the_physics_fit_did_not_converge(converg
     assert len(said) == (0 if converged else 1)
     if not converged:
         assert "(not run, 0 iterations)" in said[0]
+
+
+def test_the_fitted_parameter_table_says_what_each_parameter_is():
+    """The report's table gave ``vfs_K_m … N/A`` with no word of what it is (N/A reads as
+    "not applicable"; it is newton per ampere), and ``vfs_d_orf`` without its meaning."""
+    from clutchlab.physics import CircuitModel
+    from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
+    from clutchlab.validation import evaluate
+    from clutchlab.validation.evaluate import Evaluation
+    from clutchlab.validation.report import jsonable, render_html, render_markdown
+
+    res = SimpleNamespace(
+        model=CircuitModel,
+        free=["vfs_K_m", "vfs_d_orf"],
+        values={"vfs_K_m": 14.5, "vfs_d_orf": 0.39},
+        std_errors={"vfs_K_m": 0.002, "vfs_d_orf": 4e-5},
+        units={"vfs_K_m": "N/A", "vfs_d_orf": "mm"},
+        unidentifiable=(),
+        status="Solve_Succeeded",
+        success=True,
+        iterations=7,
+        wall_s=50.0,
+        effects=(),
+        per_experiment={},
+    )
+    ev = SimpleNamespace(models={"physics_fitted": SimpleNamespace(result_=res)})
+    fit = Evaluation.physics_fit(ev)
+    specs = {p.name: p for p in CircuitModel().parameters}
+    assert fit["parameters"]["vfs_K_m"]["description"] == specs["vfs_K_m"].description
+    assert "newton per ampere" in specs["vfs_K_m"].description
+    run = run_stand(
+        StandConfig(
+            settings=(DitherSetting(50.0, "B"),),
+            ramps=(RampProfile("fast", 1.0, 0.2), RampProfile("medium", 2.0, 0.2)),
+        ),
+        progress=False,
+    )
+    evaluated = evaluate(run.dataset, ["physics_default"], train=["fast"], progress=False)
+    doc = jsonable(evaluated.to_dict()) | {"physics_fit": jsonable(fit)}
+    for text in (render_markdown(doc, []), render_html(doc, [])):
+        assert "meaning" in text and specs["vfs_d_orf"].description in text
+    # a metrics file written before the meaning was recorded still renders
+    for p in fit["parameters"].values():
+        del p["description"]
+    assert "vfs_K_m" in render_markdown(doc, [])

@@ -249,6 +249,7 @@ class Evaluation:
                 "unit": res.units.get(n, ""),
                 "default": spec.default if spec is not None else float("nan"),
                 "identifiable": n not in res.unidentifiable,
+                "description": spec.description if spec is not None else "",
             }
         return {
             "status": res.status,

@@ -20,7 +20,7 @@ import io
 import json
 import math
 import re
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -157,6 +157,25 @@ def _md_code(text: Any) -> str:
 
 def _md_cell(text: str) -> str:
     return str(text).replace("|", "\\|")
+
+
+def _parameter_table(fit: dict, name: Callable[[str], str]) -> tuple[list[str], list[list[str]]]:
+    """Header and rows of the fitted-parameter table (``name`` formats a parameter's name);
+    the meaning column is empty for a metrics file written before it was recorded."""
+    header = ["parameter", "default", "fitted", "± std err", "unit", "identifiable", "meaning"]
+    rows = [
+        [
+            name(n),
+            fmt(p["default"]),
+            fmt(p["value"]),
+            fmt(p["std_error"]),
+            p["unit"],
+            fmt(p["identifiable"]),
+            p.get("description", ""),
+        ]
+        for n, p in fit["parameters"].items()
+    ]
+    return header, rows
 
 
 def _md_table(header: list[str], rows: list[list[str]]) -> str:
@@ -399,20 +418,7 @@ def render_markdown(doc: dict[str, Any], figure_files: list[tuple[str, str, str]
             + ("converged" if fit["converged"] else "NOT converged — best iterate used")
             + f"), {fit['iterations']} iterations, {fmt(fit['wall_s'])} s.",
             "",
-            _md_table(
-                ["parameter", "default", "fitted", "± std err", "unit", "identifiable"],
-                [
-                    [
-                        f"`{n}`",
-                        fmt(p["default"]),
-                        fmt(p["value"]),
-                        fmt(p["std_error"]),
-                        p["unit"],
-                        fmt(p["identifiable"]),
-                    ]
-                    for n, p in fit["parameters"].items()
-                ],
-            ),
+            _md_table(*_parameter_table(fit, lambda n: f"`{n}`")),
             "",
         ]
     clf = doc.get("classifier_comparison")
@@ -654,20 +660,7 @@ def render_html(
             f"<p>Status: {_e(fit['status'])} ({state}); {fit['iterations']} iterations; "
             f"{_e(fmt(fit['wall_s']))} s; effects: {_e(', '.join(fit['effects']) or 'none')}."
             "</p>",
-            _html_rows(
-                ["parameter", "default", "fitted", "± std err", "unit", "identifiable"],
-                [
-                    [
-                        n,
-                        fmt(p["default"]),
-                        fmt(p["value"]),
-                        fmt(p["std_error"]),
-                        p["unit"],
-                        fmt(p["identifiable"]),
-                    ]
-                    for n, p in fit["parameters"].items()
-                ],
-            ),
+            _html_rows(*_parameter_table(fit, str)),
         ]
     clf = doc.get("classifier_comparison")
     if clf:
