@@ -325,7 +325,7 @@ def test_improvement_is_judged_within_each_stage(small_data, monkeypatch):
         return {"cost": end, "z": z, "stats": stats}
 
     monkeypatch.setattr(PhysicsFitter, "_solve_starts", staticmethod(staged))
-    with pytest.warns(FitWarning, match=r"cost 480, 500 at the start of its stage"):
+    with pytest.warns(FitWarning, match=r"cost ½Σe² 480 bar², 500 at the start of its stage"):
         fitter = _fit(small_data, prefit_samples=100)
     assert not fitter.result_.success
     # (then the stopped iterate's own Jacobian, for the standard errors)

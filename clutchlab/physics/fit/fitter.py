@@ -364,7 +364,7 @@ class PhysicsFitter:
             if settings.strict or not improved:
                 why = "" if improved else " and did not improve on its start"
                 best_text = (
-                    f"best cost {best['cost']:.6g}"
+                    f"best cost {best['cost']:.6g} bar²"
                     if math.isfinite(best["cost"])
                     else "no iteration finished, so the start is the best iterate"
                 )
@@ -375,8 +375,8 @@ class PhysicsFitter:
                 raise err
             warnings.warn(
                 f"the fit stopped at a limit before converging ({status}) after {wall:.1f} s: "
-                f"its best iterate (cost {best['cost']:.6g}, {start_cost:.6g} at the start of "
-                "its stage) is the model, marked not converged",
+                f"its best iterate (cost ½Σe² {best['cost']:.6g} bar², {start_cost:.6g} at the "
+                "start of its stage) is the model, marked not converged",
                 FitWarning,
                 stacklevel=2,
             )
