@@ -223,3 +223,34 @@ def test_coarse_samples_keep_the_integration_step_bounded(fast_ramp_trace):
     # a gap in coarse data is split as finely as the rest
     parts = steps_per_interval(np.r_[np.arange(100) * 0.01, 1.5], 4)
     assert parts[0] == 5 and parts[-1] * 4 * MAX_STEP_S >= 1.5 - 0.99
+
+
+def test_a_gap_in_finely_sampled_data_keeps_the_step_bounded():
+    """A 1 kHz profile followed by a hold given by a few samples 0.7 s apart (an engineer's
+    own current profile): the median interval is 1 ms, so the gaps were integrated in
+    ``substeps`` steps of 175 ms each and the dithered hold at 500 mA read 8.98 bar
+    instead of 7.26. Intervals above 1 ms are now split as on coarse data; those of
+    1 ms and less keep exactly ``substeps`` steps."""
+    from clutchlab.data import Trace
+    from clutchlab.physics.settings import MAX_STEP_S, steps_per_interval
+
+    def trace(t):
+        n = len(t)
+        return Trace(
+            "gap",
+            {
+                "time_s": t,
+                "current_cmd_mA": np.interp(t, [0.0, 0.5, 5.0], [0.0, 500.0, 500.0]),
+                "dither_amp_mA": np.full(n, 150.0),
+                "dither_freq_Hz": np.full(n, 50.0),
+                "clutch_pressure_bar": np.zeros(n),
+            },
+        )
+
+    t_gap = np.r_[np.arange(1000) * 1e-3, 1.0, 1.7, 2.4, 3.1]
+    parts = steps_per_interval(t_gap, 4)
+    assert np.all(parts[:-3] == 1) and np.all(parts[-3:] * 4 * MAX_STEP_S >= 0.7 - 1e-12)
+    t_fine = np.arange(3101) * 1e-3
+    p_gap = simulate(MODEL, PARAMS, trace(t_gap)).pressure_bar
+    p_fine = simulate(MODEL, PARAMS, trace(t_fine)).pressure_bar
+    assert np.max(np.abs(p_gap[-4:] - np.interp(t_gap[-4:], t_fine, p_fine))) < 0.05

@@ -62,7 +62,8 @@ class SimulationSettings:
         interpolated linearly as within the substeps — in effect
         ``parts × substeps`` steps per sample (100 Hz data, 4 substeps: 5 parts, 20
         steps of 0.5 ms), see :func:`steps_per_interval`. Data at 1 kHz and faster are
-        integrated with exactly ``substeps`` steps per sample.
+        integrated with exactly ``substeps`` steps per sample, except across a gap
+        (an interval above 1 ms), which is split as on coarse data.
     drive : {"auto", "command", "measured"}
         Excitation of the coil. ``measured`` uses the trace's measured current
         (dither included); ``command`` rebuilds the dithered command from nominal
@@ -163,15 +164,20 @@ def steps_per_interval(t: np.ndarray, substeps: int) -> np.ndarray | None:
     Returns
     -------
     numpy.ndarray or None
-        None when ``t`` is sampled at 1 kHz or faster (median interval at most
-        :data:`COARSE_INTERVAL_S`: every interval is one part, as before) or no interval
-        needs splitting; else the number of parts (int, ≥ 1) of each of the N − 1
-        intervals, the smallest with ``dt / (parts × substeps) ≤ MAX_STEP_S``.
+        None when no interval needs splitting; else the number of parts (int, ≥ 1) of each
+        of the N − 1 intervals, the smallest with ``dt / (parts × substeps) ≤ MAX_STEP_S``.
+        On data sampled at 1 kHz or faster (median interval at most
+        :data:`COARSE_INTERVAL_S`) the intervals up to :data:`COARSE_INTERVAL_S` stay one
+        part each (exactly ``substeps`` steps per sample, as before) and only the longer
+        ones, gaps in the grid, are split: a 1 kHz trace with one 0.7 s gap was
+        integrated over the gap in ``substeps`` steps of 175 ms.
     """
     dt = np.diff(np.asarray(t, dtype=float))
-    if dt.size == 0 or float(np.median(dt)) <= COARSE_INTERVAL_S:
+    if dt.size == 0:
         return None
     # the tolerance keeps an interval of exactly parts × substeps × MAX_STEP_S whole
     parts = np.ceil(dt / (substeps * MAX_STEP_S) * (1.0 - 1e-9)).astype(np.int64)
     parts = np.maximum(parts, 1)
+    if float(np.median(dt)) <= COARSE_INTERVAL_S:
+        parts[dt <= COARSE_INTERVAL_S] = 1
     return None if np.all(parts == 1) else parts
