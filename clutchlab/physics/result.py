@@ -7,13 +7,23 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..errors import SimulationError
 from .model import OutputSpec
 from .parameters import ParameterSet
 
 if TYPE_CHECKING:  # pandas is imported on use: simulation workers start faster without it
     import pandas as pd
 
-__all__ = ["SimulationResult"]
+__all__ = ["PHYSICAL_PRESSURE_LINE_FACTOR", "PHYSICAL_PRESSURE_MIN_BAR", "SimulationResult"]
+
+#: Lowest gauge pressure (bar) a simulated pressure may reach: oil cannot be pulled below
+#: vacuum, and the model's solution with accurate steps stays above the exhaust pressure.
+PHYSICAL_PRESSURE_MIN_BAR = -1.0
+
+#: Highest simulated pressure as a multiple of the highest line pressure: nothing in the
+#: circuit raises oil above its supply by more than the small transients of spool and piston
+#: motion (about 1.3 bar on the datasheet circuit).
+PHYSICAL_PRESSURE_LINE_FACTOR = 1.5
 
 
 @dataclass(frozen=True)
@@ -60,6 +70,41 @@ class SimulationResult:
     def pressure_bar(self) -> np.ndarray:
         """Clutch pressure as the sensor reads it (bar)."""
         return self.outputs["clutch_pressure_bar"]
+
+    def check_pressures(self) -> None:
+        """Raise when a simulated pressure leaves the range the circuit can physically reach.
+
+        A fixed-step integration whose step is too long for a design's dynamics (e.g. a
+        small chamber behind a large orifice) can stay finite and still be wrong by
+        thousands of bar; no pressure of a circuit fed at line pressure falls below
+        :data:`PHYSICAL_PRESSURE_MIN_BAR` or rises above
+        :data:`PHYSICAL_PRESSURE_LINE_FACTOR` × the highest line pressure.
+
+        Raises
+        ------
+        SimulationError
+            Naming the first pressure output (bar) out of that range, its value and time,
+            and the remedy (more ``substeps``, or ``method="radau"``).
+        """
+        line = self.inputs.get("line_pressure_bar")
+        if line is None or not len(line):
+            return
+        hi = PHYSICAL_PRESSURE_LINE_FACTOR * float(np.max(line))
+        lo = PHYSICAL_PRESSURE_MIN_BAR
+        for spec in self.output_specs:
+            if spec.unit != "bar":
+                continue
+            p = np.asarray(self.outputs[spec.name])
+            bad = np.flatnonzero((p < lo) | (p > hi))
+            if bad.size:
+                k = int(bad[0])
+                raise SimulationError(
+                    f"{self.trace_name}: {spec.name} = {p[k]:.6g} bar at t = "
+                    f"{self.time_s[k]:.6g} s, outside the range the circuit can reach "
+                    f"[{lo:g}, {hi:.4g}] bar ({PHYSICAL_PRESSURE_LINE_FACTOR:g} × line "
+                    f"pressure): the integration step is too long for these parameters "
+                    f"(raise substeps, or use method='radau'), or the design is unstable"
+                )
 
     @property
     def real_time_factor(self) -> float:

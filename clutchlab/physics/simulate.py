@@ -55,6 +55,12 @@ def simulate(
         signal that is not a finite number — before anything is integrated.
     SimulationError
         If the state becomes non-finite (the message names the time).
+
+    Notes
+    -----
+    A fixed-step (ROS2) result can be finite and still wrong when the step is too long
+    for the parameters' dynamics; :meth:`SimulationResult.check_pressures` raises when a
+    pressure leaves the range the circuit can reach (design sweeps call it per point).
     """
     settings = settings or SimulationSettings()
     params = model_params(model, params)
