@@ -254,3 +254,28 @@ def test_a_gap_in_finely_sampled_data_keeps_the_step_bounded():
     p_gap = simulate(MODEL, PARAMS, trace(t_gap)).pressure_bar
     p_fine = simulate(MODEL, PARAMS, trace(t_fine)).pressure_bar
     assert np.max(np.abs(p_gap[-4:] - np.interp(t_gap[-4:], t_fine, p_fine))) < 0.05
+
+
+def test_inputs_in_a_wrong_unit_are_refused_not_simulated():
+    """A profile built in code does not pass the data layer's checks: a current written in A
+    (0 → 1.1) simulated to the prime pressure throughout, a line pressure in psi or an oil
+    temperature in K ran as given, without a word. They are now refused, naming the signal,
+    as a file with them is."""
+    from clutchlab.data import Trace
+
+    t = np.arange(500) * 1e-3
+    base = {
+        "time_s": t,
+        "current_cmd_mA": np.linspace(0.0, 1.1, t.size),  # A, not mA
+        "clutch_pressure_bar": np.zeros(t.size),
+    }
+    with pytest.raises(DataError, match=r"signal 'current_cmd_mA'.*look like amperes"):
+        simulate(MODEL, PARAMS, Trace("amps", base))
+    ok = base | {"current_cmd_mA": np.linspace(0.0, 1100.0, t.size)}
+    bad = ok | {"line_pressure_bar": np.full(t.size, 256.7), "oil_temp_C": np.full(t.size, 313.0)}
+    with pytest.raises(DataError) as err:
+        simulate(MODEL, PARAMS, Trace("psi", bad))
+    text = str(err.value)
+    assert "signal 'line_pressure_bar'" in text and "kPa or psi" in text
+    assert "signal 'oil_temp_C'" in text and "kelvin" in text
+    assert np.all(np.isfinite(simulate(MODEL, PARAMS, Trace("ok", ok)).pressure_bar))

@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from ..data import Trace
+from ..data.validate import check_values
 from ..errors import DataError
 from .assembly import MODEL_INPUTS
 from .settings import SimulationSettings
@@ -68,8 +69,10 @@ def input_matrix(trace: Trace, drive: str, settings: SimulationSettings) -> np.n
     DataError
         If the trace has fewer than 2 samples (the sample interval sets the integration
         step), or listing every input signal that is not finite (with its first sample and
-        time) and every metadata value standing for an absent signal that is not a finite
-        number — found before anything is integrated.
+        time), every input signal in an implausible unit (a current in A, a pressure in
+        Pa or psi, a temperature in °F or K) or outside its physical range, and every
+        metadata value standing for an absent signal that is not a finite number — found
+        before anything is integrated.
     """
     t = trace.time_s
     n = len(trace)
@@ -113,9 +116,26 @@ def input_matrix(trace: Trace, drive: str, settings: SimulationSettings) -> np.n
     if trace.has("oil_temp_C"):
         _check_finite(trace, "oil_temp_C", oil, problems)
     u[:, _IDX["oil_temp_C"]] = oil
+    for name in _CHECKED_SIGNALS:  # a current in A, a pressure in Pa / psi, °F / K, …
+        if trace.has(name):
+            problems += check_values(name, np.asarray(trace.get(name)), f"signal {name!r}")
     if problems:
         raise DataError(f"{trace.name}: cannot simulate, bad inputs", problems)
     return u
+
+
+#: Input signals checked for an implausible unit or a value outside the signal's physical
+#: range (:func:`clutchlab.data.validate.check_values`, as every file read is): a trace
+#: built in code is not read through the data layer's validation.
+_CHECKED_SIGNALS = (
+    "current_cmd_mA",
+    "current_mA",
+    "dither_amp_mA",
+    "dither_freq_Hz",
+    "line_pressure_bar",
+    "prime_pressure_bar",
+    "oil_temp_C",
+)
 
 
 def interval_inputs(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
