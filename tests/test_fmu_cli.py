@@ -114,3 +114,19 @@ def test_fitted_model_exported_with_effects_matches_and_reproduces_physics_fitte
     ma = pressure_metrics(np.concatenate(meas), np.concatenate(a))
     mb = pressure_metrics(np.concatenate(meas), np.concatenate(b))
     assert abs(ma["rmse_bar"] - mb["rmse_bar"]) <= 0.01
+
+
+def test_export_fmu_cli_says_how_to_export_a_parameter_file_before_any_fit(tmp_path, capsys):
+    """A design engineer's parameter file (``ParameterSet.to_json``) given to export-fmu was
+    refused as 'not a fitted physics model' with a list of fit-result keys and no way
+    forward; the error now says how a design is exported before any fit."""
+    from clutchlab.cli import main
+
+    design = tmp_path / "design.json"
+    CircuitModel().default_params().replace(vfs_d_orf=0.6).to_json(design)
+    assert main(["export-fmu", str(design), "--out", str(tmp_path / "d.fmu")]) == 2
+    err = capsys.readouterr().err
+    assert "not a fitted physics model" in err
+    assert "this is a parameter file (ParameterSet.to_json)" in err
+    assert "export_physics_fmu((model, params), OUT)" in err
+    assert not (tmp_path / "d.fmu").exists()

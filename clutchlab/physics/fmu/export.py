@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 from ...errors import ClutchlabError, FitError, FitResultError
@@ -45,9 +46,10 @@ def physics_source(source) -> tuple[CircuitModel, ParameterSet]:
         try:  # the content is checked as it is read (FitResult.from_json)
             result = FitResult.from_json(Path(source))
         except FitResultError as exc:  # every problem of the content, one per line
-            raise FmuError(
-                f"{source}: not a fitted physics model", exc.problems or [str(exc)]
-            ) from exc
+            problems = exc.problems or [str(exc)]
+            if _is_parameter_file(Path(source)):
+                problems = [*problems, _PARAMETER_FILE_HINT]
+            raise FmuError(f"{source}: not a fitted physics model", problems) from exc
         except FitError as exc:
             raise FmuError(f"{source}: not a fitted physics model ({exc})") from exc
         try:
@@ -58,6 +60,25 @@ def physics_source(source) -> tuple[CircuitModel, ParameterSet]:
         f"cannot export {type(source).__name__}: expected a fit JSON path, FitResult, "
         "fitted PhysicsFitter or (CircuitModel, ParameterSet)"
     )
+
+
+#: What to do with a parameter file (:meth:`ParameterSet.to_json`): before any fit, a design
+#: is exported from Python; the file holds values, not the model (its effects) they are for.
+_PARAMETER_FILE_HINT = (
+    "this is a parameter file (ParameterSet.to_json): it holds values, not the model they "
+    "are for; to export a design before any fit, from Python: model = CircuitModel()"
+    ".with_effects(...); params = ParameterSet.from_json(model.parameters, FILE); "
+    "export_physics_fmu((model, params), OUT) (clutchlab.physics.fmu)"
+)
+
+
+def _is_parameter_file(path: Path) -> bool:
+    """Whether ``path`` is a JSON object whose only key is ``parameters``."""
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError, RecursionError):
+        return False
+    return isinstance(doc, dict) and set(doc) == {"parameters"}
 
 
 def export_physics_fmu(
