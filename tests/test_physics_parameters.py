@@ -175,3 +175,17 @@ def test_a_parameter_set_of_another_model_is_refused_by_name():
     reordered = ParameterSet(tuple(reversed(m.parameters)), {"reg_k": 20.0})
     again = reordered.for_model(m.parameters)
     assert again.parameters == m.parameters and again["reg_k"] == 20.0
+
+
+def test_a_value_that_is_not_a_number_is_named_not_converted():
+    """``replace(reg_k=True)`` ran the model with a 1 N/mm spring without a word, and
+    ``replace(reg_k="15 N/mm")`` / ``replace(reg_k=None)`` raised float()'s own error naming
+    no parameter. All are now listed in the ModelError, each with the parameter's unit."""
+    base = CircuitModel().default_params()
+    with pytest.raises(ModelError) as err:
+        base.replace(reg_k=True, vfs_d_orf="0.6 mm", cacc_V=None, fb_V=[0.5])
+    text = str(err.value)
+    assert "reg_k = True is not a number (give the value in N/mm" in text
+    assert "vfs_d_orf = '0.6 mm' is not a number (give the value in mm" in text
+    assert "cacc_V = None is not a number" in text and "fb_V = [0.5] is not a number" in text
+    assert base.replace(reg_k=np.float64(20.0), vfs_d_orf=1)["reg_k"] == 20.0

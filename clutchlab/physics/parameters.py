@@ -138,7 +138,17 @@ class ParameterSet(Mapping[str, float]):
         problems = [f"unknown parameter {n!r}" for n in unknown]
         full = {}
         for p in self.parameters:
-            v = float(self.values.get(p.name, p.default))
+            raw = self.values.get(p.name, p.default)
+            try:
+                if isinstance(raw, bool):  # float(True) is 1.0: a flag is not a value
+                    raise TypeError
+                v = float(raw)
+            except (TypeError, ValueError):
+                problems.append(
+                    f"{p.name} = {raw!r} is not a number (give the value in {p.unit}, "
+                    "without its unit)"
+                )
+                continue
             msg = p.check(v)
             if msg:
                 problems.append(msg)
