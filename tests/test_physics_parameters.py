@@ -189,3 +189,13 @@ def test_a_value_that_is_not_a_number_is_named_not_converted():
     assert "vfs_d_orf = '0.6 mm' is not a number (give the value in mm" in text
     assert "cacc_V = None is not a number" in text and "fb_V = [0.5] is not a number" in text
     assert base.replace(reg_k=np.float64(20.0), vfs_d_orf=1)["reg_k"] == 20.0
+
+
+def test_a_parameter_of_an_effect_the_model_lacks_names_the_effect():
+    """``replace(slag_tau=3)`` on a model without sensor lag said 'unknown parameter' only."""
+    with pytest.raises(ModelError) as err:
+        CircuitModel().default_params().replace(slag_tau=3.0, nope=1.0)
+    text = str(err.value)
+    assert "unknown parameter 'slag_tau': it belongs to the effect 'sensor_lag'" in text
+    assert "CircuitModel().with_effects('sensor_lag')" in text
+    assert "unknown parameter 'nope'\n" in text + "\n"

@@ -275,3 +275,18 @@ def test_scenario_dither_frequency_is_not_checked_when_a_variable_sets_it():
     assert spec.variable_names == ("dither_freq_Hz",)
     with pytest.raises(SpecError, match="up to 300 Hz is not resolved"):
         _spec(variables=[{"name": "dither_freq_Hz", "low": 30.0, "high": 300.0}])
+
+
+def test_a_parameter_of_an_effect_the_model_lacks_names_the_effect():
+    """A design variable or fixed value of an effect not in ``[model] effects`` was refused
+    as 'unknown parameter' with the list of ~60 base names, which does not hold it; the
+    problem now names the effect to switch on."""
+    with pytest.raises(SpecError) as err:
+        _spec(
+            model={"parameters": {"jet_kappa": 0.3}},
+            variables=[{"name": "slag_tau", "low": 1.0, "high": 10.0}],
+        )
+    msg = str(err.value)
+    assert "parameter 'slag_tau' belongs to the effect 'sensor_lag'" in msg
+    assert "parameter 'jet_kappa' belongs to the effect 'flow_force'" in msg
+    assert "add it to [model] effects" in msg

@@ -135,7 +135,7 @@ class ParameterSet(Mapping[str, float]):
     def __post_init__(self) -> None:
         known = {p.name: p for p in self.parameters}
         unknown = sorted(set(self.values) - set(known))
-        problems = [f"unknown parameter {n!r}" for n in unknown]
+        problems = [_unknown(n) for n in unknown]
         full = {}
         for p in self.parameters:
             raw = self.values.get(p.name, p.default)
@@ -306,6 +306,19 @@ class ParameterSet(Mapping[str, float]):
         if problems:
             raise ModelError(f"invalid {where}:\n  - " + "\n  - ".join(problems))
         return cls(parameters, values)
+
+
+def _unknown(name: str) -> str:
+    """The problem of an unknown parameter; one of an effect the model lacks names it."""
+    from .effects import effect_of_parameter  # the effects declare their parameters here
+
+    owner = effect_of_parameter(name)
+    if owner is None:
+        return f"unknown parameter {name!r}"
+    return (
+        f"unknown parameter {name!r}: it belongs to the effect {owner!r}, which the model "
+        f"does not have (CircuitModel().with_effects({owner!r}))"
+    )
 
 
 def _read_values(doc, specs: dict[str, Parameter]) -> tuple[dict[str, float], list[str]]:

@@ -52,6 +52,7 @@ __all__ = [
     "SupplyDroop",
     "TransportDelay",
     "effect_names",
+    "effect_of_parameter",
     "effect_table",
     "make_effect",
 ]
@@ -138,6 +139,18 @@ def effect_names(value: Any, where: str = "effects") -> tuple[str, ...]:
             f"flexible laws: {laws}"
         )
     return tuple(names)
+
+
+def effect_of_parameter(name: str) -> str | None:
+    """The effect (or flexible law) that declares the parameter ``name``, or None.
+
+    A model without that effect does not have the parameter; messages about an unknown
+    parameter name the effect to switch on.
+    """
+    for cls in (*EFFECTS.values(), *FLEXIBLE_LAWS.values()):
+        if any(p.name == name for p in cls.PARAMETERS):
+            return cls.name
+    return None
 
 
 def make_effect(name: str) -> Effect:
