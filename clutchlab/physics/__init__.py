@@ -9,6 +9,7 @@ from .components import Component, default_components, latch_thresholds
 from .effects import EFFECTS, Effect, effect_table, make_effect
 from .model import OUTPUTS, CircuitModel, ModelFunctions, OutputSpec
 from .parameters import Parameter, ParameterSet
+from .profile import drive_trace, knot_profile
 from .result import SimulationResult
 from .settings import SimulationSettings
 from .simulate import simulate, simulate_inputs
@@ -30,7 +31,9 @@ __all__ = [
     "SimulationSettings",
     "StateSpec",
     "default_components",
+    "drive_trace",
     "effect_table",
+    "knot_profile",
     "latch_thresholds",
     "make_effect",
     "simulate",
