@@ -155,8 +155,12 @@ def test_infeasible_bounds(small_data):
         _fit(small_data, bounds={"reg_F_c": (1.5, 3.0)})
     with pytest.raises(FitError, match=r"leave the physical range"):
         _fit(small_data, bounds={"reg_F_c": (0.001, 3.0)})
-    with pytest.raises(FitError, match=r"unknown parameter\(s\) nope"):
+    with pytest.raises(FitError, match=r"unknown parameter\(s\) nope") as info:
         _fit(small_data, free=("nope",))
+    assert "belongs to" not in str(info.value)
+    # a parameter of an effect the model lacks names the effect (it said only "unknown")
+    with pytest.raises(FitError, match=r"slag_tau belongs to the effect 'sensor_lag'"):
+        _fit(small_data, free=("reg_F0", "slag_tau"))
 
 
 def test_trace_without_excitation():

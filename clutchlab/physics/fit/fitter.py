@@ -14,7 +14,7 @@ from tqdm.auto import tqdm
 from ...data import Dataset, Trace, dither_period_mean, dither_period_samples, pressure_metrics
 from ...errors import FitError, FitWarning, ModelError
 from ...forkmap import fork_map
-from ..effects import EFFECTS
+from ..effects import EFFECTS, effect_of_parameter
 from ..model import CircuitModel
 from ..parameters import ParameterSet
 from ..settings import SimulationSettings
@@ -58,8 +58,15 @@ def resolve_free(model: CircuitModel, settings: FitSettings) -> tuple[str, ...]:
             free += tuple(n for n in EFFECTS[e.name].fit_parameters() if n not in free)
     unknown = [n for n in (*free, *settings.per_experiment) if n not in known]
     if unknown:
+        owners = {n: effect_of_parameter(n) for n in unknown}
+        hints = "".join(
+            f"; {n} belongs to the effect {o!r}, which the model does not have (add it: "
+            f"--effects {o}, or CircuitModel().with_effects({o!r}))"
+            for n, o in owners.items()
+            if o is not None
+        )
         raise FitError(
-            f"unknown parameter(s) {', '.join(unknown)}; the model has: {', '.join(known)}"
+            f"unknown parameter(s) {', '.join(unknown)}{hints}; the model has: {', '.join(known)}"
         )
     missing = [n for n in settings.per_experiment if n not in free]
     if missing:
