@@ -82,7 +82,8 @@ def _run(args: argparse.Namespace) -> int:
     where = f"Dask {args.scheduler}" if args.scheduler else "local"
     print(
         f"{res.n_points} points: {res.n_run} run, {res.n_skipped} already done; "
-        f"{res.n_failed} failed; {res.wall_s:.1f} s on {res.workers} {where} workers "
+        f"{res.n_failed} failed; {res.wall_s:.1f} s on {res.workers} {where} "
+        f"worker{'s' if res.workers != 1 else ''} "
         f"({res.points_per_s:.2f} points/s)"
     )
     for f in res.summary()["failures"][:5]:

@@ -407,6 +407,7 @@ def test_new_points_that_succeed_do_not_exit_1_for_an_earlier_runs_failures(
     assert main(["sweep", grid([10.0, 12.0, 14.0, 16.0]), *args]) == 0
     out = capsys.readouterr()
     assert "1 run, 3 already done; 3 failed" in out.out and "every point failed" not in out.err
+    assert "on 1 local worker (" in out.out  # it said "1 local workers"
 
 
 def test_workers_reported_are_the_workers_run(tmp_path, monkeypatch):
