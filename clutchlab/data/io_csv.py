@@ -1,11 +1,15 @@
 """CSV reader and writer.
 
 File layout: one header line of column names, then one line per sample, comma-separated.
-Files written here carry canonical signal names (see
-:data:`~clutchlab.data.signals.CANONICAL_ORDER`) in canonical units. Files read here may carry
-any names (mapped by a :class:`~clutchlab.data.channel_map.ChannelMap`), optionally with a
-unit in brackets (``P_clutch [kPa]``) or in parentheses (``P_clutch (kPa)``, only a known
-unit: ``P(clutch)`` is a name). Line numbers in messages are the file's line numbers
+Files read here may also be separated by semicolons or tabs, with a decimal point or a
+decimal comma (the export of a spreadsheet or a data logger in a German or French locale:
+``Zeit;I_soll;P_K`` / ``0,001;250,0;3,52``): the separator is the header's most frequent of
+the three, the decimal comma is recognized in the first data lines. Files written here carry
+canonical signal names (see :data:`~clutchlab.data.signals.CANONICAL_ORDER`) in canonical
+units. Files read here may carry any names (mapped by a
+:class:`~clutchlab.data.channel_map.ChannelMap`), optionally with a unit in brackets
+(``P_clutch [kPa]``) or in parentheses (``P_clutch (kPa)``, only a known unit: ``P(clutch)``
+is a name). Line numbers in messages are the file's line numbers
 (the header is line 1, the first data row is line 2).
 """
 
@@ -51,6 +55,49 @@ _PAREN_UNIT_HEADER = re.compile(r"^(?P<name>.*?)\s*\((?P<unit>[^()]*)\)$")
 def _line_label(i: int) -> str:
     """Name the 0-based data row ``i`` by its line in the file (header = line 1)."""
     return f"line {i + 2} (data row {i + 1})"
+
+
+#: A number written with a decimal comma (``-3,52``, ``1,5e-3``).
+_DECIMAL_COMMA = re.compile(r"^\s*[-+]?\d+,\d+(?:[eE][-+]?\d+)?\s*$")
+#: Data lines looked at for a decimal comma.
+_SNIFF_LINES = 50
+
+
+@dataclass(frozen=True)
+class CsvDialect:
+    """How a CSV file separates its fields and writes its decimals.
+
+    Attributes
+    ----------
+    sep : {",", ";", "\\t"}
+        Field separator.
+    decimal : {".", ","}
+        Decimal mark (a comma only with another separator than the comma).
+    """
+
+    sep: str = ","
+    decimal: str = "."
+
+    def describe(self) -> str:
+        """``"semicolon-separated, decimal comma"``."""
+        sep = {",": "comma", ";": "semicolon", "\t": "tab"}[self.sep]
+        return f"{sep}-separated, decimal {'comma' if self.decimal == ',' else 'point'}"
+
+
+def _sniff_dialect(header: str, path: Path) -> CsvDialect:
+    """The separator most frequent in the header line (the comma on a tie or when none is
+    there), and a decimal comma when another separator leaves commas inside numbers of the
+    first data lines."""
+    counts = {sep: header.count(sep) for sep in (",", ";", "\t")}
+    sep = max(counts, key=lambda k: (counts[k], k == ","))
+    if counts[sep] == 0 or sep == ",":
+        return CsvDialect()
+    with path.open("r", encoding="utf-8-sig", errors="replace", newline="") as fh:
+        next(fh, None)
+        for _, line in zip(range(_SNIFF_LINES), fh, strict=False):
+            if any(_DECIMAL_COMMA.match(field) for field in line.rstrip("\r\n").split(sep)):
+                return CsvDialect(sep, ",")
+    return CsvDialect(sep, ".")
 
 
 #: Largest error of a written sample time, as a fraction of the smallest sample interval.
@@ -149,8 +196,9 @@ def _nul_offset(path: Path) -> int | None:
     return None
 
 
-def _read_header(path: Path, limits: CsvLimits) -> list[str]:
-    """First line of ``path`` as column names (BOM and surrounding whitespace stripped)."""
+def _read_header(path: Path, limits: CsvLimits) -> tuple[list[str], CsvDialect]:
+    """First line of ``path`` as column names (BOM and surrounding whitespace stripped), and
+    the file's dialect."""
     nul = _nul_offset(path)
     if nul is not None:
         with path.open("rb") as fh:
@@ -167,7 +215,8 @@ def _read_header(path: Path, limits: CsvLimits) -> list[str]:
         )
     try:
         text = raw.decode("utf-8-sig")
-        row = next(csv.reader([text]), None) if text.strip() else None
+        dialect = _sniff_dialect(text, path)
+        row = next(csv.reader([text], delimiter=dialect.sep), None) if text.strip() else None
     except UnicodeDecodeError as exc:
         raise DataError(f"{path}: not a UTF-8 text CSV file ({exc})") from None
     except csv.Error as exc:
@@ -179,7 +228,7 @@ def _read_header(path: Path, limits: CsvLimits) -> list[str]:
             f"{path}: {len(row)} columns in the header, more than the limit of "
             f"{limits.max_columns} (raise it with CLUTCHLAB_CSV_MAX_COLUMNS if the file is right)"
         )
-    return [c.strip() for c in row]
+    return [c.strip() for c in row], dialect
 
 
 def _split_unit(header: str, wanted: Callable[[str], bool] | None = None) -> tuple[str, str | None]:
@@ -246,7 +295,7 @@ def decode_csv(path: str | Path, wanted: Callable[[str], bool] | None = None) ->
     """
     path = check_input_file(path)
 
-    header = _read_header(path, CsvLimits.from_env())
+    header, dialect = _read_header(path, CsvLimits.from_env())
     problems: list[str] = []
     names_units = [_split_unit(h, wanted) for h in header]
     names = [n for n, _ in names_units]
@@ -258,18 +307,16 @@ def decode_csv(path: str | Path, wanted: Callable[[str], bool] | None = None) ->
     empty = [i + 1 for i, c in enumerate(names) if not c]
     if empty:
         problems.append(f"{path}: empty column name at position(s) {', '.join(map(str, empty))}")
-    if len(header) == 1 and any(sep in header[0] for sep in ";\t"):
-        problems.append(f"{path}: one column {header[0]!r}; the file must be comma-separated")
     if problems:
         raise DataError(f"{path}: bad CSV header", problems)
 
     try:
         columns, by_column, unparseable = _parse_values(
-            path, header, dict(zip(header, names, strict=True))
+            path, header, dict(zip(header, names, strict=True)), dialect
         )
         n = next(iter(columns.values())).size
-        fields = len(next(csv.reader([_last_line(path)]), []))
-        short = _short_rows(path, len(header), n)
+        fields = len(next(csv.reader([_last_line(path)], delimiter=dialect.sep), []))
+        short = _short_rows(path, len(header), n, dialect.sep)
     except csv.Error as exc:  # e.g. a field longer than the csv module's field size limit
         raise DataError(f"{path}: malformed CSV ({exc})") from None
     if fields < len(header):
@@ -298,7 +345,8 @@ def decode_csv(path: str | Path, wanted: Callable[[str], bool] | None = None) ->
         if short_mask is not None:  # already reported: not again as missing values
             reported = short_mask if reported is None else reported | short_mask
         channels.append(RawChannel(name, columns[h], unit, where=where, reported=reported))
-    return RawLog(path, "csv", channels, row_label=_line_label, problems=problems)
+    notes = [] if dialect == CsvDialect() else [f"{path}: read as {dialect.describe()}"]
+    return RawLog(path, "csv", channels, row_label=_line_label, problems=problems, notes=notes)
 
 
 def read_csv(
@@ -343,7 +391,7 @@ def read_csv(
     )[0]
 
 
-def _short_rows(path: Path, n_fields: int, n_rows: int) -> list[int]:
+def _short_rows(path: Path, n_fields: int, n_rows: int, sep: str = ",") -> list[int]:
     """0-based data rows (of the first ``n_rows``) with fewer fields than the header.
 
     Blank lines are left out (they read as rows of missing values, reported as such). Counts
@@ -354,7 +402,7 @@ def _short_rows(path: Path, n_fields: int, n_rows: int) -> list[int]:
     if b'"' in data:
         short = []
         with path.open("r", encoding="utf-8-sig", errors="replace", newline="") as fh:
-            for i, row in enumerate(csv.reader(fh)):
+            for i, row in enumerate(csv.reader(fh, delimiter=sep)):
                 if 0 < i <= n_rows and 0 < len(row) < n_fields and any(c.strip() for c in row):
                     short.append(i - 1)
         return short
@@ -364,7 +412,7 @@ def _short_rows(path: Path, n_fields: int, n_rows: int) -> list[int]:
         ends = np.append(ends, raw.size)
     ends = ends[1 : n_rows + 1]  # line 1 is the header
     starts = np.concatenate(([0], np.flatnonzero(raw == ord("\n"))))[1 : ends.size + 1] + 1
-    commas = np.flatnonzero(raw == ord(","))
+    commas = np.flatnonzero(raw == ord(sep))
     fields = np.searchsorted(commas, ends) - np.searchsorted(commas, starts) + 1
     short = []
     for row in np.flatnonzero(fields < n_fields):
@@ -373,11 +421,11 @@ def _short_rows(path: Path, n_fields: int, n_rows: int) -> list[int]:
     return short
 
 
-def _long_rows(path: Path, n_fields: int) -> list[str]:
+def _long_rows(path: Path, n_fields: int, sep: str = ",") -> list[str]:
     """Problems naming the lines with more fields than the header (data would be lost)."""
     bad = []
     with path.open("r", encoding="utf-8-sig", errors="replace", newline="") as fh:
-        for line_no, row in enumerate(csv.reader(fh), start=1):
+        for line_no, row in enumerate(csv.reader(fh, delimiter=sep), start=1):
             if line_no > 1 and len(row) > n_fields:
                 bad.append(f"line {line_no} (data row {line_no - 1}) has {len(row)} fields")
     shown = ", ".join(bad[:_MAX_ROWS_LISTED]) + (f" … ({len(bad)} lines)" if len(bad) > 5 else "")
@@ -385,7 +433,7 @@ def _long_rows(path: Path, n_fields: int) -> list[str]:
 
 
 def _parse_values(
-    path: Path, header: list[str], labels: Mapping[str, str]
+    path: Path, header: list[str], labels: Mapping[str, str], dialect: CsvDialect = CsvDialect()
 ) -> tuple[dict[str, np.ndarray], dict[str, str], dict[str, np.ndarray]]:
     """Parse the data rows of ``path`` into float64 columns named by ``header``.
 
@@ -408,6 +456,8 @@ def _parse_values(
         "header": 0,
         "names": header,
         "index_col": False,
+        "sep": dialect.sep,
+        "decimal": dialect.decimal,
     }
     try:
         with warnings.catch_warnings():
@@ -421,7 +471,9 @@ def _parse_values(
                 text = pd.read_csv(path, dtype=str, **{**options, "na_values": None}).fillna("")
                 df = text
     except pd.errors.ParserWarning:  # a row has more fields than the header
-        raise DataError(f"{path}: malformed CSV", _long_rows(path, len(header))) from None
+        raise DataError(
+            f"{path}: malformed CSV", _long_rows(path, len(header), dialect.sep)
+        ) from None
     except (pd.errors.ParserError, csv.Error, UnicodeDecodeError, ValueError) as exc:
         reason = " ".join(str(exc).split())
         raise DataError(f"{path}: malformed CSV ({type(exc).__name__}: {reason})") from None
@@ -440,7 +492,8 @@ def _parse_values(
     for col in header:
         cells = text[col].iloc[:n].str.strip()
         missing = cells.isin(_NA_VALUES)
-        values = pd.to_numeric(cells.where(~missing, "nan"), errors="coerce").to_numpy(
+        numbers = cells.str.replace(",", ".", regex=False) if dialect.decimal == "," else cells
+        values = pd.to_numeric(numbers.where(~missing, "nan"), errors="coerce").to_numpy(
             dtype=np.float64
         )
         unparseable = np.isnan(values) & ~missing.to_numpy()
