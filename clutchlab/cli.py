@@ -168,6 +168,8 @@ def _cmd_params(args: argparse.Namespace) -> int:
     rows = [p.to_dict() for p in model.parameters]
     if args.json:
         write_json_output(args.json, json.dumps(rows, indent=2, ensure_ascii=False))
+    if args.out:
+        write_json_output(args.out, model.default_params().to_json())
     print(
         f"{'name':18s} {'default':>10s} {'unit':14s} {'[lower, upper]':16s} {'fit scale':12s} "
         "description"
@@ -296,7 +298,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("params", help="list the model parameters (units, defaults, bounds)")
     p.add_argument("--effects", default="", help="effects switched on, comma separated")
     p.add_argument("--json", help="write the table as JSON here")
-    p.set_defaults(func=_cmd_params)
+    p.add_argument(
+        "--out",
+        help="write the datasheet values as a parameter file to edit (a design before any "
+        "fit; `clutchlab export-fmu FILE` exports it as an FMU)",
+    )
+    p.set_defaults(func=_cmd_params, file_out="json")
 
     p = sub.add_parser("demo", help="stand data → physics fit → ML variants → report, end to end")
     p.add_argument("--out", default="clutchlab-demo", help="output folder (default clutchlab-demo)")

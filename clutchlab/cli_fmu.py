@@ -1,4 +1,4 @@
-"""``clutchlab export-fmu``: a fitted model as an FMI 2.0 co-simulation FMU."""
+"""``clutchlab export-fmu``: a fitted model (or a design) as an FMI 2.0 co-simulation FMU."""
 
 from __future__ import annotations
 
@@ -95,12 +95,15 @@ def _cmd_export_fmu(args: argparse.Namespace) -> int:
 
 def register(sub) -> None:
     """Add the ``export-fmu`` subcommand to the ``clutchlab`` parser."""
-    p = sub.add_parser("export-fmu", help="export a fitted model as an FMI 2.0 co-simulation FMU")
+    p = sub.add_parser(
+        "export-fmu", help="export a fitted model (or a design) as an FMI 2.0 co-simulation FMU"
+    )
     p.add_argument(
         "model",
-        help="fitted physics model JSON (clutchlab fit-physics --out) or a residual_ml "
-        "model JSON (clutchlab train --out; gp_didt, paper_svc_gp and hybrid trained with "
-        "--causal export exactly)",
+        help="fitted physics model JSON (clutchlab fit-physics --out), a parameter file of a "
+        "design before any fit (clutchlab params --out; its effects are those its parameters "
+        "belong to) or a residual_ml model JSON (clutchlab train --out; gp_didt, "
+        "paper_svc_gp and hybrid trained with --causal export exactly)",
     )
     p.add_argument("--out", required=True, help="FMU file to write (.fmu)")
     p.add_argument(

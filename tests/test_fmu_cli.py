@@ -116,17 +116,44 @@ def test_fitted_model_exported_with_effects_matches_and_reproduces_physics_fitte
     assert abs(ma["rmse_bar"] - mb["rmse_bar"]) <= 0.01
 
 
-def test_export_fmu_cli_says_how_to_export_a_parameter_file_before_any_fit(tmp_path, capsys):
-    """A design engineer's parameter file (``ParameterSet.to_json``) given to export-fmu was
-    refused as 'not a fitted physics model' with a list of fit-result keys and no way
-    forward; the error now says how a design is exported before any fit."""
+def test_export_fmu_cli_exports_a_design_before_any_fit(tmp_path, capsys):
+    """A design engineer's parameter file was refused as 'not a fitted physics model' (then,
+    session 42, with a Python recipe): ``params --out`` writes the datasheet values to edit,
+    and ``export-fmu`` exports them with the effects their parameters belong to."""
     from clutchlab.cli import main
+    from clutchlab.physics import drive_trace, knot_profile
 
     design = tmp_path / "design.json"
-    CircuitModel().default_params().replace(vfs_d_orf=0.6).to_json(design)
-    assert main(["export-fmu", str(design), "--out", str(tmp_path / "d.fmu")]) == 2
-    err = capsys.readouterr().err
-    assert "not a fitted physics model" in err
-    assert "this is a parameter file (ParameterSet.to_json)" in err
-    assert "export_physics_fmu((model, params), OUT)" in err
-    assert not (tmp_path / "d.fmu").exists()
+    assert (
+        main(
+            [
+                "params",
+                "--effects",
+                "sensor_lag",
+                "--out",
+                str(design),
+                "--json",
+                str(tmp_path / "t.json"),
+            ]
+        )
+        == 0
+    )
+    doc = json.loads(design.read_text(encoding="utf-8"))
+    doc["parameters"]["vfs_d_orf"]["value"] = 0.6
+    doc["parameters"]["slag_tau"]["value"] = 5.0
+    design.write_text(json.dumps(doc), encoding="utf-8")
+    out = tmp_path / "d.fmu"
+    assert main(["export-fmu", str(design), "--out", str(out)]) == 0, capsys.readouterr().err
+    assert "fmpy.validation: no problems" in capsys.readouterr().out
+    model = CircuitModel().with_effects("sensor_lag")
+    params = model.default_params().replace(vfs_d_orf=0.6, slag_tau=5.0)
+    t, i = knot_profile([0.0, 0.3, 2.3, 2.6, 4.6], [0.0, 0.0, 1100.0, 1100.0, 0.0])
+    trace = drive_trace(t, i, dither_amp_mA=100.0, dither_freq_Hz=50.0)
+    ref = simulate(model, params, trace).pressure_bar
+    sim = FmuPhysics(out).simulate(trace).pressure_bar
+    assert np.ptp(ref) > 5.0 and np.abs(sim - ref).max() <= 0.01
+    # a name that no model has is named; nothing is written
+    doc["parameters"]["nope"] = {"value": 1.0, "unit": "-"}
+    design.write_text(json.dumps(doc), encoding="utf-8")
+    assert main(["export-fmu", str(design), "--out", str(tmp_path / "e.fmu")]) == 2
+    assert "nope" in capsys.readouterr().err and not (tmp_path / "e.fmu").exists()

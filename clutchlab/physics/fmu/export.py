@@ -13,7 +13,7 @@ from .build import build_fmu
 from .errors import FmuError
 from .physics import check_export_options, physics_program
 
-__all__ = ["export_physics_fmu", "physics_source"]
+__all__ = ["design_source", "export_physics_fmu", "physics_source"]
 
 
 def physics_source(source) -> tuple[CircuitModel, ParameterSet]:
@@ -22,8 +22,9 @@ def physics_source(source) -> tuple[CircuitModel, ParameterSet]:
     Parameters
     ----------
     source : path-like, FitResult, PhysicsFitter or (CircuitModel, ParameterSet)
-        A fit JSON written by ``clutchlab fit-physics`` / ``PhysicsFitter.save``, a fit
-        result, a fitted fitter, or a model with its parameters.
+        A fit JSON written by ``clutchlab fit-physics`` / ``PhysicsFitter.save``, a parameter
+        file of a design before any fit (:func:`design_source`), a fit result, a fitted
+        fitter, or a model with its parameters.
 
     Raises
     ------
@@ -42,14 +43,15 @@ def physics_source(source) -> tuple[CircuitModel, ParameterSet]:
         return source.model_, source.params_
     if isinstance(source, FitResult):
         return source.model(), source.params()
+    if isinstance(source, str | Path) and _is_parameter_file(Path(source)):
+        return design_source(source)
     if isinstance(source, str | Path):
         try:  # the content is checked as it is read (FitResult.from_json)
             result = FitResult.from_json(Path(source))
         except FitResultError as exc:  # every problem of the content, one per line
-            problems = exc.problems or [str(exc)]
-            if _is_parameter_file(Path(source)):
-                problems = [*problems, _PARAMETER_FILE_HINT]
-            raise FmuError(f"{source}: not a fitted physics model", problems) from exc
+            raise FmuError(
+                f"{source}: not a fitted physics model", exc.problems or [str(exc)]
+            ) from exc
         except FitError as exc:
             raise FmuError(f"{source}: not a fitted physics model ({exc})") from exc
         try:
@@ -62,14 +64,44 @@ def physics_source(source) -> tuple[CircuitModel, ParameterSet]:
     )
 
 
-#: What to do with a parameter file (:meth:`ParameterSet.to_json`): before any fit, a design
-#: is exported from Python; the file holds values, not the model (its effects) they are for.
-_PARAMETER_FILE_HINT = (
-    "this is a parameter file (ParameterSet.to_json): it holds values, not the model they "
-    "are for; to export a design before any fit, from Python: model = CircuitModel()"
-    ".with_effects(...); params = ParameterSet.from_json(model.parameters, FILE); "
-    "export_physics_fmu((model, params), OUT) (clutchlab.physics.fmu)"
-)
+def design_source(path: str | Path) -> tuple[CircuitModel, ParameterSet]:
+    """The model and values of a design before any fit: a parameter file.
+
+    A parameter file (:meth:`~clutchlab.physics.ParameterSet.to_json`) holds values, not the
+    model they are for; the model is the datasheet circuit with every effect (or flexible
+    law) that declares one of the file's parameters switched on. Parameters the file does
+    not list keep their defaults.
+
+    Parameters
+    ----------
+    path : path-like
+        ``{"parameters": {name: {"value": v, "unit": u}}}``, values in each parameter's unit.
+
+    Returns
+    -------
+    (CircuitModel, ParameterSet)
+
+    Raises
+    ------
+    FmuError
+        Listing every problem of the file: a name no model has, a wrong unit, a value that is
+        not a number or lies outside its bounds.
+    """
+    from ..effects import EFFECTS, FLEXIBLE_LAWS, effect_of_parameter
+
+    doc = json.loads(Path(path).read_text(encoding="utf-8"))
+    names = list(doc["parameters"]) if isinstance(doc["parameters"], dict) else []
+    base = {p.name for p in CircuitModel().parameters}
+    owners = dict.fromkeys(o for n in names if n not in base and (o := effect_of_parameter(n)))
+    laws = [(EFFECTS.get(o) or FLEXIBLE_LAWS[o])() for o in owners]
+    model = CircuitModel().with_effects(*laws)
+    try:
+        params = ParameterSet.from_json(model.parameters, Path(path))
+    except ClutchlabError as exc:
+        raise FmuError(
+            f"{path}: not a usable parameter file", getattr(exc, "problems", None) or [str(exc)]
+        ) from exc
+    return model, params
 
 
 def _is_parameter_file(path: Path) -> bool:
