@@ -89,15 +89,13 @@ def _check_classifiers_out(out: Path) -> None:
 def _physics(path: str | None):
     if not path:
         return None
-    from .errors import ModelError
     from .residual_ml import PhysicsPredictor
 
-    try:
+    if PhysicsPredictor.describes(path):  # its problems are its own, not a fit result's
         return PhysicsPredictor.load(path)
-    except (ModelError, KeyError, ValueError):
-        from .physics.fit import PhysicsFitter
+    from .physics.fit import PhysicsFitter
 
-        return PhysicsPredictor.from_fitter(PhysicsFitter.load(path))
+    return PhysicsPredictor.from_fitter(PhysicsFitter.load(path))
 
 
 def _cmd_train(args: argparse.Namespace) -> int:

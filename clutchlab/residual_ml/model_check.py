@@ -865,6 +865,30 @@ def check_model_document(
         raise ModelFileError(f"{source}: not a valid clutchlab model", c.problems)
 
 
+def check_physics_document(doc, source: str) -> None:
+    """Check a :class:`~clutchlab.residual_ml.physics.PhysicsPredictor` description.
+
+    The same check a saved hybrid model's physics goes through: keys and their types, the
+    effects and parameters the circuit model knows, the substeps.
+
+    Parameters
+    ----------
+    doc : object
+        The parsed JSON document.
+    source : str
+        How the error names the document (its file).
+
+    Raises
+    ------
+    ModelFileError
+        Listing every problem found, each naming the key.
+    """
+    c = _Checker(None, "")
+    c.physics(doc, "document")
+    if c.problems:
+        raise ModelFileError(f"{source}: not a valid PhysicsPredictor description", c.problems)
+
+
 def check_model(model, source: str | None = None) -> None:
     """Check a fitted model in memory through :func:`check_model_document`.
 

@@ -155,8 +155,34 @@ class PhysicsPredictor:
 
     @classmethod
     def load(cls, path: str | Path) -> PhysicsPredictor:
-        """Read a JSON written by :meth:`save`."""
-        return cls.from_dict(json.loads(Path(path).read_text(encoding="utf-8")))
+        """Read a JSON written by :meth:`save`.
+
+        Raises
+        ------
+        ModelError
+            If the file cannot be read or is not JSON, naming the file.
+        ModelFileError
+            (a ModelError) If it is not a valid PhysicsPredictor description, listing every
+            problem by key (missing keys, unknown effects or parameters, bad substeps).
+        """
+        from .model_check import check_physics_document
+
+        try:
+            doc = json.loads(Path(path).read_text(encoding="utf-8"))
+        except (OSError, ValueError, RecursionError) as exc:
+            raise ModelError(f"cannot read physics model {path}: {exc}") from None
+        check_physics_document(doc, str(path))
+        return cls.from_dict(doc)
+
+    @staticmethod
+    def describes(path: str | Path) -> bool:
+        """Whether ``path`` holds a JSON object that says it is a PhysicsPredictor
+        (``"kind": "PhysicsPredictor"``), valid or not; False when it cannot be read."""
+        try:
+            doc = json.loads(Path(path).read_text(encoding="utf-8"))
+        except (OSError, ValueError, RecursionError):
+            return False
+        return isinstance(doc, dict) and doc.get("kind") == "PhysicsPredictor"
 
 
 def DefaultPhysics(substeps: int = 4) -> PhysicsPredictor:

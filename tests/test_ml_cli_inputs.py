@@ -1,0 +1,80 @@
+"""``clutchlab train`` on a user's odd inputs: clear errors, before any fit, nothing written."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from clutchlab.cli import main
+from clutchlab.data import save_dataset
+from clutchlab.errors import ModelError
+from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
+from clutchlab.residual_ml import PhysicsPredictor
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    """Two short ramps at one dither setting (seconds to build, never fitted here)."""
+    config = StandConfig(
+        settings=(DitherSetting(50.0, "A"),),
+        ramps=(RampProfile("fast", 0.8, 0.2), RampProfile("slow", 2.0, 0.2)),
+        substeps=2,
+        seed=2,
+    )
+    data = tmp_path_factory.mktemp("tiny") / "stand"
+    save_dataset(run_stand(config, progress=False).dataset, data)
+    return data
+
+
+@pytest.mark.parametrize(
+    ("name", "content", "expected"),
+    [
+        ("missing.json", None, "missing.json"),
+        ("list.json", "[1, 2]", "a JSON object is expected"),
+        ("no_substeps.json", {"kind": "PhysicsPredictor", "effects": [], "params": {}}, "substeps"),
+        (
+            "bad_effect.json",
+            {"kind": "PhysicsPredictor", "effects": ["nope"], "params": {}, "substeps": 4},
+            "unknown effect 'nope'",
+        ),
+        (
+            "bad_param.json",
+            {"kind": "PhysicsPredictor", "effects": [], "params": {"nope": 1.0}, "substeps": 4},
+            "unknown parameter 'nope'",
+        ),
+    ],
+)
+def test_train_physics_file_problems_are_one_clear_error(
+    tiny, tmp_path, capsys, name, content, expected
+):
+    """A bad ``--physics`` file is an error naming it and its problem (no traceback; a
+    PhysicsPredictor description is not reported as a malformed fit result), before any fit
+    and with no model folder written."""
+    path = tmp_path / name
+    if content is not None:
+        path.write_text(content if isinstance(content, str) else json.dumps(content))
+    out = tmp_path / "model"
+    argv = ["train", str(tiny), "--variant", "hybrid", "--out", str(out), "--quiet"]
+    assert main([*argv, "--physics", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert name in err and expected in err
+    assert "Traceback" not in err
+    if isinstance(content, dict):  # its own problems, not those of a fit result
+        assert "PhysicsPredictor description" in err and "fit result" not in err
+    assert not out.exists()
+
+
+def test_physics_predictor_load_errors_are_model_errors(tmp_path):
+    """PhysicsPredictor.load raises ModelError (never OSError / KeyError / AttributeError)."""
+    with pytest.raises(ModelError, match=r"missing\.json"):
+        PhysicsPredictor.load(tmp_path / "missing.json")
+    (tmp_path / "list.json").write_text("[1]")
+    with pytest.raises(ModelError, match="JSON object"):
+        PhysicsPredictor.load(tmp_path / "list.json")
+    (tmp_path / "partial.json").write_text('{"kind": "PhysicsPredictor", "effects": []}')
+    with pytest.raises(ModelError, match="params: missing key"):
+        PhysicsPredictor.load(tmp_path / "partial.json")
+    good = PhysicsPredictor(("sensor_lag",), {"slag_tau": 2.0})
+    good.save(tmp_path / "good.json")
+    assert PhysicsPredictor.load(tmp_path / "good.json") == good
