@@ -408,8 +408,12 @@ def check_outputs(args: argparse.Namespace) -> None:
         check_output(out, kind="file", overwrite=True, what="--out")
         _check_replaceable(out, args, "--out", args.file_out)
     if getattr(args, "folder_out", False):
+        from .residual_ml.persist import check_model_destination
+
         check_output(out, kind="folder", overwrite=True, what="--out")
         _check_replaceable(Path(out) / "model.json", args, "--out", "json")
+        # a user's model.json / model.npz there is refused now, not after the fit
+        check_model_destination(Path(out) / "model.json")
     if getattr(args, "report_out", False):
         from .data.output import check_report_out
         from .validation.report import REPORT_FOLDER

@@ -78,3 +78,20 @@ def test_physics_predictor_load_errors_are_model_errors(tmp_path):
     good = PhysicsPredictor(("sensor_lag",), {"slag_tau": 2.0})
     good.save(tmp_path / "good.json")
     assert PhysicsPredictor.load(tmp_path / "good.json") == good
+
+
+@pytest.mark.parametrize(
+    ("name", "content"), [("model.npz", b"my arrays"), ("model.json", b'{"mine": 1}')]
+)
+def test_train_refuses_a_users_model_file_before_fitting(tiny, tmp_path, capsys, name, content):
+    """A file of the user's where ``train`` writes model.json / model.npz is refused before
+    the fit (was: after it, the fit's time lost), and is left as it was."""
+    out = tmp_path / "model"
+    out.mkdir()
+    (out / name).write_bytes(content)
+    argv = ["train", str(tiny), "--variant", "gp_base", "--out", str(out)]
+    assert main(argv) == 2
+    captured = capsys.readouterr()
+    assert f"{name}: exists and is not" in captured.err
+    assert "fitting" not in captured.out
+    assert (out / name).read_bytes() == content and [p.name for p in out.iterdir()] == [name]

@@ -41,7 +41,7 @@ from .model_check import (
 )
 from .physics import PhysicsPredictor
 
-__all__ = ["FORMAT", "load_model", "model_document", "save_model"]
+__all__ = ["FORMAT", "check_model_destination", "load_model", "model_document", "save_model"]
 
 _VERSION = FORMAT_VERSIONS[-1]
 _CLASSES = MODEL_CLASSES
@@ -381,6 +381,29 @@ def _destination(path: Path) -> Path:
             f"{path.name}; it is not replaced (choose another name, or remove it)"
         )
     return npz
+
+
+def check_model_destination(path: str | Path) -> Path:
+    """Refuse, before any fit, a model JSON name :func:`save_model` would refuse.
+
+    Parameters
+    ----------
+    path : path-like
+        The model JSON to be written (its NPZ goes beside it).
+
+    Returns
+    -------
+    pathlib.Path
+        The NPZ that will be written beside the JSON.
+
+    Raises
+    ------
+    OutputError
+        As :func:`save_model` does before writing (a ``.npz`` name, a folder in the way, a
+        file there that clutchlab did not write: a JSON that is not a clutchlab model, an
+        NPZ that no model JSON at ``path`` names).
+    """
+    return _destination(Path(path))
 
 
 def _savez(path: Path, arrays: dict[str, np.ndarray]) -> None:
