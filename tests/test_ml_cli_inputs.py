@@ -1,16 +1,18 @@
-"""``clutchlab train`` on a user's odd inputs: clear errors, before any fit, nothing written."""
+"""``clutchlab train`` / ``classifiers`` on a user's odd inputs: clear errors, before any fit,
+nothing written."""
 
 from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from clutchlab.cli import main
-from clutchlab.data import save_dataset
-from clutchlab.errors import ModelError
+from clutchlab.data import Dataset, Trace, save_dataset
+from clutchlab.errors import DataError, ModelError
 from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
-from clutchlab.residual_ml import PhysicsPredictor
+from clutchlab.residual_ml import PhysicsPredictor, compare_classifiers
 
 
 @pytest.fixture(scope="module")
@@ -95,3 +97,36 @@ def test_train_refuses_a_users_model_file_before_fitting(tiny, tmp_path, capsys,
     assert f"{name}: exists and is not" in captured.err
     assert "fitting" not in captured.out
     assert (out / name).read_bytes() == content and [p.name for p in out.iterdir()] == [name]
+
+
+def _ramp(name: str, ramp: str, peak_mA: float) -> Trace:
+    """0 → peak → 0 mA in 2 s at 50 Hz dither; latched (line pressure) above 800 mA."""
+    t = np.arange(0.0, 2.0005, 1e-3)
+    current = np.interp(t, [0.0, 1.0, 2.0], [0.0, peak_mA, 0.0])
+    n = t.size
+    signals = {
+        "time_s": t,
+        "current_cmd_mA": current,
+        "dither_amp_mA": np.full(n, 50.0),
+        "dither_freq_Hz": np.full(n, 50.0),
+        "clutch_pressure_bar": np.where(current > 800.0, 17.7, current / 100.0),
+        "line_pressure_bar": np.full(n, 17.7),
+    }
+    return Trace(name, signals, meta={"ramp": ramp, "dither_freq_Hz": 50.0})
+
+
+def test_classifiers_with_a_latch_state_in_one_experiment_only(tmp_path, capsys):
+    """Only one training experiment latches (the other stays below the latch current): each
+    leave-one-experiment-out fold without it has one class. Was a scikit-learn ValueError
+    traceback from a worker process; now one DataError naming that experiment."""
+    traces = [_ramp("full", "fast", 1100.0), _ramp("partial", "slow", 600.0)]
+    with pytest.raises(DataError, match="each latch state in at least 2") as exc:
+        compare_classifiers(traces, names=["logistic_regression"], workers=1)
+    assert exc.value.problems == ["only experiment 'full' has latched samples"]
+
+    data, out = tmp_path / "data", tmp_path / "clf"
+    save_dataset(Dataset(traces), data)
+    assert main(["classifiers", str(data), "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "only experiment 'full' has latched samples" in err and "Traceback" not in err
+    assert not out.exists()

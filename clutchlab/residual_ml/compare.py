@@ -197,7 +197,8 @@ def compare_classifiers(
     Raises
     ------
     DataError
-        If fewer than two experiments are given, or the labels hold one latch state only.
+        If fewer than two experiments are given, the labels hold one latch state only, or
+        a latch state occurs in one experiment only (a fold would train without it).
     """
     traces = list(traces)
     if len(traces) < 2:
@@ -217,6 +218,19 @@ def compare_classifiers(
     if np.unique(y).size < 2:
         raise DataError("the training experiments hold only one latch state; nothing to classify")
     n = len(traces)
+    # every fold trains without one experiment: it needs both states in the others
+    state_names = {0: "unlatched", 1: "latched"}
+    alone = []
+    for state, label in state_names.items():
+        holders = [k for k in range(n) if np.any(ys[k] == state)]
+        if len(holders) == 1:
+            alone.append(f"only experiment {traces[holders[0]].name!r} has {label} samples")
+    if alone:
+        raise DataError(
+            "leave-one-experiment-out needs each latch state in at least 2 training "
+            "experiments (a fold trains without one of them)",
+            alone,
+        )
     jobs = [(name, k) for name in names for k in [*range(n), None]]  # None: the final fit
 
     def run(j: int) -> tuple[int, float, object]:
