@@ -12,7 +12,7 @@ from clutchlab.cli import main
 from clutchlab.data import Dataset, Trace, save_dataset
 from clutchlab.errors import DataError, ModelError
 from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
-from clutchlab.residual_ml import PhysicsPredictor, compare_classifiers
+from clutchlab.residual_ml import GPBaseline, PhysicsPredictor, compare_classifiers
 
 
 @pytest.fixture(scope="module")
@@ -130,3 +130,25 @@ def test_classifiers_with_a_latch_state_in_one_experiment_only(tmp_path, capsys)
     err = capsys.readouterr().err
     assert "only experiment 'full' has latched samples" in err and "Traceback" not in err
     assert not out.exists()
+
+
+def test_predict_on_nan_names_the_experiment_signal_and_row(tiny):
+    """A trace built in Python (not read through the data checks) with a NaN input: was
+    "x has a non-finite value at row N" (no experiment, no signal) for the current, and
+    silently NaN predictions for the dither amplitude or frequency. Now one DataError as
+    in fit, naming experiment, signal and first row."""
+    from clutchlab.data import load_dataset
+
+    ds = load_dataset(tiny)
+    model = GPBaseline().fit(ds.select(ramps=["fast"]))
+    trace = ds.select(ramps=["slow"])[0]
+    assert np.isfinite(model.predict(trace)).all()
+    for signal in ("current_cmd_mA", "dither_amp_mA", "dither_freq_Hz"):
+        values = trace.get(signal).copy()
+        values[[99, 120]] = np.nan
+        with pytest.raises(DataError, match="predicted experiments") as info:
+            model.predict(trace.with_signals(**{signal: values}))
+        assert info.value.problems == [
+            f"experiment {trace.name!r}: {signal} has 2 non-finite value(s), the first at "
+            "row 100 (t = 0.099 s)"
+        ]

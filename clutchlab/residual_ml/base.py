@@ -29,7 +29,14 @@ from ._threads import single_thread
 from .features import FeatureBuilder, target_pressure
 from .labels import LatchLabelRule, latch_labels
 
-__all__ = ["FIT_SIGNALS", "Block", "TraceEstimator", "as_traces", "check_finite_signals"]
+__all__ = [
+    "FIT_SIGNALS",
+    "PREDICT_SIGNALS",
+    "Block",
+    "TraceEstimator",
+    "as_traces",
+    "check_finite_signals",
+]
 
 #: Signals a fit reads from a training trace, when the trace holds them: the target (clutch
 #: pressure, bar), the line pressure of the latch labels and the latched plateau's
@@ -43,6 +50,9 @@ FIT_SIGNALS: tuple[str, ...] = (
     "line_pressure_bar",
     "clutch_pressure_bar",
 )
+#: Signals a prediction reads from a trace, when the trace holds them: the fit's, less the
+#: target (the clutch pressure is only compared with, never read).
+PREDICT_SIGNALS: tuple[str, ...] = tuple(s for s in FIT_SIGNALS if s != "clutch_pressure_bar")
 
 
 def as_traces(X, role: str = "") -> list[Trace] | None:
@@ -83,8 +93,12 @@ def as_traces(X, role: str = "") -> list[Trace] | None:
     return traces
 
 
-def check_finite_signals(traces: Sequence[Trace], signals: Sequence[str] = FIT_SIGNALS) -> None:
+def check_finite_signals(
+    traces: Sequence[Trace], signals: Sequence[str] = FIT_SIGNALS, role: str = "training"
+) -> None:
     """Refuse traces with a non-finite value in one of ``signals`` (those they hold).
+
+    ``role`` names the experiments in the error (``"training"``, ``"predicted"``).
 
     Raises
     ------
@@ -107,7 +121,7 @@ def check_finite_signals(traces: Sequence[Trace], signals: Sequence[str] = FIT_S
                     f"the first at row {i + 1}{at}"
                 )
     if problems:
-        raise DataError("non-finite values in the training experiments", problems)
+        raise DataError(f"non-finite values in the {role} experiments", problems)
 
 
 def _numeric_lag(value) -> float:
@@ -292,9 +306,14 @@ class TraceEstimator(RegressorMixin, BaseEstimator):
         ------
         NotFittedError
             If the estimator is not fitted.
+        DataError
+            If a trace has a non-finite value in a signal a prediction reads
+            (:data:`PREDICT_SIGNALS`; experiment, signal and row named).
         """
         self._check_fitted()
         traces = as_traces(X)
+        if traces is not None:
+            check_finite_signals(traces, PREDICT_SIGNALS, role="predicted")
         with single_thread("blas"):
             if traces is None:
                 Xa = validate_data(self, X, reset=False, dtype=np.float64)
