@@ -152,3 +152,24 @@ def test_predict_on_nan_names_the_experiment_signal_and_row(tiny):
             f"experiment {trace.name!r}: {signal} has 2 non-finite value(s), the first at "
             "row 100 (t = 0.099 s)"
         ]
+
+
+def test_didt_features_without_dither_average_the_current_noise():
+    """A log without dither (no dither columns, no manifest frequency) and only the measured
+    current: the dI/dt window was 5 "dither periods" of 1 sample each (5 ms), so dI/dt
+    swung by ±4000 mA/s on a 220 mA/s ramp and the direction of travel flipped thousands
+    of times. It now uses the data layer's window without dither (5 periods of 50 Hz, as
+    nominal_didt), and the direction follows the ramp."""
+    from clutchlab.residual_ml import FeatureBuilder
+
+    t = np.arange(0.0, 11.0005, 1e-3)
+    ramp = np.interp(t, [0.0, 0.5, 5.5, 6.0, 11.0], [0.0, 0.0, 1100.0, 1100.0, 0.0])
+    noisy = np.round((ramp + np.random.default_rng(0).normal(0.0, 2.0, t.size)) * 2) / 2
+    trace = Trace(
+        "no_dither", {"time_s": t, "current_mA": noisy, "clutch_pressure_bar": ramp / 100}
+    )
+    X = FeatureBuilder(("didt_mA_s", "direction")).build(trace)
+    up, down = (t > 1.0) & (t < 5.0), (t > 6.5) & (t < 10.5)
+    assert np.abs(X[up | down, 0]).max() < 300.0  # the ramp is 220 mA/s
+    assert (X[up, 1] == 1).all() and (X[down, 1] == -1).all()
+    assert np.count_nonzero(np.diff(X[:, 1])) < 30

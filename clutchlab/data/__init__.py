@@ -16,6 +16,7 @@ from .demodulate import (
     DitherEstimate,
     demodulate_dither,
     demodulate_trace,
+    didt_period_samples,
     nominal_current,
     nominal_didt,
 )
@@ -73,6 +74,7 @@ __all__ = [
     "demodulate_dither",
     "demodulate_trace",
     "didt",
+    "didt_period_samples",
     "dither_period_mean",
     "dither_period_samples",
     "first_crossing",

@@ -70,6 +70,7 @@ __all__ = [
     "DitherEstimate",
     "demodulate_dither",
     "demodulate_trace",
+    "didt_period_samples",
     "nominal_current",
     "nominal_didt",
 ]
@@ -334,8 +335,26 @@ def demodulate_dither(
     return DitherEstimate(nominal, amplitude, freq, waveform, present, clipped, noise, loop_tau)
 
 
-def _samples_per_period(trace: Trace, estimate: DitherEstimate | None = None) -> float:
-    """Samples per dither period: dither_freq_Hz column, manifest value, or demodulated."""
+def didt_period_samples(trace: Trace, estimate: DitherEstimate | None = None) -> float:
+    """Samples per dither period as the dI/dt window counts it (:func:`nominal_didt`).
+
+    The ``dither_freq_Hz`` column, else the manifest value, else the demodulated frequency
+    (``estimate``); without any dither, the period of 50 Hz, so that a window of a few
+    periods still averages the current noise (unlike
+    :func:`~clutchlab.data.derived.dither_period_samples`, which is 1 sample then).
+
+    Parameters
+    ----------
+    trace : Trace
+        The experiment.
+    estimate : DitherEstimate, optional
+        Its dither estimate, when one was made.
+
+    Returns
+    -------
+    float
+        Samples (fractional).
+    """
     fs = trace.sample_rate_Hz
     if trace.has("dither_freq_Hz"):
         f = trace.get("dither_freq_Hz")
@@ -429,5 +448,5 @@ def nominal_didt(trace: Trace, periods: float = 5.0) -> np.ndarray:
     else:
         estimate = demodulate_trace(trace)
         current = estimate.nominal_mA
-    n = periods * _samples_per_period(trace, estimate)
+    n = periods * didt_period_samples(trace, estimate)
     return didt(current, trace.sample_rate_Hz, n)

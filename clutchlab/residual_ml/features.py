@@ -53,6 +53,7 @@ from ..data import (
     causal_didt,
     demodulate_trace,
     didt,
+    didt_period_samples,
     dither_period_mean,
     dither_period_samples,
     first_order_lag,
@@ -259,7 +260,8 @@ class FeatureBuilder:
             f = cols["dither_freq_Hz"]
             fpos = f[f > 0]
             fs = trace.sample_rate_Hz
-            period = fs / float(np.median(fpos)) if fpos.size else dither_period_samples(trace)
+            # no dither anywhere: the data layer's dI/dt window (a 50 Hz period), not 1 sample
+            period = fs / float(np.median(fpos)) if fpos.size else didt_period_samples(trace)
             window = self.didt_periods * period
             if need & {"didt_mA_s", "direction"}:
                 cols["didt_mA_s"] = didt(cols["current_mA"], fs, window)
