@@ -413,7 +413,9 @@ def check_outputs(args: argparse.Namespace) -> None:
         check_output(out, kind="folder", overwrite=True, what="--out")
         _check_replaceable(Path(out) / "model.json", args, "--out", "json")
         # a user's model.json / model.npz there is refused now, not after the fit
-        check_model_destination(Path(out) / "model.json")
+        npz = check_model_destination(Path(out) / "model.json")
+        # the summary is written last: over the model it would leave no model
+        check_json_apart(getattr(args, "json", None), [Path(out) / "model.json", npz])
     if getattr(args, "report_out", False):
         from .data.output import check_report_out
         from .validation.report import REPORT_FOLDER

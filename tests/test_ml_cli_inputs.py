@@ -173,3 +173,17 @@ def test_didt_features_without_dither_average_the_current_noise():
     assert np.abs(X[up | down, 0]).max() < 300.0  # the ramp is 220 mA/s
     assert (X[up, 1] == 1).all() and (X[down, 1] == -1).all()
     assert np.count_nonzero(np.diff(X[:, 1])) < 30
+
+
+@pytest.mark.parametrize("name", ["model.json", "model.npz"])
+def test_train_json_summary_may_not_replace_the_model(tiny, tmp_path, capsys, name):
+    """``--json OUT/model.json`` (or ``model.npz``) was accepted: the summary, written last,
+    replaced the model just saved, which then no longer loaded. Refused before the fit."""
+    out = tmp_path / "model"
+    argv = ["train", str(tiny), "--variant", "gp_base", "--out", str(out)]
+    assert main([*argv, "--json", str(out / name)]) == 2
+    captured = capsys.readouterr()
+    assert (
+        f"--json {out / name}: is" in captured.err and "write the summary elsewhere" in captured.err
+    )
+    assert "fitting" not in captured.out and not out.exists()
