@@ -408,9 +408,16 @@ def check_outputs(args: argparse.Namespace) -> None:
         check_output(out, kind="file", overwrite=True, what="--out")
         _check_replaceable(out, args, "--out", args.file_out)
     if getattr(args, "folder_out", False):
+        from .data.output import owned_files
         from .residual_ml.persist import check_model_destination
 
         check_output(out, kind="folder", overwrite=True, what="--out")
+        owned = owned_files(out)
+        if owned:  # a dataset, a report: another kind of output is never written into it
+            raise OutputError(
+                f"--out {out}: holds other output clutchlab wrote ({len(owned)} files, e.g. "
+                f"{sorted(owned)[0]}); write the model into a folder of its own"
+            )
         _check_replaceable(Path(out) / "model.json", args, "--out", "json")
         # a user's model.json / model.npz there is refused now, not after the fit
         npz = check_model_destination(Path(out) / "model.json")

@@ -187,3 +187,14 @@ def test_train_json_summary_may_not_replace_the_model(tiny, tmp_path, capsys, na
         f"--json {out / name}: is" in captured.err and "write the summary elsewhere" in captured.err
     )
     assert "fitting" not in captured.out and not out.exists()
+
+
+def test_train_out_may_not_be_a_folder_clutchlab_wrote(tiny, capsys):
+    """``train DS --out DS`` wrote model.json + model.npz into the dataset folder clutchlab
+    had written (another kind of output, which the README says is never written there).
+    Refused before the fit; the dataset is left as it was."""
+    before = sorted(p.name for p in tiny.iterdir())
+    assert main(["train", str(tiny), "--variant", "gp_base", "--out", str(tiny)]) == 2
+    captured = capsys.readouterr()
+    assert f"--out {tiny}: holds other output clutchlab wrote" in captured.err
+    assert "fitting" not in captured.out and sorted(p.name for p in tiny.iterdir()) == before
