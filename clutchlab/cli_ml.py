@@ -155,6 +155,9 @@ def _cmd_train(args: argparse.Namespace) -> int:
         f"{o['max_abs_bar']:12.4f} {o['fit_pct']:7.2f}"
     )
     print(f"fit {fit_s:.1f} s; model written to {out / 'model.json'} (+ model.npz)")
+    form = _hybrid_form(model)
+    if form:
+        print(f"hybrid form: {form}")
     latch = _latch_decision(model)
     if latch:
         print(f"latch decision: {latch}")
@@ -189,6 +192,9 @@ def _cmd_train(args: argparse.Namespace) -> int:
             "hyperparameters_at_bounds": bound,
             "latch_decision": latch,
         }
+        if form:
+            doc["hybrid_form"] = model.form_
+            doc["hybrid_form_loeo_rmse_bar"] = dict(model.form_scores_)
         from .cli import write_json_output
 
         write_json_output(args.json, json.dumps(doc, indent=2))
@@ -242,6 +248,24 @@ def register(sub) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", help="also write the training metrics here")
     p.set_defaults(func=_cmd_train, folder_out=True)
+
+
+def _hybrid_form(model) -> str | None:
+    """Which form a fitted hybrid predicts with, and the training-set scores behind it."""
+    form = getattr(model, "form_", None)
+    if form is None:
+        return None
+    scores = getattr(model, "form_scores_", {}) or {}
+    why = ", ".join(f"{k} {v:.4g} bar" for k, v in scores.items())
+    handicap = getattr(model, "standalone_handicap", None)
+    if "standalone" in scores and handicap:
+        why += f"; standalone compared after ÷ {handicap:g}"
+    text = form + (f" (leave-one-experiment-out RMSE on the training ramps: {why})" if why else "")
+    if form == "physics":
+        text += "; predicts with the physics model alone, the residual model below is not used"
+    elif form == "standalone":
+        text += "; predicts with the paper pipeline alone, the physics model is not used"
+    return text
 
 
 def _latch_decision(model) -> str | None:

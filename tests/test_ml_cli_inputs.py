@@ -12,7 +12,7 @@ from clutchlab.cli import main
 from clutchlab.data import Dataset, Trace, save_dataset
 from clutchlab.errors import DataError, ModelError
 from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
-from clutchlab.residual_ml import GPBaseline, PhysicsPredictor, compare_classifiers
+from clutchlab.residual_ml import GPBaseline, PhysicsPredictor, compare_classifiers, load_model
 
 
 @pytest.fixture(scope="module")
@@ -198,3 +198,19 @@ def test_train_out_may_not_be_a_folder_clutchlab_wrote(tiny, capsys):
     captured = capsys.readouterr()
     assert f"--out {tiny}: holds other output clutchlab wrote" in captured.err
     assert "fitting" not in captured.out and sorted(p.name for p in tiny.iterdir()) == before
+
+
+def test_train_hybrid_states_its_form(tiny, tmp_path, capsys):
+    """``train --variant hybrid`` printed the residual GPs and the latch decision but not
+    which form the hybrid predicts with; a hybrid that chose the physics alone (as on two
+    training experiments) looked like a residual model. The form and its leave-one-
+    experiment-out scores are now printed and in ``--json``."""
+    out, js = tmp_path / "hybrid", tmp_path / "train.json"
+    argv = ["train", str(tiny), "--variant", "hybrid", "--out", str(out), "--quiet"]
+    assert main([*argv, "--json", str(js)]) == 0
+    stdout = capsys.readouterr().out
+    model = load_model(out / "model.json")
+    assert f"hybrid form: {model.form_} (leave-one-experiment-out RMSE" in stdout
+    doc = json.loads(js.read_text())
+    assert doc["hybrid_form"] == model.form_
+    assert doc["hybrid_form_loeo_rmse_bar"] == pytest.approx(model.form_scores_)
