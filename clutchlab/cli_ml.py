@@ -161,6 +161,9 @@ def _cmd_train(args: argparse.Namespace) -> int:
     latch = _latch_decision(model)
     if latch:
         print(f"latch decision: {latch}")
+    never = _never_latched_note(model, train)
+    if never:
+        print(f"note: {never}", file=sys.stderr)
     for part, h in model.gp_hyperparameters().items():
         ell = ", ".join(f"{v:.3g}" for v in h["length_scales"])
         print(
@@ -266,6 +269,40 @@ def _hybrid_form(model) -> str | None:
     elif form == "standalone":
         text += "; predicts with the paper pipeline alone, the physics model is not used"
     return text
+
+
+def _never_latched_note(model, train) -> str | None:
+    """Why a model found one latch state only: how close the clutch came to line pressure.
+
+    A circuit whose latched plateau sits more than the label rule's margin below the logged
+    (or, unlogged, the assumed 17.7 bar) line pressure is never labelled latched, and the
+    model then has no latch at all; the engineer should see the numbers behind that.
+    """
+    import numpy as np
+
+    from .data import dither_period_mean, dither_period_samples
+
+    est = getattr(model, "residual_", None) or model
+    if getattr(est, "latch_model_", None) != "none" or getattr(est, "single_state_", None) != 0:
+        return None  # a latch decision, or only latched samples
+    rule = est._rule()
+    closest, assumed = np.inf, False
+    for t in train:
+        n = dither_period_samples(t)
+        assumed |= not t.has("line_pressure_bar")
+        gap = dither_period_mean(t.get("line_pressure_bar"), n) - dither_period_mean(
+            t.get("clutch_pressure_bar"), n
+        )
+        closest = min(closest, float(np.min(gap)))
+    line = (
+        "line pressure not logged in every experiment, 17.7 bar assumed there; " if assumed else ""
+    )
+    return (
+        f"no training sample was labelled latched: the clutch pressure came within "
+        f"{closest:.2f} bar of line pressure at the closest ({line}latched means within "
+        f"{rule.margin_bar:g} bar, dither-period means). If the clutch latches in these data, "
+        "log line_pressure_bar or check the pressure offsets."
+    )
 
 
 def _latch_decision(model) -> str | None:

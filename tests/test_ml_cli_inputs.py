@@ -99,7 +99,7 @@ def test_train_refuses_a_users_model_file_before_fitting(tiny, tmp_path, capsys,
     assert (out / name).read_bytes() == content and [p.name for p in out.iterdir()] == [name]
 
 
-def _ramp(name: str, ramp: str, peak_mA: float) -> Trace:
+def _ramp(name: str, ramp: str, peak_mA: float, line: bool = True) -> Trace:
     """0 → peak → 0 mA in 2 s at 50 Hz dither; latched (line pressure) above 800 mA."""
     t = np.arange(0.0, 2.0005, 1e-3)
     current = np.interp(t, [0.0, 1.0, 2.0], [0.0, peak_mA, 0.0])
@@ -110,8 +110,9 @@ def _ramp(name: str, ramp: str, peak_mA: float) -> Trace:
         "dither_amp_mA": np.full(n, 50.0),
         "dither_freq_Hz": np.full(n, 50.0),
         "clutch_pressure_bar": np.where(current > 800.0, 17.7, current / 100.0),
-        "line_pressure_bar": np.full(n, 17.7),
     }
+    if line:
+        signals["line_pressure_bar"] = np.full(n, 17.7)
     return Trace(name, signals, meta={"ramp": ramp, "dither_freq_Hz": 50.0})
 
 
@@ -214,3 +215,32 @@ def test_train_hybrid_states_its_form(tiny, tmp_path, capsys):
     doc = json.loads(js.read_text())
     assert doc["hybrid_form"] == model.form_
     assert doc["hybrid_form_loeo_rmse_bar"] == pytest.approx(model.form_scores_)
+
+
+@pytest.mark.parametrize("line", [True, False])
+def test_train_says_why_nothing_latched(tmp_path, capsys, line):
+    """A circuit whose clutch never came within the label margin of line pressure (e.g. a
+    12 bar system without line pressure logged: 17.7 bar is assumed) got a model without
+    latch, and train said only "none (one latch state in the training data)". It now
+    notes how close the clutch came to line pressure and what was assumed."""
+    traces = [_ramp("a", "fast", 600.0, line), _ramp("b", "slow", 650.0, line)]
+    data = tmp_path / "data"
+    save_dataset(Dataset(traces), data)
+    argv = ["train", str(data), "--variant", "paper_faithful", "--out", str(tmp_path / "m")]
+    assert main([*argv, "--quiet"]) == 0
+    captured = capsys.readouterr()
+    assert "latch decision: none (one latch state" in captured.out
+    assert (
+        "note: no training sample was labelled latched: the clutch pressure came within "
+        "11.2" in captured.err
+    )  # 17.7 - 6.5 bar, to the period mean's rounding
+    assert ("17.7 bar assumed" in captured.err) is not line
+
+
+def test_train_has_no_latch_note_when_it_latched(tmp_path, capsys):
+    traces = [_ramp(n, r, 1100.0) for n, r in (("a", "fast"), ("b", "slow"), ("c", "slow"))]
+    data = tmp_path / "data"
+    save_dataset(Dataset(traces), data)
+    argv = ["train", str(data), "--variant", "paper_faithful", "--out", str(tmp_path / "m")]
+    assert main([*argv, "--quiet"]) == 0
+    assert "note:" not in capsys.readouterr().err
