@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 
@@ -70,8 +71,11 @@ def test_classifiers_and_train_cli(tmp_path):
     doc = json.loads(mj.read_text())
     parts = doc["gp_hyperparameters"]
     assert set(parts) == {"gp", "variance_floor"}  # the mean's GP and its variance floor
+    names = ["current_mA", "dither_amp_mA", "dither_freq_Hz"]  # a length scale names its input
     assert doc["hyperparameters_at_bounds"] == [
-        f"{part}: {entry}" for part in parts for entry in parts[part]["at_bounds"]
+        f"{part}: " + re.sub(r"^length_scale\[(\d)\]", lambda m: f"{m[0]} = {names[int(m[1])]}", e)
+        for part in parts
+        for e in parts[part]["at_bounds"]
     ]
     assert doc["variant"] == "gp_base" and set(doc["training"]["per_experiment"]) == {
         "fast_50Hz_A",

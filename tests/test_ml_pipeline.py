@@ -429,6 +429,29 @@ def test_gp_hyperparameters_by_part(fitted, train):
     assert len(flat) == sum(len(h["at_bounds"]) for h in parts.values())
 
 
+def test_a_length_scale_on_its_bound_names_its_input(fitted, monkeypatch):
+    """``residual.unlatched: length_scale[4] (upper bound 1e+03)`` left the user to count
+    the features; the entry now names the input."""
+    model = fitted["paper_svc_gp"]
+    at = ["length_scale[1] (upper bound 1e+03)", "alpha (lower bound 0.01)"]
+    monkeypatch.setattr(
+        type(model), "gp_hyperparameters", lambda self: {"latched": {"at_bounds": at}}
+    )
+    name = model.feature_names_[1]
+    assert model.hyperparameters_at_bounds() == [
+        f"latched: length_scale[1] = {name} (upper bound 1e+03)",
+        "latched: alpha (lower bound 0.01)",
+    ]
+    hybrid = fitted["hybrid"]
+    inner = hybrid.residual_
+    monkeypatch.setattr(
+        type(inner), "gp_hyperparameters", lambda self: {"unlatched": {"at_bounds": at[:1]}}
+    )
+    assert hybrid.hyperparameters_at_bounds() == [
+        f"residual.unlatched: length_scale[1] = {inner.feature_names_[1]} (upper bound 1e+03)"
+    ]
+
+
 def test_paper_faithful_variant_is_the_published_stage_3():
     from clutchlab.residual_ml.features import DIDT_FEATURES
 

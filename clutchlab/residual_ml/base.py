@@ -15,6 +15,7 @@ Every estimator of :mod:`clutchlab.residual_ml` accepts two kinds of input:
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -28,6 +29,9 @@ from ..errors import DataError
 from ._threads import single_thread
 from .features import FeatureBuilder, target_pressure
 from .labels import LatchLabelRule, latch_labels
+
+#: A GP length scale in a hyperparameter-at-bound entry, by input index.
+_LENGTH_SCALE = re.compile(r"^length_scale\[(\d+)\]")
 
 __all__ = [
     "FIT_SIGNALS",
@@ -389,9 +393,21 @@ class TraceEstimator(RegressorMixin, BaseEstimator):
         return {k: gp.hyperparameters() for k, gp in parts.items() if gp is not None}
 
     def hyperparameters_at_bounds(self) -> list[str]:
-        """``"part: name (side bound value)"`` for every GP hyperparameter on a bound."""
+        """``"part: name (side bound value)"`` for every GP hyperparameter on a bound; a
+        length scale also names its input feature (``length_scale[4] = didt_mA_s``)."""
+        inner = getattr(self, "residual_", None)
+        if inner is not None:
+            return [f"residual.{entry}" for entry in inner.hyperparameters_at_bounds()]
+        names = list(getattr(self, "feature_names_", None) or [])
+
+        def named(entry: str) -> str:
+            match = _LENGTH_SCALE.match(entry)
+            if match is None or int(match[1]) >= len(names):
+                return entry
+            return f"{match[0]} = {names[int(match[1])]}{entry[match.end() :]}"
+
         return [
-            f"{part}: {entry}"
+            f"{part}: {named(entry)}"
             for part, h in self.gp_hyperparameters().items()
             for entry in h.get("at_bounds", [])
         ]
