@@ -8,7 +8,7 @@ import json
 import os
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from . import __version__
 from .budgets import DEMO_BUDGET_S
@@ -202,7 +202,7 @@ def _cmd_data_check(args: argparse.Namespace) -> int:
         raise DataError(f"{args.path}: no such file or folder")
     result = check_path(args.path, args.map, options=_read_options(args))
     if args.json:
-        write_json_output(args.json, json.dumps(result.to_dict(), indent=2, ensure_ascii=False))
+        write_json_summary(args.json, result.to_dict())
     print(result.table())
     return 0 if result.ok else 1
 
@@ -532,6 +532,15 @@ def write_json_output(path: str | Path, text: str) -> Path:
     from .data.output import write_file_atomic
 
     return write_file_atomic(path, text.rstrip("\n").encode("utf-8") + b"\n", overwrite=True)
+
+
+def write_json_summary(path: str | Path, doc: Any) -> Path:
+    """Write a command's ``--json`` summary as strict JSON: a number that is not finite (the
+    fit % of a constant experiment) is ``null``, not ``NaN``, which JSON readers refuse."""
+    from .validation.report import jsonable
+
+    text = json.dumps(jsonable(doc), indent=2, ensure_ascii=False, allow_nan=False)
+    return write_json_output(path, text)
 
 
 def _clean_warnings(command: str) -> None:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -55,9 +54,9 @@ def _cmd_classifiers(args: argparse.Namespace) -> int:
     print(result.table())
     print(f"table: {out / 'classifiers.csv'}; figure: {out / 'classifiers.png'}")
     if args.json:
-        from .cli import write_json_output
+        from .cli import write_json_summary
 
-        write_json_output(args.json, json.dumps(result.to_dict(), indent=2))
+        write_json_summary(args.json, result.to_dict())
     return 0
 
 
@@ -198,9 +197,9 @@ def _cmd_train(args: argparse.Namespace) -> int:
         if form:
             doc["hybrid_form"] = model.form_
             doc["hybrid_form_loeo_rmse_bar"] = dict(model.form_scores_)
-        from .cli import write_json_output
+        from .cli import write_json_summary
 
-        write_json_output(args.json, json.dumps(doc, indent=2))
+        write_json_summary(args.json, doc)
     return 0
 
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import warnings
 from pathlib import Path
@@ -56,7 +55,7 @@ def _run(args: argparse.Namespace) -> int:
             f"variables {', '.join(spec.variable_names) or '(none)'}; spec core {spec.core_hash}"
         )
         if args.json:
-            from .cli import write_json_output
+            from .cli import write_json_summary
 
             summary = {
                 "name": spec.name,
@@ -66,7 +65,7 @@ def _run(args: argparse.Namespace) -> int:
                 "variables": list(spec.variable_names),
                 "core_hash": spec.core_hash,
             }
-            write_json_output(args.json, json.dumps(summary, indent=2))
+            write_json_summary(args.json, summary)
         return 0
     res = run_sweep(
         spec,
@@ -92,9 +91,9 @@ def _run(args: argparse.Namespace) -> int:
     if res.figures:
         print(f"figures: {res.figures[0].parent}")
     if args.json:
-        from .cli import write_json_output
+        from .cli import write_json_summary
 
-        write_json_output(args.json, json.dumps(res.summary(), indent=2))
+        write_json_summary(args.json, res.summary())
     if res.n_run and res.n_failed_run >= res.n_run:  # earlier calls' failures do not count
         print(f"every point failed ({res.n_failed_run}): see the errors above", file=sys.stderr)
         return 1

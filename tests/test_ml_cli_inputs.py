@@ -244,3 +244,33 @@ def test_train_has_no_latch_note_when_it_latched(tmp_path, capsys):
     argv = ["train", str(data), "--variant", "paper_faithful", "--out", str(tmp_path / "m")]
     assert main([*argv, "--quiet"]) == 0
     assert "note:" not in capsys.readouterr().err
+
+
+def _strict(text: str):
+    """JSON as a strict reader takes it: NaN / Infinity are errors."""
+
+    def refuse(constant):
+        raise ValueError(f"not JSON: {constant}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_train_json_is_strict_json_when_a_metric_is_not_finite(tiny, tmp_path, monkeypatch):
+    """The fit % of a constant experiment is NaN, and ``train --json`` wrote ``NaN``, which
+    JSON readers (and other languages' parsers) refuse; it is now ``null``."""
+    import clutchlab.residual_ml as ml
+
+    real = ml.score_traces
+
+    def with_nan(model, traces, **kw):
+        out = real(model, traces, **kw)
+        for m in out["per_experiment"].values():
+            m["fit_pct"] = float("nan")
+        return out
+
+    monkeypatch.setattr(ml, "score_traces", with_nan)
+    js = tmp_path / "train.json"
+    argv = ["train", str(tiny), "--variant", "gp_base", "--out", str(tmp_path / "m")]
+    assert main([*argv, "--json", str(js), "--quiet"]) == 0
+    doc = _strict(js.read_text(encoding="utf-8"))
+    assert all(m["fit_pct"] is None for m in doc["training"]["per_experiment"].values())
