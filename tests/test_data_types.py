@@ -312,3 +312,9 @@ def test_pressure_metrics_of_a_flat_measurement_has_no_fit_pct_and_no_warning():
         exact = pressure_metrics(y, y.copy())
     assert np.isnan(m["fit_pct"]) and np.isnan(exact["fit_pct"])
     assert m["rmse_bar"] == pytest.approx(0.1)
+    # a constant pressure whose mean is not exact in binary: a spread of rounding errors gave
+    # a fit of about -6e14 % (session 42's ML pass)
+    y = np.full(1000, 17.7) + np.where(np.arange(1000) % 2, 2e-15, 0.0)
+    assert np.isnan(pressure_metrics(y, y + 0.1)["fit_pct"])
+    ramp = np.linspace(0.0, 1e-6, 1000)  # a variation far above the rounding errors counts
+    assert np.isfinite(pressure_metrics(ramp, ramp)["fit_pct"])

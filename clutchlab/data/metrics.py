@@ -7,6 +7,11 @@ import numpy as np
 __all__ = ["pressure_metrics"]
 
 
+#: RMS variation (bar, relative to the mean pressure when above 1 bar) below which a
+#: measured pressure counts as constant: far below any sensor's resolution.
+_CONSTANT_RMS = 1e-9
+
+
 def pressure_metrics(measured: np.ndarray, predicted: np.ndarray) -> dict[str, float]:
     """RMSE, MAE, max |e| (bar) and fit % = 100·(1 − ‖e‖/‖y − ȳ‖).
 
@@ -18,7 +23,8 @@ def pressure_metrics(measured: np.ndarray, predicted: np.ndarray) -> dict[str, f
     Returns
     -------
     dict with ``rmse_bar``, ``mae_bar``, ``max_abs_bar``, ``fit_pct``. ``fit_pct`` is NaN
-    when the measured pressure does not vary (no spread to explain), without a warning.
+    when the measured pressure does not vary (no spread to explain, its RMS variation below
+    1e-9 bar: rounding errors gave a fit of −6·10¹⁴ %), without a warning.
     """
     y = np.asarray(measured, dtype=float)
     p = np.asarray(predicted, dtype=float)
@@ -28,7 +34,9 @@ def pressure_metrics(measured: np.ndarray, predicted: np.ndarray) -> dict[str, f
         )
     e = p - y
     spread = float(np.linalg.norm(y - y.mean()))
-    fit = 100.0 * (1.0 - np.linalg.norm(e) / spread) if spread > 0 else np.nan
+    # a constant pressure leaves a spread of rounding errors (1e-15 bar), not one to explain
+    varies = spread / np.sqrt(y.size) > _CONSTANT_RMS * max(1.0, abs(float(y.mean())))
+    fit = 100.0 * (1.0 - np.linalg.norm(e) / spread) if varies else np.nan
     return {
         "rmse_bar": float(np.sqrt(np.mean(e * e))),
         "mae_bar": float(np.mean(np.abs(e))),
