@@ -107,7 +107,9 @@ def test_nan_run_in_csv_names_column_and_lines(tmp_path):
     assert (
         f"{path}: column 'clutch_pressure_bar': missing values (NaN/inf) at "
         "line 52 (data row 51) to line 54 (data row 53) (3 × NaN); line 122 (data row 121) "
-        "(1 × +inf) (pass interpolate_gaps=3 to fill runs up to 3 samples)"
+        "(1 × +inf) (pass interpolate_gaps=3 to fill runs up to 3 samples: "
+        "ReadOptions(interpolate_gaps=3), or `clutchlab data convert --interpolate-gaps 3` "
+        "for a filled copy to fit on)"
     ) in text
     # explicit option: filled by interpolation and reported
     trace, report = read_log(path, options=ReadOptions(interpolate_gaps=3))

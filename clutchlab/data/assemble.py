@@ -54,6 +54,13 @@ class _Signal:
 RATE_PLAUSIBLE_HZ = (10.0, 1e6)
 
 
+#: Where ``interpolate_gaps`` is given: the commands that fit read the data as they are.
+_FILL_HOW = (
+    ": ReadOptions(interpolate_gaps={n}), or `clutchlab data convert --interpolate-gaps {n}` "
+    "for a filled copy to fit on"
+)
+
+
 def _hint_names(names: list[str]) -> str:
     hints = []
     for name in names:
@@ -360,6 +367,7 @@ def assemble(
                     f"longer than interpolate_gaps = {options.interpolate_gaps}"
                     if options.interpolate_gaps
                     else f"pass interpolate_gaps={longest} to fill runs up to {longest} samples"
+                    f"{_FILL_HOW.format(n=longest)}"
                 )
                 problems.append(f"{sig.where}: missing values (NaN/inf) at {text} ({hint})")
         problems += check_values(sig.name, sig.values, sig.where, row_label)
@@ -394,7 +402,7 @@ def assemble(
             hint = (
                 f"longer than interpolate_gaps = {options.interpolate_gaps}"
                 if options.interpolate_gaps
-                else f"pass interpolate_gaps={worst} to interpolate them"
+                else f"pass interpolate_gaps={worst} to interpolate them{_FILL_HOW.format(n=worst)}"
             )
             problems.append(
                 f"{base_where[b]}: time gap(s) of missing samples before {shown} "
