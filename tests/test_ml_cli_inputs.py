@@ -274,3 +274,14 @@ def test_train_json_is_strict_json_when_a_metric_is_not_finite(tiny, tmp_path, m
     assert main([*argv, "--json", str(js), "--quiet"]) == 0
     doc = _strict(js.read_text(encoding="utf-8"))
     assert all(m["fit_pct"] is None for m in doc["training"]["per_experiment"].values())
+
+
+def test_compare_classifiers_compares_a_repeated_name_once_and_names_an_unknown_one():
+    """``compare_classifiers(names=[a, a])`` gave two rows of the same classifier in its
+    table and CSV through the API (the CLI removed repeats); unknown names are listed."""
+    traces = [_ramp("a", "fast", 1100.0), _ramp("b", "slow", 1100.0), _ramp("c", "fast", 1000.0)]
+    result = compare_classifiers(traces, names=["logistic_regression"] * 2, workers=1)
+    assert result.csv_text().count("logistic_regression,") == 1
+    assert result.table().count("Logistic regression") == 1
+    with pytest.raises(ModelError, match=r"unknown classifier\(s\) \['nope', 'nix'\]"):
+        compare_classifiers(traces, names=["nope", "logistic_regression", "nix"], workers=1)

@@ -20,7 +20,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from ..data import Trace, write_file_atomic
-from ..errors import DataError
+from ..errors import DataError, ModelError
 from ..forkmap import default_workers, fork_imap
 from .classifiers import CLASSIFIERS, make_classifier
 from .features import DIDT_FEATURES, FeatureBuilder
@@ -177,7 +177,8 @@ def compare_classifiers(
     traces : list of Trace
         Training experiments (at least 2; e.g. the fast and slow ramps).
     names : list of str, optional
-        Classifiers (default all six of :data:`CLASSIFIERS`, in the paper's order).
+        Classifiers (default all six of :data:`CLASSIFIERS`, in the paper's order); a name
+        given twice is compared once.
     features : tuple of str
         Classifier inputs (default I, A_d, f_d, dI/dt, direction).
     rule : LatchLabelRule, optional
@@ -199,13 +200,18 @@ def compare_classifiers(
     DataError
         If fewer than two experiments are given, the labels hold one latch state only, or
         a latch state occurs in one experiment only (a fold would train without it).
+    ModelError
+        Naming every classifier that is not one of :data:`CLASSIFIERS`.
     """
     traces = list(traces)
     if len(traces) < 2:
         raise DataError(
             f"leave-one-experiment-out needs at least 2 training experiments, got {len(traces)}"
         )
-    names = list(names or CLASSIFIERS)
+    names = list(dict.fromkeys(names or CLASSIFIERS))  # each once: a repeat is one row
+    unknown = [n for n in names if n not in CLASSIFIERS]
+    if unknown:
+        raise ModelError(f"unknown classifier(s) {unknown}; known: {', '.join(CLASSIFIERS)}")
     builder = FeatureBuilder(tuple(features))
     Xs, ys = [], []
     for t in traces:
