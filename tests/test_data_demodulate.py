@@ -332,3 +332,15 @@ def test_didt_slope_and_noise():
     expected_std = sigma * FS * np.sqrt(12.0 / (n**3 - n))  # least-squares slope
     assert np.std(d[n:-n]) == pytest.approx(expected_std, rel=0.15)
     np.testing.assert_allclose(didt(440.0 * t, FS, 20), 440.0, rtol=1e-9)
+
+
+def test_a_clean_quantized_current_without_dither_has_no_dither():
+    """A noise-free current quantized in 0.5 mA steps (a simulation's export) along a ramp
+    shows its quantization as a 0.1 mA line at 120 Hz, which was taken for a dither (81 % of
+    the samples 'present'): its frequency then became a feature of the models (session 42)."""
+    fs = 1000.0
+    t = np.arange(0.0, 12.0, 1.0 / fs)
+    x = np.round(np.interp(t, [0, 1, 6, 7, 12], [0, 0, 1100, 1100, 0]) / 0.5) * 0.5
+    est = demodulate_dither(x, fs)
+    assert not est.present.any() and np.all(est.amplitude_mA == 0.0)
+    np.testing.assert_array_equal(est.nominal_mA, x)  # nothing to remove

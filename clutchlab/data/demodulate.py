@@ -6,8 +6,8 @@ need are estimated per sample:
 1. **frequency** — the spectral peak of the linearly detrended current in sliding Hann
    windows (default 0.25 s, hop 1/4 window, zero-padded 4×, parabolic interpolation of the
    log power), interpolated between window centres. Windows without a clear line (peak less
-   than 20 × the median power of the band, or amplitude below 3 noise σ) do not count; their
-   samples take the frequency of the nearest window with a strong line (≥ 6 σ).
+   than 20 × the median power of the band, or amplitude below 3 noise σ or below 1 mA) do not
+   count; their samples take the frequency of the nearest window with a strong line (≥ 6 σ).
 2. **nominal current** — :func:`~clutchlab.data.derived.dither_period_mean` over exactly one
    (fractional) period at that frequency. For an unfiltered square wave (sharp edges) the
    mean of the square template over the same window is removed as well: a period that is
@@ -79,6 +79,11 @@ __all__ = [
 FUNDAMENTAL_RATIO = {"sine": 1.0, "triangle": 8.0 / math.pi**2, "square": 4.0 / math.pi}
 _SNR_MIN = 20.0
 _AMP_MIN_NOISE = 3.0  # a window's line must be at least this many noise σ
+#: Smallest line amplitude (mA) that counts as a dither. Dithers are tens to hundreds of mA;
+#: a noise-free, quantized current without dither (a simulation's export) shows its
+#: quantization as a line of a tenth of the step (0.1 mA at 120 Hz for a 0.5 mA step on a
+#: 220 mA/s ramp), which the noise test alone took for a dither.
+_AMP_MIN_MA = 1.0
 _AMP_SMOOTH_S = 0.05  # the amplitude is averaged over at least 2 periods and 50 ms
 _SHARP_EDGES = 0.05  # at most this fraction of square-wave samples between -A/2 and A/2
 _Q_TRIANGLE = 0.04  # Re q above: triangle
@@ -176,7 +181,7 @@ def _track(
         amp[sl] = 2.0 * np.sqrt(pb[rows, k]) / w1
         valid[sl] = inner & (snr >= _SNR_MIN)
     noise = float(np.sqrt(np.median(floor_var)))
-    valid &= amp >= _AMP_MIN_NOISE * noise
+    valid &= amp >= max(_AMP_MIN_NOISE * noise, _AMP_MIN_MA)
     return starts + (length - 1) / 2.0, f_peak, valid, amp, noise
 
 
