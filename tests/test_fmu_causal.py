@@ -236,3 +236,27 @@ def test_ml_export_step_sets_the_default_experiment_and_bounds_the_internal_step
     assert fmpy.read_model_description(str(fmu)).defaultExperiment.stepSize == "0.01"
     with pytest.raises(Exception, match="fmi2ExitInitializationMode"):
         fmpy.simulate_fmu(str(fmu), stop_time=0.1, start_values={"max_step_s": 0.01})
+
+
+def test_causal_didt_without_dither_counts_the_window_as_offline():
+    """At a dither frequency input of 0 Hz the FMU's window was its largest (255 samples);
+    offline, data without dither take 5 periods of 50 Hz (session 42): the two now agree."""
+    import casadi as ca
+
+    from clutchlab.data import Trace
+    from clutchlab.data.demodulate import didt_period_samples
+    from clutchlab.physics.fmu.ml import DidtSpec
+
+    rng = np.random.default_rng(1)
+    x = np.concatenate([np.zeros(300), 0.4 * np.arange(700)]) + rng.normal(0, 0.2, 1000)
+    t = np.arange(x.size) * 1e-3
+    bare = Trace("x", {"time_s": t, "current_mA": x, "clutch_pressure_bar": np.zeros(x.size)})
+    n = 5.0 * didt_period_samples(bare)
+    offline = causal_didt(x, 1000.0, n)
+    spec = DidtSpec()
+    buf, f = ca.MX.sym("b", spec.max_samples), ca.MX.sym("f")
+    slope = ca.Function("s", [buf, f], [spec.slope(buf, f)])
+    padded = np.concatenate([np.full(spec.max_samples, x[0]), x])
+    for k in (400, 650, 999):
+        newest_first = padded[k + spec.max_samples :: -1][: spec.max_samples]
+        assert float(slope(newest_first, 0.0)) == pytest.approx(offline[k], rel=1e-9, abs=1e-9)

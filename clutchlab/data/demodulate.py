@@ -67,6 +67,7 @@ from .trace import Trace
 
 __all__ = [
     "FUNDAMENTAL_RATIO",
+    "NO_DITHER_DIDT_HZ",
     "DitherEstimate",
     "demodulate_dither",
     "demodulate_trace",
@@ -79,6 +80,9 @@ __all__ = [
 FUNDAMENTAL_RATIO = {"sine": 1.0, "triangle": 8.0 / math.pi**2, "square": 4.0 / math.pi}
 _SNR_MIN = 20.0
 _AMP_MIN_NOISE = 3.0  # a window's line must be at least this many noise σ
+#: Frequency (Hz) whose period the dI/dt window counts in when there is no dither at all
+#: (:func:`didt_period_samples`; an FMU's causal dI/dt at a dither frequency input of 0).
+NO_DITHER_DIDT_HZ = 50.0
 #: Smallest line amplitude (mA) that counts as a dither. Dithers are tens to hundreds of mA;
 #: a noise-free, quantized current without dither (a simulation's export) shows its
 #: quantization as a line of a tenth of the step (0.1 mA at 120 Hz for a 0.5 mA step on a
@@ -371,7 +375,7 @@ def didt_period_samples(trace: Trace, estimate: DitherEstimate | None = None) ->
         return fs / float(meta_f)
     if estimate is not None and estimate.present.any():
         return fs / float(np.median(estimate.frequency_Hz[estimate.present]))
-    return max(fs / 50.0, 1.0)
+    return max(fs / NO_DITHER_DIDT_HZ, 1.0)
 
 
 def demodulate_trace(trace: Trace, *, waveform: str | None = None) -> DitherEstimate:

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from ...data.demodulate import NO_DITHER_DIDT_HZ
 from ...errors import ModelError
 from .physics import FMU_INPUTS
 from .program import FmuProgram, FmuVariable
@@ -465,7 +466,8 @@ class DidtSpec:
     where the slope is above ``deadband_mA_s`` / below its negative, else held (0 at start).
 
     Offline the window uses the trace's median dither frequency; the FMU uses the current
-    input, the same for an experiment at one dither frequency.
+    input, the same for an experiment at one dither frequency. Without dither (an input of
+    0 Hz) both count in periods of :data:`~clutchlab.data.demodulate.NO_DITHER_DIDT_HZ`.
     """
 
     periods: float = 5.0
@@ -476,7 +478,8 @@ class DidtSpec:
     def slope(self, buffer: ca.MX, freq: ca.MX) -> ca.MX:
         """Slope (mA/s) from ``buffer`` (newest first, mA) at dither frequency ``freq`` (Hz)."""
         m = self.max_samples
-        period = (1.0 / self.sample_s) / ca.fmax(freq, 1e-9)
+        # no dither (0 Hz): the period the offline window counts in then (a 50 Hz one)
+        period = (1.0 / self.sample_s) / ca.if_else(freq > 0, freq, NO_DITHER_DIDT_HZ)
         n = ca.fmax(ca.ceil(self.periods * period - 1e-6), 4)
         n = ca.fmin(n + 1 - ca.fmod(n, 2), m)
         j = ca.DM(np.arange(m, dtype=float))
