@@ -318,3 +318,26 @@ def test_pressure_metrics_of_a_flat_measurement_has_no_fit_pct_and_no_warning():
     assert np.isnan(pressure_metrics(y, y + 0.1)["fit_pct"])
     ramp = np.linspace(0.0, 1e-6, 1000)  # a variation far above the rounding errors counts
     assert np.isfinite(pressure_metrics(ramp, ramp)["fit_pct"])
+
+
+def test_dither_period_from_a_frequency_logged_as_0_while_the_dither_is_off():
+    """A logger writing 0 Hz while the dither is off (here 60 % of the samples) made the
+    median frequency 0 and the dither period one sample: the period means then averaged
+    nothing. The period comes from the samples where the frequency is logged."""
+    from clutchlab.data import dither_period_samples
+
+    n = 2000
+    f = np.where(np.arange(n) < 1200, 0.0, 50.0)
+    t = np.arange(n) * 1e-3
+    tr = Trace(
+        "x",
+        {
+            "time_s": t,
+            "current_mA": np.zeros(n),
+            "clutch_pressure_bar": np.zeros(n),
+            "dither_freq_Hz": f,
+        },
+    )
+    assert dither_period_samples(tr) == pytest.approx(20.0)
+    off = Trace("off", dict(tr.signals) | {"dither_freq_Hz": np.zeros(n)})
+    assert dither_period_samples(off) == 1.0

@@ -247,11 +247,15 @@ def first_order_lag(x: np.ndarray, tau_s: float, sample_rate_Hz: float) -> np.nd
 def dither_period_samples(trace) -> float:
     """Samples in one dither period of ``trace`` (fractional; 1.0 without dither).
 
-    The dither frequency (Hz) is the median of the ``dither_freq_Hz`` signal, else the
-    manifest's ``dither_freq_Hz``; the sample rate (Hz) is the trace's.
+    The dither frequency (Hz) is the median of the ``dither_freq_Hz`` signal where it is
+    positive (a logger that writes 0 Hz while the dither is off, over half the samples, gave
+    a 1-sample period), else the manifest's ``dither_freq_Hz``; the sample rate (Hz) is the
+    trace's.
     """
     if trace.has("dither_freq_Hz"):
-        f = float(np.median(trace.get("dither_freq_Hz")))
+        f = np.asarray(trace.get("dither_freq_Hz"), dtype=float)
+        f = f[np.isfinite(f) & (f > 0)]
+        f = float(np.median(f)) if f.size else 0.0
     else:
         f = float(trace.meta.get("dither_freq_Hz", 0.0) or 0.0)
     return max(1.0, trace.sample_rate_Hz / f) if f > 0 else 1.0
