@@ -12,11 +12,10 @@ __all__ = ["register"]
 def _is_ml_model(path: str) -> bool:
     """Whether ``path`` claims to be a model saved by ``clutchlab.residual_ml.save_model``
     (a ``"format"`` key: a fit result has none); the loader then checks it."""
-    try:
-        doc = json.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, ValueError, RecursionError):
-        return False
-    return isinstance(doc, dict) and "format" in doc
+    from .data import read_json_object
+
+    doc = read_json_object(path)
+    return doc is not None and "format" in doc
 
 
 def _export(args: argparse.Namespace) -> Path:

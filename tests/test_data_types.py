@@ -341,3 +341,17 @@ def test_dither_period_from_a_frequency_logged_as_0_while_the_dither_is_off():
     assert dither_period_samples(tr) == pytest.approx(20.0)
     off = Trace("off", dict(tr.signals) | {"dither_freq_Hz": np.zeros(n)})
     assert dither_period_samples(off) == 1.0
+
+
+def test_read_json_object_is_none_for_anything_but_a_json_object(tmp_path):
+    from clutchlab.data import read_json_object
+
+    obj = tmp_path / "o.json"
+    obj.write_text('{"kind": "x"}', encoding="utf-8")
+    assert read_json_object(obj) == {"kind": "x"}
+    assert read_json_object(obj, max_bytes=5) is None  # larger than the limit: not read
+    for name, text in (("list.json", "[1]"), ("bad.json", "{"), ("deep.json", "[" * 100000)):
+        (tmp_path / name).write_text(text, encoding="utf-8")
+        assert read_json_object(tmp_path / name) is None
+    assert read_json_object(tmp_path / "missing.json") is None
+    assert read_json_object(tmp_path) is None  # a folder

@@ -35,6 +35,7 @@ from .io_dataset import DatasetScan, load_dataset, save_dataset, scan_dataset
 from .io_mat import write_mat, write_mat73
 from .io_mf4 import read_mf4, write_mf4
 from .io_parquet import read_parquet, write_parquet
+from .json_file import read_json_object
 from .metrics import pressure_metrics
 from .options import ReadOptions
 from .output import OWNED_NAME, check_output, owned_files, write_file_atomic, write_folder_atomic
@@ -90,6 +91,7 @@ __all__ = [
     "ramp_rate_mA_s",
     "ramps_fastest_first",
     "read_csv",
+    "read_json_object",
     "read_log",
     "read_mf4",
     "read_parquet",

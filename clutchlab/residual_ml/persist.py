@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 from sklearn.base import BaseEstimator
 
+from ..data.json_file import read_json_object
 from ..data.output import check_output, write_file_atomic
 from ..errors import ClutchlabError, ModelError, ModelFileError, OutputError
 from .estimators import SVCPartitionedGP
@@ -333,13 +334,8 @@ _MAX_OWN_JSON_BYTES = 64 * 2**20
 
 def _own_document(path: Path) -> dict | None:
     """The model document at ``path`` if it is a clutchlab model JSON, else None."""
-    try:
-        if not path.is_file() or path.stat().st_size > _MAX_OWN_JSON_BYTES:
-            return None
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError, RecursionError):
-        return None
-    return doc if isinstance(doc, dict) and doc.get("format") == FORMAT else None
+    doc = read_json_object(path, max_bytes=_MAX_OWN_JSON_BYTES)
+    return doc if doc is not None and doc.get("format") == FORMAT else None
 
 
 def _destination(path: Path) -> Path:

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..data import Trace, write_file_atomic
+from ..data import Trace, read_json_object, write_file_atomic
 from ..errors import ModelError
 from ..physics import CircuitModel, SimulationSettings, simulate
 
@@ -178,11 +178,8 @@ class PhysicsPredictor:
     def describes(path: str | Path) -> bool:
         """Whether ``path`` holds a JSON object that says it is a PhysicsPredictor
         (``"kind": "PhysicsPredictor"``), valid or not; False when it cannot be read."""
-        try:
-            doc = json.loads(Path(path).read_text(encoding="utf-8"))
-        except (OSError, ValueError, RecursionError):
-            return False
-        return isinstance(doc, dict) and doc.get("kind") == "PhysicsPredictor"
+        doc = read_json_object(path)
+        return doc is not None and doc.get("kind") == "PhysicsPredictor"
 
 
 def DefaultPhysics(substeps: int = 4) -> PhysicsPredictor:

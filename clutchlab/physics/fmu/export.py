@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
+from ...data import read_json_object
 from ...errors import ClutchlabError, FitError, FitResultError
 from ..model import CircuitModel
 from ..parameters import ParameterSet
@@ -89,8 +89,8 @@ def design_source(path: str | Path) -> tuple[CircuitModel, ParameterSet]:
     """
     from ..effects import EFFECTS, FLEXIBLE_LAWS, effect_of_parameter
 
-    doc = json.loads(Path(path).read_text(encoding="utf-8"))
-    names = list(doc["parameters"]) if isinstance(doc["parameters"], dict) else []
+    doc = read_json_object(path) or {}
+    names = list(doc["parameters"]) if isinstance(doc.get("parameters"), dict) else []
     base = {p.name for p in CircuitModel().parameters}
     owners = dict.fromkeys(o for n in names if n not in base and (o := effect_of_parameter(n)))
     laws = [(EFFECTS.get(o) or FLEXIBLE_LAWS[o])() for o in owners]
@@ -106,11 +106,8 @@ def design_source(path: str | Path) -> tuple[CircuitModel, ParameterSet]:
 
 def _is_parameter_file(path: Path) -> bool:
     """Whether ``path`` is a JSON object whose only key is ``parameters``."""
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError, RecursionError):
-        return False
-    return isinstance(doc, dict) and set(doc) == {"parameters"}
+    doc = read_json_object(path)
+    return doc is not None and set(doc) == {"parameters"}
 
 
 def export_physics_fmu(
