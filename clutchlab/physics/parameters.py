@@ -310,15 +310,13 @@ class ParameterSet(Mapping[str, float]):
 
 def _unknown(name: str) -> str:
     """The problem of an unknown parameter; one of an effect the model lacks names it."""
-    from .effects import effect_of_parameter  # the effects declare their parameters here
+    from .effects import missing_effect  # the effects declare their parameters here
 
-    owner = effect_of_parameter(name)
-    if owner is None:
+    missing = missing_effect(name)
+    if missing is None:
         return f"unknown parameter {name!r}"
-    return (
-        f"unknown parameter {name!r}: it belongs to the effect {owner!r}, which the model "
-        f"does not have (CircuitModel().with_effects({owner!r}))"
-    )
+    owner, text = missing
+    return f"unknown parameter {name!r}: it {text} (CircuitModel().with_effects({owner!r}))"
 
 
 def _read_values(doc, specs: dict[str, Parameter]) -> tuple[dict[str, float], list[str]]:

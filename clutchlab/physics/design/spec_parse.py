@@ -10,7 +10,7 @@ import numpy as np
 
 from ...data import SIGNALS
 from ...errors import ModelError
-from ..effects import effect_names, effect_of_parameter
+from ..effects import effect_names, missing_effect
 from ..model import CircuitModel
 from ..settings import is_finite_real
 from ..stand.scenarios import DITHER_SHAPES, RAMPS, RampProfile, dither_amplitude
@@ -153,12 +153,9 @@ def _parse_model(doc: dict, problems: list[str]) -> tuple[ModelSpec, CircuitMode
 
 
 def _unknown_parameter(name: str, known: dict, where: str) -> str:
-    owner = effect_of_parameter(name)
-    if owner is not None:
-        return (
-            f"{where} parameter {name!r} belongs to the effect {owner!r}, which the model "
-            f"does not have: add it to [model] effects"
-        )
+    missing = missing_effect(name)
+    if missing is not None:
+        return f"{where} parameter {name!r} {missing[1]}: add it to [model] effects"
     names = sorted(known) + sorted(SCENARIO_VARIABLES)
     return f"{where} unknown parameter {name!r}; known: {', '.join(names)}"
 

@@ -55,6 +55,7 @@ __all__ = [
     "effect_of_parameter",
     "effect_table",
     "make_effect",
+    "missing_effect",
 ]
 
 #: The flexible component laws (identity at their defaults; no stand uses them).
@@ -151,6 +152,17 @@ def effect_of_parameter(name: str) -> str | None:
         if any(p.name == name for p in cls.PARAMETERS):
             return cls.name
     return None
+
+
+def missing_effect(name: str) -> tuple[str, str] | None:
+    """``(effect, text)`` when ``name`` is a parameter of an effect (or flexible law): the
+    text ``"belongs to the effect 'E', which the model does not have"``, which messages about
+    an unknown parameter follow with how to add the effect where they are given; else None.
+    """
+    owner = effect_of_parameter(name)
+    if owner is None:
+        return None
+    return owner, f"belongs to the effect {owner!r}, which the model does not have"
 
 
 def make_effect(name: str) -> Effect:

@@ -14,7 +14,7 @@ from tqdm.auto import tqdm
 from ...data import Dataset, Trace, dither_period_mean, dither_period_samples, pressure_metrics
 from ...errors import FitError, FitWarning, ModelError
 from ...forkmap import fork_map
-from ..effects import EFFECTS, effect_of_parameter
+from ..effects import EFFECTS, missing_effect
 from ..model import CircuitModel
 from ..parameters import ParameterSet
 from ..settings import SimulationSettings
@@ -58,12 +58,11 @@ def resolve_free(model: CircuitModel, settings: FitSettings) -> tuple[str, ...]:
             free += tuple(n for n in EFFECTS[e.name].fit_parameters() if n not in free)
     unknown = [n for n in (*free, *settings.per_experiment) if n not in known]
     if unknown:
-        owners = {n: effect_of_parameter(n) for n in unknown}
+        missing = {n: missing_effect(n) for n in unknown}
         hints = "".join(
-            f"; {n} belongs to the effect {o!r}, which the model does not have (add it: "
-            f"--effects {o}, or CircuitModel().with_effects({o!r}))"
-            for n, o in owners.items()
-            if o is not None
+            f"; {n} {m[1]} (add it: --effects {m[0]}, or CircuitModel().with_effects({m[0]!r}))"
+            for n, m in missing.items()
+            if m is not None
         )
         raise FitError(
             f"unknown parameter(s) {', '.join(unknown)}{hints}; the model has: {', '.join(known)}"
