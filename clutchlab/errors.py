@@ -17,6 +17,7 @@ __all__ = [
     "OutputError",
     "ProblemListError",
     "SimulationError",
+    "SimulationWarning",
 ]
 
 
@@ -101,3 +102,8 @@ class FitResultError(ModelFileError, FitError):
 
 class FitWarning(UserWarning):
     """A fit returned its best iterate without converging (stopped at a limit)."""
+
+
+class SimulationWarning(UserWarning):
+    """A simulation finished, but a pressure left the range the circuit can reach: the
+    integration step was too long for the parameters' dynamics, or the design is unstable."""

@@ -71,8 +71,8 @@ class SimulationResult:
         """Clutch pressure as the sensor reads it (bar)."""
         return self.outputs["clutch_pressure_bar"]
 
-    def check_pressures(self) -> None:
-        """Raise when a simulated pressure leaves the range the circuit can physically reach.
+    def out_of_range(self) -> str | None:
+        """Why a simulated pressure is unphysical, or None when every one is in range.
 
         A fixed-step integration whose step is too long for a design's dynamics (e.g. a
         small chamber behind a large orifice) can stay finite and still be wrong by
@@ -80,15 +80,15 @@ class SimulationResult:
         :data:`PHYSICAL_PRESSURE_MIN_BAR` or rises above
         :data:`PHYSICAL_PRESSURE_LINE_FACTOR` × the highest line pressure.
 
-        Raises
-        ------
-        SimulationError
+        Returns
+        -------
+        str or None
             Naming the first pressure output (bar) out of that range, its value and time,
-            and the remedy (more ``substeps``, or ``method="radau"``).
+            the range and the remedy (more ``substeps``, or ``method="radau"``).
         """
         line = self.inputs.get("line_pressure_bar")
         if line is None or not len(line):
-            return
+            return None
         hi = PHYSICAL_PRESSURE_LINE_FACTOR * float(np.max(line))
         lo = PHYSICAL_PRESSURE_MIN_BAR
         for spec in self.output_specs:
@@ -98,13 +98,27 @@ class SimulationResult:
             bad = np.flatnonzero((p < lo) | (p > hi))
             if bad.size:
                 k = int(bad[0])
-                raise SimulationError(
+                return (
                     f"{self.trace_name}: {spec.name} = {p[k]:.6g} bar at t = "
                     f"{self.time_s[k]:.6g} s, outside the range the circuit can reach "
                     f"[{lo:g}, {hi:.4g}] bar ({PHYSICAL_PRESSURE_LINE_FACTOR:g} × line "
                     f"pressure): the integration step is too long for these parameters "
                     f"(raise substeps, or use method='radau'), or the design is unstable"
                 )
+        return None
+
+    def check_pressures(self) -> None:
+        """Raise when a simulated pressure leaves the range the circuit can physically reach
+        (see :meth:`out_of_range`).
+
+        Raises
+        ------
+        SimulationError
+            With the message of :meth:`out_of_range`.
+        """
+        why = self.out_of_range()
+        if why is not None:
+            raise SimulationError(why)
 
     @property
     def real_time_factor(self) -> float:

@@ -86,6 +86,14 @@ class SimulationSettings:
     oil_temp_C : float
         Oil temperature (°C) when the trace has no ``oil_temp_C`` signal; within the
         signal's plausible range (−40 to 180 °C).
+    out_of_range : {"warn", "raise", "ignore"}
+        What :func:`~clutchlab.physics.simulate` does when a simulated pressure leaves the
+        range the circuit can reach (below −1 bar or above 1.5 × line pressure; see
+        :meth:`SimulationResult.out_of_range`): a fixed step too long for a design's
+        dynamics can return ±10⁴ bar that are finite. ``warn`` (default) returns the
+        result with a :class:`~clutchlab.errors.SimulationWarning`, ``raise`` raises a
+        :class:`~clutchlab.errors.SimulationError` (design sweeps: the point is
+        ``failed``), ``ignore`` returns it without a word.
 
     Raises
     ------
@@ -104,6 +112,7 @@ class SimulationSettings:
     atol: float = 1e-9
     dither_waveform: Literal["sine", "triangle", "square"] = "sine"
     oil_temp_C: float = 40.0
+    out_of_range: Literal["warn", "raise", "ignore"] = "warn"
 
     def __post_init__(self) -> None:
         problems = []
@@ -133,6 +142,8 @@ class SimulationSettings:
                 f"oil_temp_C {self.oil_temp_C!r} is not a number in "
                 f"{oil.plausible_min:g}..{oil.plausible_max:g} °C"
             )
+        if self.out_of_range not in ("warn", "raise", "ignore"):
+            problems.append(f"out_of_range {self.out_of_range!r} is not warn, raise or ignore")
         if problems:
             raise ModelError("invalid simulation settings: " + "; ".join(problems))
 

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import time
+import warnings
 
 import numpy as np
 
 from ..data import Trace
-from ..errors import ModelError, SimulationError
+from ..errors import ModelError, SimulationError, SimulationWarning
 from .assembly import MODEL_INPUTS
 from .dense_call import DenseCall
 from .inputs import choose_drive, input_matrix, interval_inputs, split_intervals
@@ -54,13 +55,18 @@ def simulate(
         message names it and its first bad sample) or metadata standing for an absent
         signal that is not a finite number — before anything is integrated.
     SimulationError
-        If the state becomes non-finite (the message names the time).
+        If the state becomes non-finite (the message names the time), or, with
+        ``settings.out_of_range == "raise"``, if a pressure leaves the range the circuit
+        can reach.
 
-    Notes
+    Warns
     -----
-    A fixed-step (ROS2) result can be finite and still wrong when the step is too long
-    for the parameters' dynamics; :meth:`SimulationResult.check_pressures` raises when a
-    pressure leaves the range the circuit can reach (design sweeps call it per point).
+    SimulationWarning
+        With ``settings.out_of_range == "warn"`` (the default), if a pressure leaves the
+        range the circuit can reach (below −1 bar or above 1.5 × line pressure): a
+        fixed-step (ROS2) result can be finite and still wrong by thousands of bar when the
+        step is too long for the parameters' dynamics. The message names the output, its
+        value and time, and the remedy (more ``substeps``, or ``method="radau"``).
     """
     settings = settings or SimulationSettings()
     params = model_params(model, params)
@@ -70,7 +76,7 @@ def simulate(
     x, y = simulate_inputs(model, params, trace.time_s, u, drive, settings)
     wall = time.perf_counter() - t0
     fns = model.functions(drive)
-    return SimulationResult(
+    result = SimulationResult(
         time_s=np.asarray(trace.time_s, dtype=float),
         outputs={o.name: y[:, k] for k, o in enumerate(fns.outputs)},
         states=x,
@@ -83,6 +89,11 @@ def simulate(
         wall_s=wall,
         inputs={s.name: u[:, k] for k, s in enumerate(MODEL_INPUTS)},
     )
+    if settings.out_of_range == "raise":
+        result.check_pressures()
+    elif settings.out_of_range == "warn" and (why := result.out_of_range()) is not None:
+        warnings.warn(why, SimulationWarning, stacklevel=2)
+    return result
 
 
 def model_params(model: CircuitModel, params: ParameterSet | None) -> ParameterSet:

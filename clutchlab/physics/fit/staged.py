@@ -367,7 +367,7 @@ def measured_thresholds(
         The thresholds, or why there are none.
     """
     on, off = [], []
-    sim = SimulationSettings(substeps=substeps)
+    sim = SimulationSettings(substeps=substeps, out_of_range="ignore")
     for tr in traces:
         k = latch.get(tr.name) if latch is not None else measured_latch_indices(tr)
         if k is None:
@@ -463,7 +463,7 @@ def _snap_offsets(model, params, traces, latch, substeps) -> np.ndarray | None:
     """The model's latch-on and latch-off current minus the measured one (mA), median over
     ``traces``; None when the model does not snap on both branches of every trace."""
     rows = []
-    sim = SimulationSettings(substeps=substeps)
+    sim = SimulationSettings(substeps=substeps, out_of_range="ignore")
     for tr in traces:
         y = simulate(model, params, tr, sim).outputs["clutch_pressure_bar"]
         own = measured_latch_indices(tr.with_signals(clutch_pressure_bar=y))
@@ -650,7 +650,7 @@ def _lag_stage(model, params, traces, settings, info) -> None:
         info.notes.append("one ramp rate only: lag signature not measured")
         return
     data = lag_signature(fast, slow)
-    sim = SimulationSettings(substeps=settings.substeps)
+    sim = SimulationSettings(substeps=settings.substeps, out_of_range="ignore")
     pred = {
         tr.name: simulate(model, params, tr, sim).outputs["clutch_pressure_bar"]
         for tr in fast + slow
