@@ -97,6 +97,11 @@ def _physics(path: str | None):
     return PhysicsPredictor.from_fitter(PhysicsFitter.load(path))
 
 
+#: ``train`` variants with a latched GP whose reference ``--latched-reference`` sets (the
+#: hybrid's residual has none: its physics prediction already follows line pressure).
+LATCHED_REFERENCE_VARIANTS = ("paper_svc_gp", "paper_faithful")
+
+
 def _cmd_train(args: argparse.Namespace) -> int:
     from tqdm.auto import tqdm
 
@@ -106,6 +111,12 @@ def _cmd_train(args: argparse.Namespace) -> int:
     from .residual_ml.features import PHYSICS_FEATURES, causal_features
     from .residual_ml.hybrid import HYBRID_FEATURES
 
+    partitioned = {"latched_reference": args.latched_reference} if args.latched_reference else {}
+    if partitioned and args.variant not in LATCHED_REFERENCE_VARIANTS:
+        raise ModelError(
+            f"--latched-reference is only used by {' and '.join(LATCHED_REFERENCE_VARIANTS)}; "
+            f"{args.variant} has no latched GP of its own on the line pressure"
+        )
     dataset = load_dataset(args.dataset, channel_map=args.map)
     train = _training(dataset, _csv(args.train))
     params = {}
@@ -126,6 +137,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
             params["kernel"] = args.kernel
         if args.causal:
             params["features"] = causal_features(make_variant(args.variant)._builder().names)
+        params |= partitioned
     model = make_variant(args.variant, **params)
     if args.causal and not args.quiet:
         names = model.residual._builder().names if args.variant == "hybrid" else None
@@ -246,6 +258,14 @@ def register(sub) -> None:
         help="causal features (trailing-window dI/dt and direction, no look-ahead) so that "
         "`clutchlab export-fmu` reproduces the model exactly; hybrid: the residual model "
         "uses I, A_d, f_d and the causal dI/dt and direction (no physics features)",
+    )
+    p.add_argument(
+        "--latched-reference",
+        choices=["line", "none"],
+        help="paper_svc_gp and paper_faithful: learn the latched "
+        "plateau relative to the logged line pressure (line; clutchlab's default, the paper's "
+        "is none) or as the pressure itself (none: the model then predicts where line "
+        "pressure is not logged)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", help="also write the training metrics here")

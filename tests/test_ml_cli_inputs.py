@@ -285,3 +285,32 @@ def test_compare_classifiers_compares_a_repeated_name_once_and_names_an_unknown_
     assert result.table().count("Logistic regression") == 1
     with pytest.raises(ModelError, match=r"unknown classifier\(s\) \['nope', 'nix'\]"):
         compare_classifiers(traces, names=["nope", "logistic_regression", "nix"], workers=1)
+
+
+def test_train_latched_reference_none_predicts_where_line_pressure_is_not_logged(tmp_path, capsys):
+    """A model trained from the CLI on a log with line pressure could not predict on one
+    without it, and its error said "fit with latched_reference='none'", which no command
+    could do. ``train --latched-reference none`` does it."""
+    traces = [_ramp(n, r, 1100.0) for n, r in (("a", "fast"), ("b", "slow"), ("c", "slow"))]
+    data = tmp_path / "data"
+    save_dataset(Dataset(traces), data)
+    unlogged = _ramp("d", "fast", 1100.0, line=False)
+    fitted = {}
+    for ref in ("line", "none"):
+        out = tmp_path / ref
+        argv = ["train", str(data), "--variant", "paper_svc_gp", "--out", str(out), "--quiet"]
+        assert main([*argv, "--latched-reference", ref]) == 0
+        fitted[ref] = load_model(out / "model.json")
+        assert fitted[ref].latched_reference_ == ref
+    with pytest.raises(DataError, match="clutchlab train --latched-reference none"):
+        fitted["line"].predict(unlogged)
+    assert np.isfinite(fitted["none"].predict(unlogged)).all()
+
+
+def test_train_latched_reference_is_refused_for_a_variant_without_it(tiny, tmp_path, capsys):
+    out = tmp_path / "m"
+    argv = ["train", str(tiny), "--variant", "gp_didt", "--out", str(out)]
+    assert main([*argv, "--latched-reference", "none"]) == 2
+    err = capsys.readouterr().err
+    assert "--latched-reference is only used by paper_svc_gp and paper_faithful" in err
+    assert not out.exists()

@@ -599,7 +599,8 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
             raise DataError(
                 f"{trace.name}: no line_pressure_bar; this model predicts the latched plateau "
                 "relative to line pressure (latched_reference='line', as fitted): log line "
-                "pressure or fit with latched_reference='none'"
+                "pressure or fit with latched_reference='none' (`clutchlab train "
+                "--latched-reference none`)"
             )
         # As logged (not period-averaged), as the FMU and the step predictor see it: the
         # prediction stays causal, and its period mean is the period-mean reference.
