@@ -359,9 +359,19 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--overwrite", action="store_true", help="replace an existing destination")
     _add_read_options(q)
     q.set_defaults(func=_cmd_data_convert)
-    from . import cli_discover, cli_eval, cli_fit, cli_fmu, cli_ml, cli_structure, cli_sweep
+    from . import (
+        cli_discover,
+        cli_eval,
+        cli_fit,
+        cli_fmu,
+        cli_ml,
+        cli_predict,
+        cli_structure,
+        cli_sweep,
+    )
 
-    for module in (cli_fit, cli_structure, cli_ml, cli_eval, cli_discover, cli_fmu, cli_sweep):
+    modules = (cli_fit, cli_structure, cli_ml, cli_eval, cli_predict, cli_discover, cli_fmu)
+    for module in (*modules, cli_sweep):
         module.register(sub)
     return parser
 
