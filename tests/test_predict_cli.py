@@ -172,3 +172,28 @@ def test_a_failed_prediction_writes_nothing(tiny, tmp_path, capsys):
     assert _run(tmp_path / "svc" / "model.json", tmp_path / "noline", "--out", out) == 2
     assert "no line_pressure_bar" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_logs_under_the_loggers_names_are_read_through_map(tiny, tmp_path, capsys):
+    from test_cli_map import LOGGER, MAP_TOML
+
+    root, _, ds = tiny
+    logs, canonical = tmp_path / "logs", tmp_path / "canonical"
+    for folder in (logs, canonical):
+        save_dataset(ds, folder)
+    for tr in ds:  # the same signals both ways: the logger's names and kPa, or canonical
+        df = pd.read_csv(canonical / f"{tr.name}.csv")
+        df = df[[c for c in df.columns if c in LOGGER]]
+        df.to_csv(canonical / f"{tr.name}.csv", index=False)
+        df = pd.DataFrame({LOGGER[c][0]: df[c] * LOGGER[c][1] for c in df.columns})
+        df.to_csv(logs / f"{tr.name}.csv", index=False)
+    cmap = tmp_path / "logger.toml"
+    cmap.write_text(MAP_TOML, encoding="utf-8")
+    argv = [root / "fit.json", "--ramps", "medium", "--no-figures", "--out"]
+    assert _run(argv[0], logs, *argv[1:], tmp_path / "unmapped") == 2
+    assert "clutch_pressure_bar" in capsys.readouterr().err
+    assert _run(argv[0], logs, *argv[1:], tmp_path / "mapped", "--map", cmap) == 0
+    assert _run(argv[0], canonical, *argv[1:], tmp_path / "plain") == 0
+    mapped = pd.read_csv(tmp_path / "mapped" / "metrics.csv")
+    plain = pd.read_csv(tmp_path / "plain" / "metrics.csv")
+    pd.testing.assert_frame_equal(mapped, plain, rtol=1e-6)
