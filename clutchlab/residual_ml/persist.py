@@ -106,10 +106,20 @@ def _params_from(d: dict) -> dict:
 
 
 def _as_predictor(phys) -> PhysicsPredictor:
+    """The physics of a hybrid as a :class:`PhysicsPredictor`: a fitted PhysicsFitter, or an
+    estimator wrapping one (``fitter_``: the evaluation's ``physics_fitted``) or holding a
+    fitted model and values (``model_``, ``params_``: the discovery's augmented physics),
+    each simulated as they are, with the default 4 substeps."""
     if isinstance(phys, PhysicsPredictor):
         return phys
-    if hasattr(phys, "model_") and hasattr(phys, "params_"):  # a fitted PhysicsFitter
-        return PhysicsPredictor.from_fitter(phys)
+    fitter = getattr(phys, "fitter_", None)
+    if fitter is not None and hasattr(fitter, "model_"):
+        return PhysicsPredictor.from_fitter(fitter)
+    if hasattr(phys, "model_") and hasattr(phys, "params_"):
+        if hasattr(phys, "_check_fitted"):  # a fitted PhysicsFitter
+            return PhysicsPredictor.from_fitter(phys)
+        trained = tuple(getattr(phys, "train_experiments_", None) or ())
+        return PhysicsPredictor(tuple(phys.model_.effect_names), phys.params_.changed(), 4, trained)
     raise ModelError(
         f"physics of type {type(phys).__name__} cannot be saved; use a PhysicsPredictor or a "
         "fitted PhysicsFitter"

@@ -32,6 +32,7 @@ from ..data.output import write_file_atomic, write_folder_atomic
 from .figures import FigureSpec, report_figures
 from .interactive import interactive_figures
 from .metrics import ACCURACY_KEYS, COVERAGE_REGIONS, METRIC_KEYS
+from .model_files import model_files
 
 if TYPE_CHECKING:
     from .evaluate import Evaluation
@@ -361,6 +362,36 @@ def _md_regions(doc: dict[str, Any]) -> list[str]:
     return ["## Where the error lies", "", caption, "", _md_table(head, body), ""]
 
 
+_MODELS_INTRO = (
+    "The fitted models of this report, to predict other logs with (`clutchlab predict "
+    "models/<variant>.json DATASET --out DIR`) or to export for co-simulation (`clutchlab "
+    "export-fmu models/<variant>.json --out model.fmu`) without fitting again."
+)
+
+
+def _models_rows(doc: dict[str, Any]) -> list[list[str]]:
+    models = doc.get("models") or {}
+    rows = [[n, ", ".join(f)] for n, f in models.get("files", {}).items()]
+    rows += [[n, f"not saved: {why}"] for n, why in models.get("not_saved", {}).items()]
+    return rows
+
+
+def _md_models(doc: dict[str, Any]) -> list[str]:
+    rows = _models_rows(doc)
+    if not rows:
+        return []
+    body = [[f"`{n}`", _md_text(f)] for n, f in rows]
+    return ["## Saved models", "", _MODELS_INTRO, "", _md_table(["variant", "files"], body), ""]
+
+
+def _html_models(doc: dict[str, Any]) -> list[str]:
+    rows = _models_rows(doc)
+    if not rows:
+        return []
+    intro = _e(_MODELS_INTRO).replace("`", "")
+    return ["<h2>Saved models</h2>", f"<p>{intro}</p>", _html_rows(["variant", "files"], rows)]
+
+
 def render_markdown(doc: dict[str, Any], figure_files: list[tuple[str, str, str]]) -> str:
     """The Markdown summary of a report document.
 
@@ -442,6 +473,7 @@ def render_markdown(doc: dict[str, Any], figure_files: list[tuple[str, str, str]
             out += [f"**{_md_text(_discovery_title(it))}**", ""]
             if it["candidates"]:
                 out += [_md_table(_DISCOVERY_HEAD, _discovery_rows(it)), ""]
+    out += _md_models(doc)
     out += ["## Figures", ""]
     for title, rel, caption in figure_files:
         out += [f"### {title}", "", f"![{title}]({rel})", "", caption, ""]
@@ -686,6 +718,7 @@ def render_html(
             s.append(f"<h3>{_e(_discovery_title(it))}</h3>")
             if it["candidates"]:
                 s.append(_html_rows(_DISCOVERY_HEAD, _discovery_rows(it)))
+    s += _html_models(doc)
     s.append("<h2>Figures</h2>")
     if plotly_js:
         s.append(
@@ -843,11 +876,18 @@ def write_report(ev: Evaluation, out: str | Path, interactive: bool = True) -> R
     figures, missing = report_figures(ev)
     doc = ev.to_dict()
     doc["figures"] = {"drawn": [f.key for f in figures], "missing": missing}
+    saved, not_saved = model_files(ev.models)
+    by_variant = {n: sorted(f for f in saved if Path(f).stem == n) for n in ev.models}
+    doc["models"] = {
+        "files": {n: f for n, f in by_variant.items() if f},
+        "not_saved": not_saved,
+    }
     doc = jsonable(doc)
     json.loads(_json_text(doc))  # strict JSON before anything is written
     pngs = [(spec, _png(spec.figure)) for spec in figures]
     rel = [(spec.title, f"figures/{spec.key}.png", spec.caption) for spec, _ in pngs]
     files: dict[str, bytes] = {f"figures/{spec.key}.png": png for spec, png in pngs}
+    files |= saved
     files["metrics.csv"] = metrics_csv(doc).encode("utf-8")
     files["report.md"] = render_markdown(doc, rel).encode("utf-8")
     iplots = interactive_figures(ev, [spec.key for spec in figures]) if interactive else {}
