@@ -41,6 +41,12 @@ def _finish(files, failed: dict[str, str], json_path: str | None) -> int:
         print(f"{what} failed: {why}", file=sys.stderr)
     for line in summary_lines(files.doc):
         print(line)
+    saved = (files.doc.get("models") or {}).get("files") or {}
+    if saved:
+        print(
+            f"models: {files.folder / 'models'} ({', '.join(saved)}; "
+            "`clutchlab predict` and `clutchlab export-fmu` take them)"
+        )
     print(f"report: {files.html}")
     return 1 if failed else 0
 
