@@ -9,7 +9,8 @@ import zipfile
 from functools import lru_cache
 from pathlib import Path
 
-from clutchlab.physics import CircuitModel
+from fit_support import synthetic_fit
+
 from clutchlab.physics.fit import FitResult
 from clutchlab.physics.fmu import export_physics_fmu
 from clutchlab.physics.stand import RAMPS, DitherSetting, StandConfig, run_stand
@@ -22,28 +23,7 @@ TMP = Path(tempfile.mkdtemp(prefix="clutchlab-fmu-tests-"))
 
 def fit_result(effects: tuple[str, ...] = ()) -> FitResult:
     """A FitResult with the :data:`FITTED` values (as ``clutchlab fit-physics`` writes one)."""
-    model = CircuitModel().with_effects(*effects)
-    params = model.params(**FITTED)
-    return FitResult(
-        effects=list(effects),
-        values={n: float(params[n]) for n in params},
-        units={p.name: p.unit for p in model.parameters},
-        free=list(FITTED),
-        std_errors={},
-        correlation=[],
-        singular_values=[],
-        unidentifiable=[],
-        weak_directions=[],
-        per_experiment={},
-        per_experiment_values={},
-        cost_history=[],
-        status="synthetic (tests)",
-        success=True,
-        iterations=0,
-        wall_s=0.0,
-        train=[],
-        settings={},
-    )
+    return synthetic_fit(FITTED, effects)
 
 
 @lru_cache(maxsize=1)

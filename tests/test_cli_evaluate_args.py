@@ -6,9 +6,11 @@ Exit status 1 means "a variant failed" (the report lists it); a bad option is no
 from __future__ import annotations
 
 import pytest
+from fit_support import synthetic_fit
 
 from clutchlab.cli import main
 from clutchlab.errors import DataError
+from clutchlab.physics import CircuitModel
 
 
 @pytest.mark.parametrize(
@@ -28,31 +30,9 @@ def test_a_bad_fmu_param_is_a_usage_error(tmp_path, capsys, extra, message):
 
 def _fit_json(path, effects, train):
     """A fit result as `clutchlab fit-physics` writes it, at the datasheet values."""
-    from clutchlab.physics import CircuitModel
-    from clutchlab.physics.fit import FitResult
-
-    model = CircuitModel().with_effects(*effects)
-    values = dict(model.default_params().values)
-    free = ["reg_F0"]
-    FitResult(
-        effects=list(effects),
-        values=values,
-        units={p.name: p.unit for p in model.parameters},
-        free=free,
-        std_errors={"reg_F0": 0.01},
-        correlation=[[1.0]],
-        singular_values=[1.0],
-        unidentifiable=[],
-        weak_directions=[],
-        per_experiment={},
-        per_experiment_values={},
-        cost_history=[1.0],
-        status="Solve_Succeeded",
-        success=True,
-        iterations=3,
-        wall_s=1.0,
-        train=list(train),
-    ).to_json(path)
+    synthetic_fit({"reg_F0": CircuitModel().default_params()["reg_F0"]}, effects, train).to_json(
+        path
+    )
     return path
 
 
@@ -86,7 +66,6 @@ def test_fitted_physics_refuses_a_given_fit_without_the_models_effects(tmp_path)
     from synthetic import make_trace
 
     from clutchlab.errors import FitError
-    from clutchlab.physics import CircuitModel
     from clutchlab.physics.fit import PhysicsFitter
     from clutchlab.validation.variants import FittedPhysics
 

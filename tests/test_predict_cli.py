@@ -9,11 +9,11 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
+from fit_support import synthetic_fit
 
 from clutchlab.cli import main
 from clutchlab.data import Dataset, Trace, load_dataset, save_dataset
 from clutchlab.physics import CircuitModel
-from clutchlab.physics.fit import FitResult
 from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
 from clutchlab.residual_ml import GPWithDerivative, PhysicsPredictor
 from clutchlab.validation import load_predictor, predict_traces
@@ -36,15 +36,9 @@ def tiny(tmp_path_factory):
     ds = load_dataset(data)
     model = GPWithDerivative().fit(ds.select(ramps=["fast", "slow"]))
     model.save(root / "gp" / "model.json")
-    fit = CircuitModel().default_params().values
-    FitResult(
-        effects=[], values={**fit, "reg_F0": fit["reg_F0"] * 1.05},
-        units={p.name: p.unit for p in CircuitModel().parameters}, free=["reg_F0"],
-        std_errors={"reg_F0": 0.01}, correlation=[[1.0]], singular_values=[1.0],
-        unidentifiable=[], weak_directions=[], per_experiment={}, per_experiment_values={},
-        cost_history=[1.0], status="Solve_Succeeded", success=True, iterations=3, wall_s=1.0,
-        train=[t.name for t in ds.select(ramps=["fast", "slow"])],
-    ).to_json(root / "fit.json")  # fmt: skip
+    reg_f0 = CircuitModel().default_params()["reg_F0"] * 1.05
+    train = [t.name for t in ds.select(ramps=["fast", "slow"])]
+    synthetic_fit({"reg_F0": reg_f0}, train=train).to_json(root / "fit.json")  # fmt: skip
     return root, data, ds
 
 

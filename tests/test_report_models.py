@@ -8,10 +8,11 @@ import json
 
 import numpy as np
 import pytest
+from fit_support import synthetic_fit
 
 from clutchlab.cli import main
 from clutchlab.physics import CircuitModel
-from clutchlab.physics.fit import FitResult, PhysicsFitter
+from clutchlab.physics.fit import PhysicsFitter
 from clutchlab.physics.fmu import physics_source
 from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
 from clutchlab.residual_ml import load_model
@@ -28,15 +29,10 @@ def report(tmp_path_factory):
         seed=4,
     )
     ds = run_stand(config, progress=False).dataset
-    values = CircuitModel().default_params().values
-    fit = FitResult(
-        effects=[], values={**values, "reg_F0": values["reg_F0"] * 1.03},
-        units={p.name: p.unit for p in CircuitModel().parameters}, free=["reg_F0"],
-        std_errors={"reg_F0": 0.01}, correlation=[[1.0]], singular_values=[1.0],
-        unidentifiable=[], weak_directions=[], per_experiment={}, per_experiment_values={},
-        cost_history=[1.0], status="Solve_Succeeded", success=True, iterations=3, wall_s=1.0,
-        train=[t.name for t in ds.select(ramps=["fast", "slow"])],
-    )  # fmt: skip
+    reg_f0 = CircuitModel().default_params()["reg_F0"] * 1.03
+    fit = synthetic_fit(
+        {"reg_F0": reg_f0}, train=[t.name for t in ds.select(ramps=["fast", "slow"])]
+    )
     fitter = PhysicsFitter.load(fit.to_json())
     ev = evaluate(
         ds,
