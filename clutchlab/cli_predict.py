@@ -127,16 +127,20 @@ def register(sub) -> None:
     p = sub.add_parser(
         "predict",
         help="predict a dataset's clutch pressure with a saved model; score it and plot it",
-        description="Predict the clutch pressure of a dataset's experiments with a model saved "
-        "earlier, without fitting anything: a `clutchlab train` model.json, a `fit-physics` "
-        "result or a `params --out` design file. Writes predictions/<experiment>.csv (time, "
-        "nominal current, measured, predicted, residual [, std]), metrics.csv (RMSE, MAE, "
-        "max |e| and fit % of the dither-period means, as `evaluate` scores) and "
-        "figures/<experiment>.png into --out. Experiments the model was trained on are "
-        "marked: their scores are in-sample. Exit status 0: written; 2: refused, nothing "
-        "written.",
+        description=(
+            "Predict the clutch pressure of a dataset's experiments with a model saved earlier, "
+            "without fitting anything: a `clutchlab train` model.json, a `fit-physics` result, "
+            "a `params --out` design file or an FMU (`export-fmu`'s). Writes "
+            "predictions/<experiment>.csv (time, nominal current, measured, predicted, "
+            "residual [, std]), metrics.csv (RMSE, MAE, max |e| and fit % of the dither-period "
+            "means, as `evaluate` scores) and figures/<experiment>.png into --out. Experiments "
+            "the model was trained on are marked: their scores are in-sample. Exit status 0: "
+            "written; 2: refused, nothing written."
+        ),
     )
-    p.add_argument("model", help="model file: train's model.json, fit-physics JSON or design")
+    p.add_argument(
+        "model", help="model file: train's model.json, fit-physics JSON, design file or FMU"
+    )
     p.add_argument("dataset", help="dataset folder (manifest.json + experiments)")
     add_map_argument(p)
     p.add_argument("--out", required=True, help="folder to write the predictions into")

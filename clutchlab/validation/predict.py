@@ -8,6 +8,7 @@ without fitting anything again.
 from __future__ import annotations
 
 import time
+import zipfile
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -65,8 +66,9 @@ def load_predictor(path: str | Path, substeps: int | None = None) -> LoadedModel
     ----------
     path : path-like
         A model of ``clutchlab train`` (``model.json``, its ``model.npz`` beside it), a fit of
-        ``clutchlab fit-physics``, a physics description (``PhysicsPredictor.save``) or a
-        parameter file of a design (``clutchlab params --out``).
+        ``clutchlab fit-physics``, a physics description (``PhysicsPredictor.save``), a
+        parameter file of a design (``clutchlab params --out``) or an FMI 2.0 co-simulation
+        FMU whose inputs are named after the canonical signals (``clutchlab export-fmu``).
     substeps : int, optional
         Physics models: ROS2 steps per sample (default 4, what ``clutchlab evaluate``
         scores with). Refused for an ML model, which has none.
@@ -86,9 +88,13 @@ def load_predictor(path: str | Path, substeps: int | None = None) -> LoadedModel
     from ..residual_ml import PhysicsPredictor, check_model, load_model
 
     path = Path(path)
+    if path.is_file() and zipfile.is_zipfile(path):
+        return _fmu(path, substeps)
     doc = read_json_object(path)
     if doc is None:
-        raise ModelError(f"{path}: not a model file (it is missing or not a JSON object)")
+        raise ModelError(
+            f"{path}: not a model file (it is missing, or neither a JSON object nor an FMU)"
+        )
     if "format" in doc:  # a residual_ml model; the loader checks the rest
         if substeps is not None:
             raise ModelError(
@@ -123,6 +129,24 @@ def load_predictor(path: str | Path, substeps: int | None = None) -> LoadedModel
     kind = "fitted physics model (clutchlab fit-physics)" if trained else "physics design"
     model = PhysicsPredictor(tuple(circuit.effect_names), params.changed(), steps, trained)
     return LoadedModel(model, kind, False, trained)
+
+
+def _fmu(path: Path, substeps: int | None) -> LoadedModel:
+    """An FMI 2.0 co-simulation FMU (``clutchlab export-fmu``'s, or one whose inputs are
+    named after the canonical signals), simulated with FMPy at its own start values."""
+    from ..physics.fmu import FmuPhysics
+
+    if substeps is not None:
+        raise ModelError(f"{path}: --substeps is not used by an FMU (its steps are its own)")
+    try:
+        model = FmuPhysics(path)
+    except ClutchlabError as exc:
+        raise ModelError(
+            f"{path}: an FMU clutchlab cannot predict with (`clutchlab evaluate --physics-fmu` "
+            "maps other input names and sets parameters)",
+            getattr(exc, "problems", None) or [str(exc)],
+        ) from exc
+    return LoadedModel(model, "FMU", False, ())
 
 
 #: The ``train`` variant each saved estimator class stands for (``paper_faithful`` saves as
