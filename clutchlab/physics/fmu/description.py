@@ -127,7 +127,7 @@ def model_description_xml(
         lines.append("    </ScalarVariable>")
 
     for var in program.inputs:
-        scalar(var, 'causality="input" variability="continuous"', _real(var, True, False))
+        scalar(var, 'causality="input" variability="continuous"', _real(var, True, True))
     for var in program.outputs:
         scalar(
             var,

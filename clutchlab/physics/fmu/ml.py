@@ -806,4 +806,10 @@ def ml_program(
             "didt": "causal" if use_didt else "none",
         },
         constants=tuple(const.arrays),
+        # a hybrid checks its physics' pressures as the physics FMU does
+        pressure_outputs=tuple(
+            "physics_pressure_bar" if n == "clutch_pressure_bar" else n
+            for n in (physics.pressure_outputs if physics is not None else ())
+        ),
+        supply_inputs=physics.supply_inputs if physics is not None else (),
     )

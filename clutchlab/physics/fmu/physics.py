@@ -13,6 +13,7 @@ import math
 
 import casadi as ca
 
+from ...data import SIGNALS
 from ...errors import ModelError
 from ..assembly import MODEL_INPUTS
 from ..integrator import sample_step_function
@@ -27,7 +28,9 @@ __all__ = [
     "FMU_INPUTS",
     "INTERNAL_STEP_S",
     "SUBSTEPS_RANGE",
+    "SUPPLY_INPUTS",
     "check_export_options",
+    "input_range",
     "physics_program",
 ]
 
@@ -62,6 +65,32 @@ _COMMON_INPUTS = (
     ("oil_temp_C", "°C", "oil temperature", 40.0),
 )
 _WAVES = ("sine", "triangle", "square")
+
+#: Inputs whose highest value so far bounds the FMU's pressure outputs (bar): the line and
+#: the prime pressure (see :attr:`~clutchlab.physics.fmu.program.FmuProgram.supply_inputs`).
+SUPPLY_INPUTS = ("line_pressure_bar", "prime_pressure_bar")
+
+
+def input_range(name: str) -> tuple[float, float]:
+    """Declared ``min`` / ``max`` of an FMU input, which the FMU enforces.
+
+    Parameters
+    ----------
+    name : str
+        Canonical signal name of the input (``current_cmd_mA`` …).
+
+    Returns
+    -------
+    (float, float)
+        The plausible range of the signal in its unit (:data:`clutchlab.data.SIGNALS`:
+        −300 … 2000 mA for a current, 0 … 500 mA / Hz for the dither, −1 … 60 bar for a
+        pressure, −40 … 180 °C): a value outside it is a signal in another unit or one the
+        model was never made for, refused by the FMU with its name.
+    """
+    spec = SIGNALS[name]
+    return spec.plausible_min, spec.plausible_max
+
+
 _U = {s.name: k for k, s in enumerate(MODEL_INPUTS)}
 
 
@@ -186,7 +215,7 @@ def physics_program(
     fns = model.functions(drive)
     nx_m, npar_m = fns.nx, len(fns.parameters)
     spec = FMU_INPUTS[drive] + _COMMON_INPUTS
-    inputs = tuple(FmuVariable(n, u, d, s) for n, u, d, s in spec)
+    inputs = tuple(FmuVariable(n, u, d, s, *input_range(n)) for n, u, d, s in spec)
     outputs = tuple(FmuVariable(o.name, o.unit, o.description) for o in fns.outputs)
     model_pars = tuple(
         FmuVariable(
@@ -280,6 +309,8 @@ def physics_program(
         step_s=step_s,
         stop_time_s=stop_time_s,
         max_step_s=INTERNAL_STEP_S,
+        pressure_outputs=tuple(o.name for o in outputs if o.unit == "bar"),
+        supply_inputs=SUPPLY_INPUTS,
         annotations={
             "kind": "physics",
             "drive": drive,

@@ -104,6 +104,20 @@ class FmuProgram:
     constants : tuple of ndarray
         Arrays passed as extra trailing inputs of every function (each as a dense matrix,
         column-major), stored in the FMU's resources.
+    pressure_outputs : tuple of str
+        Outputs (bar) the FMU checks after initialization and every step against the range
+        the circuit can reach: ``[PHYSICAL_PRESSURE_MIN_BAR,
+        PHYSICAL_PRESSURE_LINE_FACTOR × max(highest supply pressure so far, 1 bar)]``
+        (as :meth:`~clutchlab.physics.SimulationResult.check_pressures`); a value outside it
+        (a fixed-step solution that stays finite but is wrong by thousands of bar) is an
+        error naming the output. Empty: no check.
+    supply_inputs : tuple of str
+        Inputs (bar) whose highest value so far is the supply pressure of that check (line
+        and prime pressure); required when ``pressure_outputs`` is not empty.
+
+    Inputs with a declared ``min`` / ``max`` are checked against it by ``fmi2DoStep`` and
+    ``fmi2ExitInitializationMode`` (an input outside it, e.g. a current given in A, is an
+    error naming it); every input and parameter must be finite.
     """
 
     name: str
@@ -122,6 +136,8 @@ class FmuProgram:
     max_step_s: float = 1e-3
     annotations: dict[str, str] = field(default_factory=dict)
     constants: tuple[np.ndarray, ...] = ()
+    pressure_outputs: tuple[str, ...] = ()
+    supply_inputs: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         problems = []
@@ -161,6 +177,25 @@ class FmuProgram:
                 f"parameter max_step_s starts at {self.parameters[k].start}, outside "
                 f"(0, {self.max_step_s}] (max_step_s)"
             )
+        outputs = {v.name: v.unit for v in self.outputs}
+        inputs = {v.name: v.unit for v in self.inputs}
+        problems += [
+            f"pressure output {n!r} is not an output in bar"
+            for n in self.pressure_outputs
+            if outputs.get(n) != "bar"
+        ]
+        problems += [
+            f"supply input {n!r} is not an input in bar"
+            for n in self.supply_inputs
+            if inputs.get(n) != "bar"
+        ]
+        if self.pressure_outputs and not self.supply_inputs:
+            problems.append("pressure_outputs are checked against supply_inputs: none given")
+        problems += [
+            f"input {v.name!r}: min {v.min} above max {v.max}"
+            for v in self.inputs
+            if v.min is not None and v.max is not None and v.min > v.max
+        ]
         if problems:
             raise ModelError("invalid FMU program:\n  - " + "\n  - ".join(problems))
 

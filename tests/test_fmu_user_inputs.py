@@ -1,0 +1,186 @@
+"""A co-simulation user's inputs and parameters: what the physics FMU refuses, and how.
+
+Found by using an exported FMU as a controls engineer would (fmpy, own input tables):
+a NaN input was reported as "the integrator diverged", a current of 5000 mA (or an oil
+temperature in K) gave −7·10⁶ bar with status OK, and a parameter inside its declared
+bounds (``vfs_c`` = 1 N·s/m) gave −38 000 bar with status OK.
+"""
+
+from __future__ import annotations
+
+import shutil
+
+import fmpy
+import numpy as np
+import pytest
+from fmu_support import exported, fit_result
+from synthetic import make_trace
+
+from clutchlab.data import SIGNALS
+from clutchlab.errors import SimulationError
+from clutchlab.physics import SimulationSettings, simulate
+
+COMMAND = SimulationSettings(drive="command")
+INPUTS = (
+    "current_cmd_mA",
+    "dither_amp_mA",
+    "dither_freq_Hz",
+    "line_pressure_bar",
+    "prime_pressure_bar",
+    "oil_temp_C",
+)
+
+
+def _table(stop_s: float = 0.3, **constant: float) -> np.ndarray:
+    """An input table: 0 → 800 mA over ``stop_s``, 100 mA dither at 50 Hz, then the
+    ``constant`` inputs (fmpy's format)."""
+    t = np.linspace(0.0, stop_s, 31)
+    names = ("current_cmd_mA", "dither_amp_mA", "dither_freq_Hz", *constant)
+    sig = np.zeros(t.size, dtype=[("time", float), *((n, float) for n in names)])
+    sig["time"] = t
+    sig["current_cmd_mA"] = 800.0 * t / stop_s
+    sig["dither_amp_mA"] = 100.0
+    sig["dither_freq_Hz"] = 50.0
+    for name, value in constant.items():
+        sig[name] = value
+    return sig
+
+
+def _simulate(fmu, sig: np.ndarray, start_values=None):
+    """Run ``fmu`` at 1 ms steps on the input table ``sig`` (held inputs, linearly
+    interpolated at each step's start, as ``fmpy.simulate_fmu``): the clutch pressure at
+    the steps' ends (or the exception fmpy raised, naming the FMI call) and the FMU's log
+    messages.
+
+    Not ``fmpy.simulate_fmu(logger=...)``: FMPy's logger proxy keeps that logger in one
+    process-global slot, and the next FMU logging through FMPy's default callbacks calls
+    the freed callback (a segmentation fault in a later test)."""
+    from fmpy import calloc, free
+    from fmpy.fmi2 import (
+        FMU2Slave,
+        fmi2CallbackAllocateMemoryTYPE,
+        fmi2CallbackFreeMemoryTYPE,
+        fmi2CallbackFunctions,
+        fmi2CallbackLoggerTYPE,
+    )
+
+    md = fmpy.read_model_description(str(fmu))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    messages: list[str] = []
+
+    def logger(env, instance, status, category, message):
+        messages.append(message.decode("utf-8", "replace") if message else "")
+
+    callbacks = fmi2CallbackFunctions()
+    callbacks.logger = fmi2CallbackLoggerTYPE(logger)
+    callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+    callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+    unzip = fmpy.extract(str(fmu))
+    slave = FMU2Slave(
+        guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.coSimulation.modelIdentifier
+    )
+    names = [n for n in sig.dtype.names if n != "time"]
+    refs = [vr[n] for n in names]
+
+    def inputs_at(t: float) -> list[float]:
+        return [float(np.interp(t, sig["time"], sig[n])) for n in names]
+
+    out: list[float] = []
+    try:
+        slave.instantiate(callbacks=callbacks)
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+        for name, value in (start_values or {}).items():
+            slave.setReal([vr[name]], [value])
+        slave.setReal(refs, inputs_at(0.0))
+        slave.exitInitializationMode()
+        for k in range(round(float(sig["time"][-1]) / 1e-3)):
+            slave.setReal(refs, inputs_at(k * 1e-3))
+            slave.doStep(k * 1e-3, 1e-3)
+            out.append(slave.getReal([vr["clutch_pressure_bar"]])[0])
+    except Exception as exc:  # FMPy's FMICallException names the FMI call
+        return exc, " ".join(messages)
+    finally:
+        slave.freeInstance()
+        shutil.rmtree(unzip, ignore_errors=True)
+    return np.array(out), " ".join(messages)
+
+
+def _run(fmu, start_values=None, **constant):
+    """:func:`_simulate` on the default ramp with ``constant`` inputs added."""
+    return _simulate(fmu, _table(**constant), start_values)
+
+
+def test_inputs_declare_the_data_contracts_plausible_range():
+    md = fmpy.read_model_description(str(exported("command")))
+    var = {v.name: v for v in md.modelVariables if v.causality == "input"}
+    assert list(var) == list(INPUTS)
+    for name, v in var.items():
+        spec = SIGNALS[name]
+        assert (float(v.min), float(v.max)) == (spec.plausible_min, spec.plausible_max), name
+        assert float(v.min) <= float(v.start) <= float(v.max)
+
+
+@pytest.mark.parametrize(
+    ("name", "value"),
+    [
+        ("current_cmd_mA", 5000.0),  # -7e6 bar with status OK on a design with all effects
+        ("oil_temp_C", 313.15),  # in K
+        ("line_pressure_bar", 1770.0),  # in kPa
+        ("dither_freq_Hz", -50.0),
+    ],
+)
+def test_an_input_outside_its_range_is_refused_by_name(name, value):
+    sig = _table(line_pressure_bar=17.7, oil_temp_C=40.0)
+    sig[name][5:] = value  # in range at initialization, out of it from t ≈ 40 ms
+    res, text = _simulate(exported("command"), sig)
+    assert isinstance(res, Exception) and "fmi2DoStep" in str(res), res
+    assert f"input {name} = " in text and "outside its range" in text, text
+    lo, hi = SIGNALS[name].plausible_min, SIGNALS[name].plausible_max
+    assert f"[{lo:g}, {hi:g}]" in text, text
+
+
+def test_an_input_at_its_bound_is_inside():
+    """An importer's interpolation between two rows at the bound may land 1 ulp outside."""
+    res, text = _run(exported("command"), oil_temp_C=-40.0, line_pressure_bar=60.0)
+    assert not isinstance(res, Exception), text
+    assert np.all(np.isfinite(res))
+
+
+def test_a_nan_input_is_named_not_reported_as_a_divergence():
+    sig = _table()
+    sig["current_cmd_mA"][10:] = np.nan
+    res, text = _simulate(exported("command"), sig)
+    assert isinstance(res, Exception) and "fmi2DoStep" in str(res), res
+    assert "input current_cmd_mA is nan" in text and "diverged" not in text, text
+
+
+def test_a_nan_parameter_is_named_at_initialization():
+    res, text = _run(exported("command"), start_values={"vfs_K_m": float("nan")})
+    assert isinstance(res, Exception) and "fmi2ExitInitializationMode" in str(res)
+    assert "parameter vfs_K_m is nan" in text and "diverged" not in text, text
+
+
+def test_a_finite_but_unphysical_pressure_is_an_error_as_in_process():
+    """``vfs_c`` at its lower bound (1 N·s/m): the fixed-step solution stays finite and
+    reaches −44 bar in the pilot chamber at 0.17 s (thousands of bar later). In process,
+    :meth:`SimulationResult.check_pressures` says so; the FMU returned status OK."""
+    sig = _table(stop_s=1.0)
+    res, text = _simulate(exported("command"), sig, start_values={"vfs_c": 1.0})
+    assert isinstance(res, Exception) and "fmi2DoStep" in str(res), res
+    assert "pilot_pressure_bar = " in text and "outside the range the circuit can reach" in text
+    assert "[-1, 26.55] bar" in text, text  # 1.5 × 17.7 bar line pressure
+    fit = fit_result()
+    params = fit.model().params(**{**fit.values, "vfs_c": 1.0})
+    ref = simulate(fit.model(), params, make_trace([0.0, 1.0], [0.0, 800.0]), COMMAND)
+    with pytest.raises(SimulationError, match="outside the range the circuit can reach"):
+        ref.check_pressures()
+
+
+def test_inputs_in_range_still_run_and_match_the_default():
+    """The checks change nothing inside the ranges: the default run is unchanged by an
+    explicit line / prime pressure at their start values."""
+    res, text = _run(exported("command"), line_pressure_bar=17.7, prime_pressure_bar=0.5)
+    ref, _ = _run(exported("command"))
+    assert not isinstance(res, Exception), text
+    np.testing.assert_array_equal(res, ref)
