@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 from ...data import read_json_object
-from ...errors import ClutchlabError, FitError, FitResultError
+from ...errors import ClutchlabError, FitError, FitResultError, FitWarning
 from ..model import CircuitModel
 from ..parameters import ParameterSet
 from ..settings import SimulationSettings
@@ -13,7 +14,7 @@ from .build import build_fmu
 from .errors import FmuError
 from .physics import check_export_options, physics_program
 
-__all__ = ["design_source", "export_physics_fmu", "physics_source"]
+__all__ = ["design_source", "export_physics_fmu", "physics_source", "source_origin"]
 
 
 def physics_source(source) -> tuple[CircuitModel, ParameterSet]:
@@ -31,20 +32,62 @@ def physics_source(source) -> tuple[CircuitModel, ParameterSet]:
     FmuError
         When ``source`` is none of these (a JSON that is not a fit result is named).
     """
+    model, params, _ = _resolve(source)
+    return model, params
+
+
+def source_origin(source) -> dict[str, str]:
+    """Where the parameter values of ``source`` come from, as written into the FMU.
+
+    Parameters
+    ----------
+    source : path-like, FitResult, PhysicsFitter or (CircuitModel, ParameterSet)
+        As :func:`physics_source`.
+
+    Returns
+    -------
+    dict
+        ``"source"``: ``"fit"`` (a fit result), ``"design"`` (a parameter file: datasheet
+        or edited values, never fitted) or ``"given"`` (a model and its parameters);
+        for a fit also ``"fit_converged"`` (``"true"`` / ``"false"``) and ``"fit_status"``
+        (the solver's status); ``"summary"``: the same in words, for the description.
+    """
+    return _resolve(source)[2]
+
+
+def _fit_origin(result) -> dict[str, str]:
+    converged = bool(result.success)
+    summary = (
+        f"fitted (fit status: {result.status})"
+        if converged
+        else f"fitted, NOT CONVERGED: the fit's best iterate (fit status: {result.status})"
+    )
+    return {
+        "source": "fit",
+        "fit_converged": "true" if converged else "false",
+        "fit_status": str(result.status),
+        "summary": summary,
+    }
+
+
+def _resolve(source) -> tuple[CircuitModel, ParameterSet, dict[str, str]]:
+    """The model, its parameter values and their origin (:func:`source_origin`)."""
     from ..fit import FitResult, PhysicsFitter
 
     if isinstance(source, tuple) and len(source) == 2:
         model, params = source
         if isinstance(model, CircuitModel) and isinstance(params, ParameterSet):
-            return model, params
+            return model, params, {"source": "given", "summary": "as given"}
     if isinstance(source, PhysicsFitter):
         if not hasattr(source, "result_"):
             raise FmuError("the PhysicsFitter is not fitted; fit it or load a fit JSON first")
-        return source.model_, source.params_
+        return source.model_, source.params_, _fit_origin(source.result_)
     if isinstance(source, FitResult):
-        return source.model(), source.params()
+        return source.model(), source.params(), _fit_origin(source)
     if isinstance(source, str | Path) and _is_parameter_file(Path(source)):
-        return design_source(source)
+        model, params = design_source(source)
+        summary = f"a design before any fit (parameter file {Path(source).name})"
+        return model, params, {"source": "design", "summary": summary}
     if isinstance(source, str | Path):
         try:  # the content is checked as it is read (FitResult.from_json)
             result = FitResult.from_json(Path(source))
@@ -55,7 +98,7 @@ def physics_source(source) -> tuple[CircuitModel, ParameterSet]:
         except FitError as exc:
             raise FmuError(f"{source}: not a fitted physics model ({exc})") from exc
         try:
-            return result.model(), result.params()
+            return result.model(), result.params(), _fit_origin(result)
         except ClutchlabError as exc:  # not expected after the check; named if it happens
             raise FmuError(f"{source}: the fitted model cannot be rebuilt: {exc}") from exc
     raise FmuError(
@@ -149,17 +192,41 @@ def export_physics_fmu(
     Returns
     -------
     Path
-        The FMU written.
+        The FMU written. Its description and vendor annotation say where the parameter
+        values come from (:func:`source_origin`): a fit (and whether it converged) or a
+        design before any fit.
 
     Raises
     ------
     FmuError
         ``source`` is not a fitted model, or ``substeps`` / ``step_s`` / ``stop_time_s``
         are out of range (checked first, before the model is read or anything compiled).
+
+    Warns
+    -----
+    FitWarning
+        ``source`` is a fit that did not converge (stopped at a limit): the FMU holds its
+        best iterate, and says so in its description.
     """
     check_export_options(substeps, step_s, stop_time_s)
-    model, params = physics_source(source)
+    model, params, origin = _resolve(source)
+    if origin.get("fit_converged") == "false":
+        warnings.warn(
+            f"the fit did not converge ({origin['fit_status']}): the FMU holds its best "
+            "iterate and its description says NOT CONVERGED; refit with more time "
+            "(fit-physics --time-limit) for a converged model",
+            FitWarning,
+            stacklevel=2,
+        )
     program = physics_program(
-        model, params, drive, substeps, settings, name, step_s=step_s, stop_time_s=stop_time_s
+        model,
+        params,
+        drive,
+        substeps,
+        settings,
+        name,
+        step_s=step_s,
+        stop_time_s=stop_time_s,
+        origin=origin,
     )
     return build_fmu(program, path)

@@ -164,6 +164,7 @@ def physics_program(
     name: str | None = None,
     step_s: float = 1e-3,
     stop_time_s: float = 23.0,
+    origin: dict[str, str] | None = None,
 ) -> FmuProgram:
     """The FMU program of ``model`` with parameter values ``params``.
 
@@ -194,6 +195,11 @@ def physics_program(
         :data:`INTERNAL_STEP_S`).
     stop_time_s : float
         Default experiment stop time (s), > ``step_s``.
+    origin : dict, optional
+        Where the parameter values come from
+        (:func:`~clutchlab.physics.fmu.export.source_origin`): its ``"summary"`` goes into
+        the description, its other keys into the vendor annotation. Default: values as
+        given.
 
     Returns
     -------
@@ -290,12 +296,14 @@ def physics_program(
     output = ca.Function("output", [x, v, p], [fns.out(xm, u0, pm)])
     ident = name or f"{model.name}_{drive}"
     effects = ", ".join(model.effect_names) or "none"
+    origin = dict(origin or {"source": "given", "summary": "as given"})
+    summary = origin.pop("summary", origin.get("source", "given"))
     return FmuProgram(
         name=ident,
         description=(
             f"clutchlab physics model of the clutch control circuit ({drive} drive; "
             f"effects: {effects}); ROS2, {substeps} substeps per internal step of at most "
-            f"{INTERNAL_STEP_S * 1e3:g} ms"
+            f"{INTERNAL_STEP_S * 1e3:g} ms. Parameter values: {summary}"
         ),
         kind="physics",
         inputs=inputs,
@@ -318,5 +326,6 @@ def physics_program(
             "effects": ",".join(model.effect_names),
             "model_key": model.key,
             "states": ",".join(["dither_phase", *(s.name for s in fns.states)]),
+            **origin,
         },
     )
