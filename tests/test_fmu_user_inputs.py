@@ -184,3 +184,31 @@ def test_inputs_in_range_still_run_and_match_the_default():
     ref, _ = _run(exported("command"))
     assert not isinstance(res, Exception), text
     np.testing.assert_array_equal(res, ref)
+
+
+@pytest.mark.parametrize(
+    ("start_values", "shown"),
+    [
+        # accepted silently (clutch pressure 0.56 bar) although the model refuses it:
+        # CircuitModel().params(vfs_K_m=1000) raises "outside bounds [5, 30] N/A"
+        ({"vfs_K_m": 1000.0}, "parameter vfs_K_m = 1000 N/A is outside its range [5, 30] N/A"),
+        # accepted up to any length: 10⁶ s ran initialization for hours (8 ms per settled
+        # second; 600 s here, 5 s on the old code)
+        ({"settle_s": 600.0}, "parameter settle_s = 600 s is outside its range [0, 60] s"),
+    ],
+)
+def test_a_parameter_outside_its_declared_range_is_refused_at_initialization(start_values, shown):
+    res, text = _run(exported("command"), start_values=start_values)
+    assert isinstance(res, Exception) and "fmi2ExitInitializationMode" in str(res), res
+    assert shown in text, text
+
+
+def test_settle_s_declares_the_simulators_range():
+    md = fmpy.read_model_description(str(exported("command")))
+    settle = next(v for v in md.modelVariables if v.name == "settle_s")
+    assert (settle.min, settle.max) == ("0.0", "60.0")  # SimulationSettings.settle_s
+
+
+def test_a_parameter_at_its_bound_is_accepted():
+    res, text = _run(exported("command"), start_values={"vfs_K_m": 30.0, "settle_s": 0.0})
+    assert not isinstance(res, Exception), text

@@ -61,7 +61,9 @@ static const char* VAR_NAMES[VR_END] = {@@NAMES@@};
 static const long C_OFFSET[NC + 1] = {@@C_OFFSET@@};
 static const double V_MIN[NV] = {@@V_MIN@@}; /* declared input ranges (NO_BOUND: none) */
 static const double V_MAX[NV] = {@@V_MAX@@};
-static const char* V_UNIT[NV] = {@@V_UNIT@@};
+static const double P_MIN[NP] = {@@P_MIN@@}; /* declared parameter ranges */
+static const double P_MAX[NP] = {@@P_MAX@@};
+static const char* VAR_UNITS[VR_END] = {@@UNITS@@};
 static const int RC_OUT[NRC + 1] = {@@RC_OUT@@};
 static const int SUP_IN[NSUP + 1] = {@@SUP_IN@@};
 
@@ -135,6 +137,10 @@ static int finite_all(const double* a, int n) {
 
 /* Inputs (value and derivative) finite and inside their declared min / max; 0 and an error
  * message naming the first that is not. */
+static int outside(double v, double lo, double hi) {
+    return v < lo - SLACK * (1.0 + fabs(lo)) || v > hi + SLACK * (1.0 + fabs(hi));
+}
+
 static int inputs_ok(Instance* m, double t) {
     int k;
     for (k = 0; k < NV; k++) {
@@ -145,13 +151,12 @@ static int inputs_ok(Instance* m, double t) {
                    "nothing integrated", VAR_NAMES[k], v, d, t);
             return 0;
         }
-        if (v < V_MIN[k] - SLACK * (1.0 + fabs(V_MIN[k]))
-            || v > V_MAX[k] + SLACK * (1.0 + fabs(V_MAX[k]))) {
+        if (outside(v, V_MIN[k], V_MAX[k])) {
             logmsg(m, fmi2Error, "logStatusError",
                    "input %s = %g %s at t = %.9g s is outside its range [%g, %g] %s "
                    "(min / max in modelDescription.xml; a value in another unit?); "
-                   "nothing integrated", VAR_NAMES[k], v, V_UNIT[k], t, V_MIN[k], V_MAX[k],
-                   V_UNIT[k]);
+                   "nothing integrated", VAR_NAMES[k], v, VAR_UNITS[k], t, V_MIN[k], V_MAX[k],
+                   VAR_UNITS[k]);
             return 0;
         }
     }
@@ -353,6 +358,13 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
         if (!isfinite(m->n.p[k])) {
             logmsg(m, fmi2Error, "logStatusError", "parameter %s is %g: not a finite number",
                    VAR_NAMES[VR_PAR + k], m->n.p[k]);
+            return fmi2Error;
+        }
+        if (outside(m->n.p[k], P_MIN[k], P_MAX[k])) {
+            logmsg(m, fmi2Error, "logStatusError",
+                   "parameter %s = %g %s is outside its range [%g, %g] %s (min / max in "
+                   "modelDescription.xml)", VAR_NAMES[VR_PAR + k], m->n.p[k],
+                   VAR_UNITS[VR_PAR + k], P_MIN[k], P_MAX[k], VAR_UNITS[VR_PAR + k]);
             return fmi2Error;
         }
     }
@@ -693,7 +705,11 @@ def wrapper_source(program: FmuProgram, guid: str, version: str) -> str:
         "NAMES": names,
         "V_MIN": ", ".join(_bound(v.min, "-NO_BOUND") for v in program.inputs),
         "V_MAX": ", ".join(_bound(v.max, "NO_BOUND") for v in program.inputs),
-        "V_UNIT": ", ".join(_c_unit(v.unit) for v in program.inputs),
+        "P_MIN": ", ".join(_bound(v.min, "-NO_BOUND") for v in program.parameters) or "0.0",
+        "P_MAX": ", ".join(_bound(v.max, "NO_BOUND") for v in program.parameters) or "0.0",
+        "UNITS": ", ".join(
+            _c_unit(v.unit) for v in (*program.inputs, *program.outputs, *program.parameters)
+        ),
         "NRC": len(program.pressure_outputs),
         "NSUP": len(program.supply_inputs),
         "RC_OUT": _c_ints(outputs.index(n) for n in program.pressure_outputs),

@@ -19,7 +19,7 @@ from ..assembly import MODEL_INPUTS
 from ..integrator import sample_step_function
 from ..model import CircuitModel
 from ..parameters import ParameterSet
-from ..settings import SimulationSettings
+from ..settings import MAX_SETTLE_S, SimulationSettings
 from .errors import FmuError
 from .program import FmuProgram, FmuVariable
 
@@ -245,7 +245,12 @@ def physics_program(
             for w in _WAVES
         ),
         FmuVariable(
-            "settle_s", "s", "settling run at the initial inputs before t = 0", settings.settle_s
+            "settle_s",
+            "s",
+            "settling run at the initial inputs before t = 0",
+            settings.settle_s,
+            0.0,
+            MAX_SETTLE_S,
         ),
         FmuVariable("settle_step_s", "s", "step of the settling run", INTERNAL_STEP_S),
         FmuVariable(
