@@ -146,7 +146,10 @@ def model_description_xml(
         "  </ModelVariables>",
         "  <ModelStructure>",
         "    <Outputs>",
-        *(f'      <Unknown index="{i}"/>' for i in out_idx),
+        # no direct feedthrough: the outputs are those at the end of the last step
+        # (fmi2DoStep), not recomputed when an input is set, so that a master closing a
+        # loop through the FMU (a pressure controller) sees no algebraic loop
+        *(f'      <Unknown index="{i}" dependencies=""/>' for i in out_idx),
         "    </Outputs>",
         "    <InitialUnknowns>",
         *(f'      <Unknown index="{i}"/>' for i in out_idx),

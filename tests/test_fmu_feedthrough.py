@@ -1,0 +1,53 @@
+"""What a master reads from ``ModelStructure``: the FMU's outputs have no direct feedthrough.
+
+The outputs are those at the end of the last ``fmi2DoStep`` (or of initialization) and do
+not change when an input is set. Without a ``dependencies`` attribute FMI 2.0 says an
+output depends on every input, so a master closing a loop through the FMU (a pressure
+controller reading ``clutch_pressure_bar`` and setting ``current_cmd_mA``) saw an
+algebraic loop that does not exist, and a master that iterates such loops waited for
+outputs that never moved.
+"""
+
+from __future__ import annotations
+
+import shutil
+
+import fmpy
+from fmpy.fmi2 import FMU2Slave
+from fmu_support import exported
+
+
+def test_outputs_declare_no_dependency_on_the_inputs():
+    md = fmpy.read_model_description(str(exported("command")))
+    outputs = [v for v in md.modelVariables if v.causality == "output"]
+    assert [u.variable for u in md.outputs] == outputs
+    assert all(u.dependencies == [] for u in md.outputs)
+
+
+def test_an_input_set_after_a_step_does_not_change_the_outputs_until_the_next_step():
+    """The declaration above is what the FMU does."""
+    path = exported("command")
+    md = fmpy.read_model_description(str(path))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    outs = [v.valueReference for v in md.modelVariables if v.causality == "output"]
+    unzip = fmpy.extract(str(path))
+    fmu = FMU2Slave(
+        guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.coSimulation.modelIdentifier
+    )
+    try:
+        fmu.instantiate()
+        fmu.setupExperiment(startTime=0.0)
+        fmu.enterInitializationMode()
+        fmu.setReal([vr["current_cmd_mA"]], [500.0])
+        fmu.exitInitializationMode()
+        for k in range(20):
+            fmu.doStep(k * 1e-3, 1e-3)
+        before = fmu.getReal(outs)
+        fmu.setReal([vr["current_cmd_mA"], vr["line_pressure_bar"]], [900.0, 12.0])
+        assert fmu.getReal(outs) == before
+        fmu.doStep(20e-3, 1e-3)
+        assert fmu.getReal(outs) != before
+        fmu.terminate()
+    finally:
+        fmu.freeInstance()
+        shutil.rmtree(unzip, ignore_errors=True)
