@@ -8,12 +8,10 @@ bounds (``vfs_c`` = 1 N·s/m) gave −38 000 bar with status OK.
 
 from __future__ import annotations
 
-import shutil
-
 import fmpy
 import numpy as np
 import pytest
-from fmu_support import exported, fit_result
+from fmu_support import exported, fit_result, input_table, simulate_logged
 from synthetic import make_trace
 
 from clutchlab.data import SIGNALS
@@ -31,84 +29,9 @@ INPUTS = (
 )
 
 
-def _table(stop_s: float = 0.3, **constant: float) -> np.ndarray:
-    """An input table: 0 → 800 mA over ``stop_s``, 100 mA dither at 50 Hz, then the
-    ``constant`` inputs (fmpy's format)."""
-    t = np.linspace(0.0, stop_s, 31)
-    names = ("current_cmd_mA", "dither_amp_mA", "dither_freq_Hz", *constant)
-    sig = np.zeros(t.size, dtype=[("time", float), *((n, float) for n in names)])
-    sig["time"] = t
-    sig["current_cmd_mA"] = 800.0 * t / stop_s
-    sig["dither_amp_mA"] = 100.0
-    sig["dither_freq_Hz"] = 50.0
-    for name, value in constant.items():
-        sig[name] = value
-    return sig
-
-
-def _simulate(fmu, sig: np.ndarray, start_values=None):
-    """Run ``fmu`` at 1 ms steps on the input table ``sig`` (held inputs, linearly
-    interpolated at each step's start, as ``fmpy.simulate_fmu``): the clutch pressure at
-    the steps' ends (or the exception fmpy raised, naming the FMI call) and the FMU's log
-    messages.
-
-    Not ``fmpy.simulate_fmu(logger=...)``: FMPy's logger proxy keeps that logger in one
-    process-global slot, and the next FMU logging through FMPy's default callbacks calls
-    the freed callback (a segmentation fault in a later test)."""
-    from fmpy import calloc, free
-    from fmpy.fmi2 import (
-        FMU2Slave,
-        fmi2CallbackAllocateMemoryTYPE,
-        fmi2CallbackFreeMemoryTYPE,
-        fmi2CallbackFunctions,
-        fmi2CallbackLoggerTYPE,
-    )
-
-    md = fmpy.read_model_description(str(fmu))
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    messages: list[str] = []
-
-    def logger(env, instance, status, category, message):
-        messages.append(message.decode("utf-8", "replace") if message else "")
-
-    callbacks = fmi2CallbackFunctions()
-    callbacks.logger = fmi2CallbackLoggerTYPE(logger)
-    callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-    callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-    unzip = fmpy.extract(str(fmu))
-    slave = FMU2Slave(
-        guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.coSimulation.modelIdentifier
-    )
-    names = [n for n in sig.dtype.names if n != "time"]
-    refs = [vr[n] for n in names]
-
-    def inputs_at(t: float) -> list[float]:
-        return [float(np.interp(t, sig["time"], sig[n])) for n in names]
-
-    out: list[float] = []
-    try:
-        slave.instantiate(callbacks=callbacks)
-        slave.setupExperiment(startTime=0.0)
-        slave.enterInitializationMode()
-        for name, value in (start_values or {}).items():
-            slave.setReal([vr[name]], [value])
-        slave.setReal(refs, inputs_at(0.0))
-        slave.exitInitializationMode()
-        for k in range(round(float(sig["time"][-1]) / 1e-3)):
-            slave.setReal(refs, inputs_at(k * 1e-3))
-            slave.doStep(k * 1e-3, 1e-3)
-            out.append(slave.getReal([vr["clutch_pressure_bar"]])[0])
-    except Exception as exc:  # FMPy's FMICallException names the FMI call
-        return exc, " ".join(messages)
-    finally:
-        slave.freeInstance()
-        shutil.rmtree(unzip, ignore_errors=True)
-    return np.array(out), " ".join(messages)
-
-
 def _run(fmu, start_values=None, **constant):
-    """:func:`_simulate` on the default ramp with ``constant`` inputs added."""
-    return _simulate(fmu, _table(**constant), start_values)
+    """:func:`simulate_logged` on the default ramp with ``constant`` inputs added."""
+    return simulate_logged(fmu, input_table(**constant), start_values)
 
 
 def test_inputs_declare_the_data_contracts_plausible_range():
@@ -131,9 +54,9 @@ def test_inputs_declare_the_data_contracts_plausible_range():
     ],
 )
 def test_an_input_outside_its_range_is_refused_by_name(name, value):
-    sig = _table(line_pressure_bar=17.7, oil_temp_C=40.0)
+    sig = input_table(line_pressure_bar=17.7, oil_temp_C=40.0)
     sig[name][5:] = value  # in range at initialization, out of it from t ≈ 40 ms
-    res, text = _simulate(exported("command"), sig)
+    res, text = simulate_logged(exported("command"), sig)
     assert isinstance(res, Exception) and "fmi2DoStep" in str(res), res
     assert f"input {name} = " in text and "outside its range" in text, text
     lo, hi = SIGNALS[name].plausible_min, SIGNALS[name].plausible_max
@@ -148,9 +71,9 @@ def test_an_input_at_its_bound_is_inside():
 
 
 def test_a_nan_input_is_named_not_reported_as_a_divergence():
-    sig = _table()
+    sig = input_table()
     sig["current_cmd_mA"][10:] = np.nan
-    res, text = _simulate(exported("command"), sig)
+    res, text = simulate_logged(exported("command"), sig)
     assert isinstance(res, Exception) and "fmi2DoStep" in str(res), res
     assert "input current_cmd_mA is nan" in text and "diverged" not in text, text
 
@@ -165,8 +88,8 @@ def test_a_finite_but_unphysical_pressure_is_an_error_as_in_process():
     """``vfs_c`` at its lower bound (1 N·s/m): the fixed-step solution stays finite and
     reaches −44 bar in the pilot chamber at 0.17 s (thousands of bar later). In process,
     :meth:`SimulationResult.check_pressures` says so; the FMU returned status OK."""
-    sig = _table(stop_s=1.0)
-    res, text = _simulate(exported("command"), sig, start_values={"vfs_c": 1.0})
+    sig = input_table(stop_s=1.0)
+    res, text = simulate_logged(exported("command"), sig, start_values={"vfs_c": 1.0})
     assert isinstance(res, Exception) and "fmi2DoStep" in str(res), res
     assert "pilot_pressure_bar = " in text and "outside the range the circuit can reach" in text
     assert "[-1, 26.55] bar" in text, text  # 1.5 × 17.7 bar line pressure

@@ -32,7 +32,7 @@ import numpy as np
 
 from ...data.demodulate import NO_DITHER_DIDT_HZ
 from ...errors import ModelError
-from .physics import FMU_INPUTS
+from .physics import FMU_INPUTS, input_range
 from .program import FmuProgram, FmuVariable
 
 __all__ = ["ML_FEATURES", "DecisionSpec", "DidtSpec", "GPSpec", "LagSpec", "ml_program"]
@@ -536,7 +536,8 @@ def _inputs(
         ("prime_pressure_bar", "bar", "prime pressure (not used by this model)", 0.5),
         ("oil_temp_C", "°C", "oil temperature (not used by this model)", 40.0),
     )
-    return tuple(FmuVariable(n, u, d, s) for n, u, d, s in spec)
+    # the data contract's plausible ranges, refused outside as by a physics FMU
+    return tuple(FmuVariable(n, u, d, s, *input_range(n)) for n, u, d, s in spec)
 
 
 def ml_program(
