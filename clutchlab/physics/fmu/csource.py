@@ -82,6 +82,7 @@ typedef struct {
     char name[128];
     fmi2CallbackFunctions cb;
     int logging;
+    int init_valid; /* initialize() ran since the last change of an input or parameter */
     double* data; /* the constants, from resources/DATA_FILE */
     const casadi_real* arg[SZ_ARG];
     casadi_real* res[SZ_RES];
@@ -244,6 +245,7 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const 
 }
 
 static void reset_values(Instance* m) {
+    m->init_valid = 0;
     memset(&m->n, 0, sizeof m->n);
     memcpy(m->n.v, V_START, sizeof m->n.v);
     memcpy(m->n.p, P_START, sizeof m->n.p);
@@ -335,12 +337,13 @@ fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
     return fmi2OK;
 }
 
-fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
-    Instance* m = (Instance*)c;
+/* The state and outputs at the initial inputs (parameters checked, the settling run):
+ * what fmi2ExitInitializationMode computes, and fmi2GetReal of an output in
+ * Initialization Mode (an initial unknown) computes first. */
+static fmi2Status initialize(Instance* m) {
     long k, n = 0;
     double h = 1e-3, t_pre = 0.0;
-    if (!m || m->n.mode != M_INIT)
-        return fail(m, "%s", "fmi2ExitInitializationMode: not in initialization mode");
+    m->init_valid = 0;
 #if I_MAX_STEP >= 0
     {   /* a longer internal step than the model is accurate at diverges or is wrong */
         double ms = m->n.p[I_MAX_STEP];
@@ -393,6 +396,18 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
         return fail(m, "%s", "the settling run at the initial inputs diverged (state not finite)");
     }
     if (!pressures_ok(m, m->n.time)) return fmi2Error;
+    m->init_valid = 1;
+    return fmi2OK;
+}
+
+fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
+    Instance* m = (Instance*)c;
+    if (!m || m->n.mode != M_INIT)
+        return fail(m, "%s", "fmi2ExitInitializationMode: not in initialization mode");
+    if (!m->init_valid) { /* else computed by fmi2GetReal with the same inputs and parameters */
+        fmi2Status st = initialize(m);
+        if (st != fmi2OK) return st;
+    }
     m->n.mode = M_STEP;
     return fmi2OK;
 }
@@ -416,6 +431,15 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
     Instance* m = (Instance*)c;
     size_t k;
     if (!m) return fmi2Error;
+    if (m->n.mode == M_INIT && !m->init_valid) {
+        for (k = 0; k < nvr; k++) {
+            if (vr[k] >= VR_OUT && vr[k] < VR_PAR) { /* an output: an initial unknown */
+                fmi2Status st = initialize(m);
+                if (st != fmi2OK) return st;
+                break;
+            }
+        }
+    }
     for (k = 0; k < nvr; k++) {
         fmi2ValueReference r = vr[k];
         if (r < VR_OUT) value[k] = m->n.v[r];
@@ -431,6 +455,7 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
     Instance* m = (Instance*)c;
     size_t k;
     if (!m) return fmi2Error;
+    m->init_valid = 0;
     for (k = 0; k < nvr; k++) {
         fmi2ValueReference r = vr[k];
         if (r < VR_OUT) {
@@ -480,6 +505,7 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate s) {
     Instance* m = (Instance*)c;
     if (!m || !s) return fmi2Error;
     m->n = *(Numbers*)s;
+    m->init_valid = 0;
     return fmi2OK;
 }
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate* s) {
@@ -520,6 +546,7 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference
     Instance* m = (Instance*)c;
     size_t k;
     if (!m) return fmi2Error;
+    m->init_valid = 0;
     for (k = 0; k < nvr; k++) {
         if (vr[k] >= VR_OUT)
             return fail(m, "fmi2SetRealInputDerivatives: %s is not an input",
