@@ -5,7 +5,7 @@ not change when an input is set. Without a ``dependencies`` attribute FMI 2.0 sa
 output depends on every input, so a master closing a loop through the FMU (a pressure
 controller reading ``clutch_pressure_bar`` and setting ``current_cmd_mA``) saw an
 algebraic loop that does not exist, and a master that iterates such loops waited for
-outputs that never moved.
+outputs that never moved. Also what such a master may send: input derivatives of any order.
 """
 
 from __future__ import annotations
@@ -51,3 +51,38 @@ def test_an_input_set_after_a_step_does_not_change_the_outputs_until_the_next_st
     finally:
         fmu.freeInstance()
         shutil.rmtree(unzip, ignore_errors=True)
+
+
+def test_higher_input_derivative_orders_are_accepted_and_unused():
+    """FMI 2.0 declares no highest order of input derivatives, so a master that
+    extrapolates its inputs quadratically may set order 2 with ``canInterpolateInputs``;
+    the FMU returned fmi2Error ("only order 1 is supported") and the co-simulation
+    stopped. Order 2 is now accepted and unused (the inputs are linear over a step)."""
+    path = exported("command")
+    md = fmpy.read_model_description(str(path))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    cur, p = vr["current_cmd_mA"], vr["clutch_pressure_bar"]
+    out = []
+    for orders in ([1], [1, 2]):
+        unzip = fmpy.extract(str(path))
+        fmu = FMU2Slave(
+            guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.coSimulation.modelIdentifier
+        )
+        try:
+            fmu.instantiate()
+            fmu.setupExperiment(startTime=0.0)
+            fmu.enterInitializationMode()
+            fmu.setReal([cur], [400.0])
+            fmu.exitInitializationMode()
+            for k in range(50):
+                fmu.setReal([cur], [400.0 + 4000.0 * k * 1e-3])
+                fmu.setRealInputDerivatives(
+                    [cur] * len(orders), orders, [4000.0, 1e5][: len(orders)]
+                )
+                fmu.doStep(k * 1e-3, 1e-3)
+            out.append(fmu.getReal([p])[0])
+            fmu.terminate()
+        finally:
+            fmu.freeInstance()
+            shutil.rmtree(unzip, ignore_errors=True)
+    assert out[0] == out[1]

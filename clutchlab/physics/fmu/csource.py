@@ -551,8 +551,18 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference
         if (vr[k] >= VR_OUT)
             return fail(m, "fmi2SetRealInputDerivatives: %s is not an input",
                         vr[k] < VR_END ? VAR_NAMES[vr[k]] : "?");
-        if (order[k] != 1)
-            return fail(m, "%s", "fmi2SetRealInputDerivatives: only order 1 is supported");
+        if (order[k] < 1) {
+            logmsg(m, fmi2Error, "logStatusError",
+                   "fmi2SetRealInputDerivatives: order %d of %s: derivative orders start at 1",
+                   (int)order[k], VAR_NAMES[vr[k]]);
+            return fmi2Error;
+        }
+        if (order[k] > 1) { /* FMI 2.0 declares no highest input order: accepted, unused */
+            logmsg(m, fmi2OK, "logAll",
+                   "fmi2SetRealInputDerivatives: order %d of %s ignored (inputs are linear "
+                   "over a step)", (int)order[k], VAR_NAMES[vr[k]]);
+            continue;
+        }
         m->n.dv[vr[k]] = value[k];
     }
     return fmi2OK;
