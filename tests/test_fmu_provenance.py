@@ -72,3 +72,18 @@ def test_export_fmu_cli_warns_about_an_unconverged_fit(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "clutchlab export-fmu: warning: the fit did not converge" in err, err
     assert (tmp_path / "c.fmu").is_file()
+
+
+def test_a_hybrids_physics_is_not_labelled_as_given():
+    """The physics inside a hybrid FMU carried ``source="given"`` (the default for a
+    model and parameters passed by hand) into the hybrid's vendor annotation."""
+    from types import SimpleNamespace
+
+    from clutchlab.physics.fmu.adapters import _physics_program
+
+    hybrid = SimpleNamespace(
+        physics_=SimpleNamespace(effects=(), params=dict(fit_result().values), substeps=4)
+    )
+    program = _physics_program(hybrid, "hybrid")
+    assert program.annotations["source"] == "hybrid"
+    assert program.description.endswith("Parameter values: those of the trained hybrid's physics")

@@ -195,8 +195,13 @@ def _physics_program(hybrid, kind: str):
             "FMU needs that FMU beside it and cannot be re-exported"
         )
     model = CircuitModel().with_effects(*phys.effects)
+    origin = {"source": "hybrid", "summary": "those of the trained hybrid's physics"}
     return physics_program(
-        model, model.params(**phys.params), "command", substeps=int(phys.substeps)
+        model,
+        model.params(**phys.params),
+        "command",
+        substeps=int(phys.substeps),
+        origin=origin,
     )
 
 
