@@ -303,7 +303,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="write the datasheet values as a parameter file to edit (a design before any "
         "fit; `clutchlab export-fmu FILE` exports it as an FMU)",
     )
-    p.set_defaults(func=_cmd_params, file_out="json")
+    p.set_defaults(func=_cmd_params, file_out="json", out_writes="design")
 
     p = sub.add_parser("demo", help="stand data → physics fit → ML variants → report, end to end")
     p.add_argument("--out", default="clutchlab-demo", help="output folder (default clutchlab-demo)")
@@ -506,6 +506,45 @@ def _check_replaceable(path: str | Path, args: argparse.Namespace, flag: str, ki
             f"{flag} {target}: exists and is not {description}, so clutchlab did not write "
             "it; choose another name (or remove the file)"
         )
+    if kind == "json":
+        have = model_file_kind(target)
+        writes = getattr(args, "out_writes" if flag == "--out" else "json_writes", None)
+        if have is not None and have != writes:
+            what = "this command's result" if writes else "a summary"
+            raise OutputError(
+                f"{flag} {target}: holds {MODEL_FILE_KINDS[have]}, which {what} would "
+                "replace; choose another name"
+            )
+
+
+#: The model files clutchlab writes as JSON, by kind (what :func:`model_file_kind` returns).
+MODEL_FILE_KINDS = {
+    "fit": "a fitted physics model (clutchlab fit-physics)",
+    "ml": "a model of clutchlab train",
+    "physics": "a physics model description (PhysicsPredictor)",
+    "design": "a design's parameter file (clutchlab params --out)",
+}
+
+
+def model_file_kind(path: str | Path) -> str | None:
+    """Which model a JSON file holds (a key of :data:`MODEL_FILE_KINDS`), None for anything
+    else (a summary, a report's metrics, not JSON). A command's ``--json`` summary must not
+    replace a model, nor its ``--out`` one of another kind (``export-fmu --json fit.json``
+    once replaced the fit it had just exported)."""
+    from .data import read_json_object
+
+    doc = read_json_object(path)
+    if doc is None:
+        return None
+    if "format" in doc:
+        return "ml"
+    if doc.get("kind") == "PhysicsPredictor":
+        return "physics"
+    if set(doc) == {"parameters"}:
+        return "design"
+    if {"values", "free", "status", "effects"} <= set(doc):
+        return "fit"
+    return None
 
 
 def check_json_apart(

@@ -222,4 +222,4 @@ def register(sub) -> None:
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", help="also write the fit result here")
-    p.set_defaults(func=_cmd_fit_physics, file_out="json")
+    p.set_defaults(func=_cmd_fit_physics, file_out="json", out_writes="fit", json_writes="fit")

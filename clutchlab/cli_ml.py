@@ -269,7 +269,7 @@ def register(sub) -> None:
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", help="also write the training metrics here")
-    p.set_defaults(func=_cmd_train, folder_out=True)
+    p.set_defaults(func=_cmd_train, folder_out=True, out_writes="ml")
 
 
 def _hybrid_form(model) -> str | None:

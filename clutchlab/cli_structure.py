@@ -118,4 +118,4 @@ def register(sub) -> None:
     p.add_argument("--out", help="write the chosen structure's fitted model (JSON) here")
     p.add_argument("--json", help="write the choice with every candidate's training score here")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=_cmd_select_structure, file_out="json")
+    p.set_defaults(func=_cmd_select_structure, file_out="json", out_writes="fit")

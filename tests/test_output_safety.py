@@ -381,6 +381,34 @@ def test_json_output_replaces_a_json_result_but_not_another_file(small_ds, tmp_p
     assert "earlier" not in result.read_text()
 
 
+def test_a_summary_never_replaces_a_model_nor_an_out_a_model_of_another_kind(
+    small_ds, tmp_path, capsys
+):
+    """`export-fmu design.json --json fit.json` replaced the fit result the user had just
+    exported (a JSON document, so it counted as replaceable)."""
+    from fit_support import synthetic_fit
+
+    from clutchlab.cli import main
+
+    fit = tmp_path / "fit.json"
+    synthetic_fit({"reg_F0": 1.0}).to_json(fit)
+    design = tmp_path / "design.json"
+    assert main(["params", "--out", str(design)]) == 0
+    kept = {fit: fit.read_bytes(), design: design.read_bytes()}
+    for path, kind in (
+        (fit, "a fitted physics model (clutchlab fit-physics)"),
+        (design, "a design's parameter file (clutchlab params --out)"),
+    ):
+        assert _check_json(small_ds, path) == 2
+        err = capsys.readouterr().err
+        assert f"--json {path}: holds {kind}, which a summary would replace" in err
+    assert main(["params", "--out", str(fit)]) == 2  # a design over a fit
+    err = capsys.readouterr().err
+    assert "holds a fitted physics model (clutchlab fit-physics), which this command's" in err
+    assert all(path.read_bytes() == content for path, content in kept.items())
+    assert main(["params", "--out", str(design)]) == 0  # its own kind: replaced
+
+
 # ---- a report never goes into a dataset folder clutchlab wrote (it would remove the data) ---
 
 
