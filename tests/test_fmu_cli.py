@@ -62,6 +62,16 @@ def test_export_fmu_cli_names_a_file_that_is_not_a_fit(tmp_path):
     assert not (tmp_path / "x.fmu").exists()
 
 
+def test_export_fmu_names_an_fmu_given_as_the_model(tmp_path):
+    """An FMU as the model was "cannot read fit result ... 'utf-8' codec can't decode"."""
+    from fmu_support import exported
+
+    res = _cli("export-fmu", str(exported("command")), "--out", str(tmp_path / "x.fmu"))
+    assert res.returncode == 2
+    assert "is an FMU (a zip archive), not a model to export" in res.stderr
+    assert "utf-8" not in res.stderr and not (tmp_path / "x.fmu").exists()
+
+
 def test_export_fmu_cli_exports_a_saved_gp_model(tmp_path):
     from fmu_support import medium_trace
 

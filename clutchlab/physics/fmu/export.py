@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import warnings
+import zipfile
 from pathlib import Path
 
 from ...data import read_json_object
@@ -84,6 +85,12 @@ def _resolve(source) -> tuple[CircuitModel, ParameterSet, dict[str, str]]:
         return source.model_, source.params_, _fit_origin(source.result_)
     if isinstance(source, FitResult):
         return source.model(), source.params(), _fit_origin(source)
+    if isinstance(source, str | Path) and Path(source).is_file() and zipfile.is_zipfile(source):
+        raise FmuError(
+            f"{source}: is an FMU (a zip archive), not a model to export; give the fit JSON "
+            "(clutchlab fit-physics --out), a design file (clutchlab params --out) or a "
+            "model of clutchlab train"
+        )
     if isinstance(source, str | Path) and _is_parameter_file(Path(source)):
         model, params = design_source(source)
         summary = f"a design before any fit (parameter file {Path(source).name})"
