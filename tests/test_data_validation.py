@@ -268,6 +268,18 @@ def test_truncated_files(tmp_path):
         assert f"{cut}: {expected[suffix]}" in problems_of(lambda c=cut: read_log(c))
 
 
+def test_truncated_mf4_names_the_file_once_and_says_truncated(tmp_path):
+    # A DataError from the structure walk is a ValueError too: it was caught and wrapped
+    # again, so the message said "FILE: damaged MDF file (...): FILE: damaged MDF file ...".
+    full = write_mf4(Trace("t", signals()), tmp_path / "full.mf4")
+    cut = tmp_path / "cut.mf4"
+    cut.write_bytes(full.read_bytes()[: full.stat().st_size // 2])
+    text = problems_of(lambda: read_mf4(cut))
+    assert text.count("damaged MDF file") == 1, text
+    assert f"{cut}: damaged MDF file (refused before parsing): a link" in text, text
+    assert "truncated?" in text, text
+
+
 def test_damaged_mf4_structure_is_refused_before_parsing(tmp_path):
     # A damaged channel byte offset made asammdf read outside its buffer (segfault).
     full = write_mf4(Trace("t", signals()), tmp_path / "full.mf4").read_bytes()

@@ -50,13 +50,23 @@ class _File:
 
     def block(self, addr: int, where: str) -> tuple[bytes, list[int], int]:
         """(id, links, offset of the data section) of the block at ``addr``."""
-        if addr < 64 or addr + 24 > self.size:
+        if addr < 64:
             raise self.fail(f"{where} points outside the file (address {addr})")
+        if addr + 24 > self.size:
+            raise self.fail(
+                f"{where} points beyond the end of the file (address {addr}, file "
+                f"{self.size} bytes: truncated?)"
+            )
         bid, length, nlinks = _HEADER.unpack_from(self.data, addr)
         if bid[:2] != b"##":
             raise self.fail(f"{where} does not point to a block (address {addr})")
-        if length < 24 + 8 * nlinks or addr + length > self.size:
+        if length < 24 + 8 * nlinks:
             raise self.fail(f"block {bid.decode(errors='replace')} at {addr} has a bad length")
+        if addr + length > self.size:
+            raise self.fail(
+                f"block {bid.decode(errors='replace')} at {addr} ends beyond the end of the "
+                f"file ({addr + length} > {self.size} bytes: truncated?)"
+            )
         links = list(struct.unpack_from(f"<{nlinks}Q", self.data, addr + 24))
         return bid, links, addr + 24 + 8 * nlinks
 
@@ -187,6 +197,8 @@ def check_mdf4_structure(path: str | Path) -> None:
         with mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as data:
             try:
                 _check(_File(data, path))
+            except DataError:  # a ValueError too: already names the file, keep it as is
+                raise
             except (struct.error, IndexError, ValueError, OverflowError) as exc:
                 raise DataError(
                     f"{path}: damaged MDF file (refused before parsing): {exc}"
