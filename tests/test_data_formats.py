@@ -325,3 +325,21 @@ def test_parquet_pandas_index_column_is_ignored(tmp_path):
     trace, report = read_log(path)
     np.testing.assert_array_equal(trace.get("current_mA"), df["current_mA"].to_numpy())
     assert any("'__index_level_0__' ignored" in n for n in report.notes)
+
+
+def test_slow_mf4_group_and_offset_clock_get_no_time_unit_note(tmp_path):
+    # A logger's 1 Hz temperature group (as in a calibration tool's MF4) and a clock that
+    # starts at 1234.5 s: the master channels are in seconds, nothing to ask. The note used
+    # to say "time of group 1 (master channel): sample rate 1 Hz: is the time in seconds? A
+    # time logged in ms ... needs its unit in the channel map", which an MF4 master cannot
+    # take, and "sample rate 10 Hz" for a 10 Hz group (9.9999… from the offset clock).
+    t1 = 1234.5 + np.arange(0, 3000) * 1e-3
+    mdf = MDF(version="4.10")
+    mdf.append([Signal(100.0 + 100.0 * (t1 - t1[0]), t1, name="current_mA", unit="mA")])
+    mdf.append([Signal(2.0 + 0 * t1[::100], t1[::100], name="clutch_pressure_bar", unit="bar")])
+    mdf.append([Signal(40.0 + 0 * t1[::1000], t1[::1000], name="oil_temp_C", unit="°C")])
+    mdf.save(tmp_path / "slow.mf4", overwrite=True)
+    mdf.close()
+    _, report = read_log(tmp_path / "slow.mf4")
+    assert sorted(round(tm.rate_Hz, 3) for tm in report.timing) == [1.0, 10.0, 1000.0]
+    assert not [n for n in report.notes if "is the time in seconds" in n], report.notes

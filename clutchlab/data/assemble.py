@@ -409,7 +409,9 @@ def assemble(
                 f"(interval {tm.interval_s:.6g} s; {hint})"
             )
     for b, tm in timings.items():
-        if not RATE_PLAUSIBLE_HZ[0] <= tm.rate_Hz <= RATE_PLAUSIBLE_HZ[1]:
+        # An MF4 master channel is in seconds by the standard, and a slow channel group
+        # (oil temperature at 1 Hz) is normal there; a column of a table may be in ms.
+        if raw.tabular and not RATE_PLAUSIBLE_HZ[0] <= tm.rate_Hz <= RATE_PLAUSIBLE_HZ[1]:
             notes.append(
                 f"{base_where[b]}: sample rate {tm.rate_Hz:.6g} Hz: is the time in seconds? A "
                 "time logged in ms, µs or ns needs its unit in the channel map (unit = 'ms')"
