@@ -77,8 +77,13 @@ def test_the_line_reference_follows_line_pressure(models, data):
 def test_prediction_needs_line_pressure_when_fitted_with_it(models, data):
     tr = data["medium_70Hz_B"]
     bare = Trace(tr.name, {k: v for k, v in tr.signals.items() if k != "line_pressure_bar"})
-    with pytest.raises(DataError, match=r"medium_70Hz_B: no line_pressure_bar"):
+    with pytest.raises(DataError, match=r"medium_70Hz_B: no line_pressure_bar") as info:
         models["line"].predict(bare)
+    # the remedy a command-line user has (the message named only a Python argument)
+    assert "line_pressure_bar = 17.7 under [defaults] in its channel map" in str(info.value)
+    logged = Trace(tr.name, bare.signals, source="logs/r10s_run2.csv")
+    with pytest.raises(DataError, match=r"medium_70Hz_B \(logs/r10s_run2.csv\): no line_"):
+        models["line"].predict(logged)
     models["none"].predict(bare)  # the paper's form needs none
     with pytest.raises(ModelError, match="relative to line pressure"):
         models["line"].predict(models["line"]._trace_matrix(tr))

@@ -596,11 +596,13 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         if getattr(self, "latched_reference_", "none") != "line":
             return None
         if not trace.has("line_pressure_bar"):
+            where = trace.name + (f" ({trace.source})" if trace.source is not None else "")
             raise DataError(
-                f"{trace.name}: no line_pressure_bar; this model predicts the latched plateau "
-                "relative to line pressure (latched_reference='line', as fitted): log line "
-                "pressure or fit with latched_reference='none' (`clutchlab train "
-                "--latched-reference none`)"
+                f"{where}: no line_pressure_bar; this model predicts the latched plateau "
+                "relative to line pressure (latched_reference='line', as fitted: its training "
+                "experiments logged it): log line pressure, give the experiment a constant "
+                "one (line_pressure_bar = 17.7 under [defaults] in its channel map), or fit "
+                "with latched_reference='none' (`clutchlab train --latched-reference none`)"
             )
         # As logged (not period-averaged), as the FMU and the step predictor see it: the
         # prediction stays causal, and its period mean is the period-mean reference.
