@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from .budgets import FIT_BUDGET_S
-from .cli_types import add_map_argument, positive_float
+from .cli_types import add_map_argument, positive_float, print_dither_notes
 from .report_files import REPORT_FILES
 
 __all__ = ["REPORT_FILES", "command_line", "register", "run_demo_command"]
@@ -118,6 +118,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     fmu_params = _fmu_params(args.fmu_param, args.physics_fmu)  # fails before any work
     input_map, output = _fmu_ports(args.fmu_input, args.fmu_output, args.physics_fmu)
     dataset = load_dataset(args.dataset, channel_map=args.map)
+    print_dither_notes(dataset)
     fmu = None
     if args.physics_fmu:
         from .physics.fmu import FmuPhysics

@@ -8,7 +8,7 @@ import warnings
 from pathlib import Path
 
 from .budgets import FIT_BUDGET_S
-from .cli_types import add_map_argument, positive_float
+from .cli_types import add_map_argument, positive_float, print_dither_notes
 
 __all__ = ["register"]
 
@@ -81,6 +81,7 @@ def _cmd_fit_physics(args: argparse.Namespace) -> int:
     from .physics.fit import FitSettings, PhysicsFitter
 
     dataset = load_dataset(args.dataset, channel_map=args.map)
+    print_dither_notes(dataset)
     model = CircuitModel().with_effects(*_csv(args.effects))
     kw = {
         "train_ramps": _csv(args.train) or ("fast", "slow"),

@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from .cli_types import add_map_argument
+from .cli_types import add_map_argument, print_dither_notes
 
 __all__ = ["register"]
 
@@ -35,6 +35,7 @@ def _cmd_classifiers(args: argparse.Namespace) -> int:
     out = Path(args.out)
     _check_classifiers_out(out)
     dataset = load_dataset(args.dataset, channel_map=args.map)
+    print_dither_notes(dataset)
     train = _training(dataset, _csv(args.train))
     names = list(dict.fromkeys(_csv(args.classifiers))) or None  # each one once
     unknown = sorted(set(names or []) - set(CLASSIFIERS))

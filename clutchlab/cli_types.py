@@ -16,6 +16,7 @@ __all__ = [
     "nonnegative_int",
     "positive_float",
     "positive_int",
+    "print_dither_notes",
 ]
 
 #: Help of ``--map`` on every command that reads test-stand logs.
@@ -79,3 +80,24 @@ def add_map_argument(parser: argparse.ArgumentParser) -> None:
         The subcommand's parser.
     """
     parser.add_argument("--map", metavar="MAP.toml", help=MAP_HELP)
+
+
+def print_dither_notes(dataset) -> None:
+    """Print to stderr, before any work, the experiments of ``dataset`` whose dither the
+    analyses cannot average out (no dither frequency given, a dither in the measured
+    current: :func:`~clutchlab.data.demodulate.dither_frequency_note`), as ``data check``
+    lists them.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        As loaded by :func:`~clutchlab.data.load_dataset` (its ``reports`` hold the notes).
+    """
+    import sys
+
+    from .data.demodulate import NO_DITHER_FREQUENCY
+
+    for report in dataset.reports.values():
+        for note in report.notes:
+            if note.startswith(NO_DITHER_FREQUENCY):
+                print(f"note: {report.file}: {note}", file=sys.stderr)

@@ -161,3 +161,32 @@ def test_a_path_that_does_not_exist_is_an_error_of_the_call(tmp_path, command):
     assert res.returncode == 2, res.stdout + res.stderr
     assert str(missing) in res.stderr and "file  ramp" not in res.stdout
     assert not (tmp_path / "out").exists()
+
+
+def test_an_experiment_without_a_dither_frequency_gets_a_note(stand_ds, tmp_path, capsys):
+    # A logger's export with the measured current only, no dither_freq_Hz column and none in
+    # the manifest: dither_period_samples is then 1 sample, so the fit's cost, the ramp rate
+    # and the report's "dither-period mean" scores average nothing, and nothing said so.
+    from clutchlab.cli_types import print_dither_notes
+
+    src = load_dataset(stand_ds)["medium_50Hz_B"]
+    keep = ("time_s", "current_mA", "clutch_pressure_bar")
+    own = Trace("r10s_run2", {k: src.get(k) for k in keep}, meta={"ramp": "r10s"})
+    root = save_dataset(Dataset([own]), tmp_path / "own")
+    manifest = json.loads((root / "manifest.json").read_text())
+    manifest["experiments"][0].pop("dither_freq_Hz", None)
+    (root / "manifest.json").write_text(json.dumps(manifest))
+    res = cli("check", root)
+    assert res.returncode == 0, res.stderr
+    (note,) = [ln for ln in res.stdout.splitlines() if "no dither frequency" in ln]
+    assert f"{root / 'r10s_run2.csv'}: no dither frequency" in note
+    assert "carries a dither at about 50 Hz" in note and '"dither_freq_Hz": 50' in note
+    print_dither_notes(load_dataset(root))  # what fit-physics, evaluate and train print
+    err = capsys.readouterr().err
+    assert err.startswith(f"note: {root / 'r10s_run2.csv'}: no dither frequency"), err
+    manifest["experiments"][0]["dither_freq_Hz"] = 50
+    (root / "manifest.json").write_text(json.dumps(manifest))
+    res = cli("check", root)
+    assert res.returncode == 0 and "no dither frequency" not in res.stdout, res.stdout
+    print_dither_notes(load_dataset(root))
+    assert capsys.readouterr().err == ""

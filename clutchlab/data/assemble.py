@@ -17,6 +17,7 @@ import numpy as np
 
 from ..errors import DataError
 from .channel_map import ChannelMap, ChannelSpec
+from .demodulate import dither_frequency_note
 from .options import ReadOptions
 from .rawlog import RawChannel, RawLog, TimeBase
 from .report import LoadReport
@@ -499,6 +500,8 @@ def assemble(
             trace = Trace(name, signals, meta=meta, source=raw.path)
         except DataError as exc:
             problems += exc.problems or [str(exc)]
+        if trace is not None and not problems and (note := dither_frequency_note(trace)):
+            notes.append(note)
     if trace is None:  # describe the log as read, for `clutchlab data check`
         if bases and used_bases:
             t0 = bases[used_bases[0]].time_s
