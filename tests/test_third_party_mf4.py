@@ -137,3 +137,20 @@ def test_a_wrong_group_names_the_group_the_channel_is_in(mf4, tmp_path):
     assert "is not in group 7; it is in group" in text
     assert "not logged from source 'no such device'" in text
     assert "required column" not in text and "is required" not in text  # each said once
+
+
+def test_a_refused_multi_rate_log_is_described_at_one_rate(mf4, tmp_path):
+    # The row of `data check` for the refused log read "1240 samples, 12.390 s, 1000 Hz":
+    # the samples of the 10 ms group beside the rate of the 1 ms group.
+    cmap = tmp_path / "asap2.toml"
+    cmap.write_text(
+        MAP.replace(
+            "[defaults]",
+            'oil_temp_C = { channel = "ASAM.M.SCALAR.UBYTE.FORM_X_PLUS_4", unit = "degC" }'
+            "  # 10 ms\n\n[defaults]",
+        )
+    )
+    trace, report = check_log(mf4, channel_map=cmap)
+    assert trace is None and report.problems
+    assert report.rate_Hz == pytest.approx(1000.0, rel=1e-3)
+    assert report.samples == pytest.approx(report.duration_s * report.rate_Hz + 1, rel=0.01)

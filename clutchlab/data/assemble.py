@@ -62,6 +62,18 @@ _FILL_HOW = (
 )
 
 
+def _fastest_base(bases: list[TimeBase], used: list[int]) -> int:
+    """The time base (index) of ``used`` with the shortest median sample interval: the one
+    whose rate a failed multi-rate log is reported at, so its samples and duration match."""
+
+    def step(b: int) -> float:
+        d = np.diff(bases[b].time_s)
+        d = d[np.isfinite(d) & (d > 0)]
+        return float(np.median(d)) if d.size else np.inf
+
+    return min(used, key=step)
+
+
 def _hint_names(names: list[str]) -> str:
     hints = []
     for name in names:
@@ -504,7 +516,7 @@ def assemble(
             notes.append(note)
     if trace is None:  # describe the log as read, for `clutchlab data check`
         if bases and used_bases:
-            t0 = bases[used_bases[0]].time_s
+            t0 = bases[_fastest_base(bases, used_bases)].time_s
             signals = {"time_s": t0, **{s.name: s.values for s in picked.values()}}
         else:
             signals = {s.name: s.values for s in picked.values()}
