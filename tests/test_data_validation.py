@@ -354,6 +354,24 @@ def test_sample_rate_too_low_for_the_dither(tmp_path):
     assert f"{path}: manifest 'dither_freq_Hz': sample rate 400 Hz is too low" in str(info.value)
 
 
+def test_resampling_below_the_dither_of_a_log_without_its_frequency(tmp_path):
+    # A log with the measured current only and no dither frequency anywhere: asked for
+    # 100 Hz (`data convert --rate 100`), it was resampled and written with its 50 Hz dither
+    # aliased, and `data check` said OK. The dither is demodulated from the current at its
+    # own rate, and the sample rate is checked against it as against a given frequency.
+    sig = signals(n=2000, rate=1000.0)
+    del sig["dither_freq_Hz"]
+    path = write_raw_csv(tmp_path / "own.csv", sig)
+    read_csv(path)  # at its own 1 kHz it reads
+    text = problems_of(lambda: read_log(path, options=ReadOptions(rate_Hz=100.0)))
+    assert (
+        f"{path}: column 'current_mA': its dither (demodulated, no dither_freq_Hz given): "
+        "sample rate 100 Hz is too low to resolve a dither of 50 Hz" in text
+    ), text
+    trace, _ = read_log(path, options=ReadOptions(rate_Hz=500.0))  # 10 × 50 Hz: fine
+    assert trace.sample_rate_Hz == pytest.approx(500.0)
+
+
 # -- everything at once ------------------------------------------------------------------------
 
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import DataError
 from .channel_map import ChannelMap, ChannelSpec
-from .demodulate import dither_frequency_note
+from .demodulate import dither_in_current, no_dither_frequency_note
 from .options import ReadOptions
 from .rawlog import RawChannel, RawLog, TimeBase
 from .report import LoadReport
@@ -472,6 +472,7 @@ def assemble(
 
     # -- 6. dither resolvable at this rate? ------------------------------------------------------
     rate = None
+    found_dither_Hz: float | None = None  # demodulated when no frequency is given
     if grid is not None:
         rate = float(1.0 / np.median(np.diff(grid)))
     elif used_bases:  # the rate the trace would have: checked even when other problems exist
@@ -493,6 +494,17 @@ def assemble(
             problems += check_dither_rate(
                 rate, float(meta["dither_freq_Hz"]), f"{file}: manifest 'dither_freq_Hz'"
             )
+        elif (csig := picked.get("current_mA")) is not None and time_ok.get(csig.base):
+            # No frequency given: the dither of the measured current at its own rate (a
+            # log resampled below 10 × that dither would alias it), and a note below.
+            t_c = bases[csig.base].time_s
+            found_dither_Hz = dither_in_current(csig.values, 1.0 / float(np.median(np.diff(t_c))))
+            if found_dither_Hz is not None:
+                problems += check_dither_rate(
+                    rate,
+                    found_dither_Hz,
+                    f"{csig.where}: its dither (demodulated, no dither_freq_Hz given)",
+                )
 
     # -- 7. the trace ------------------------------------------------------------------------
     signals: dict[str, np.ndarray] = {}
@@ -512,8 +524,8 @@ def assemble(
             trace = Trace(name, signals, meta=meta, source=raw.path)
         except DataError as exc:
             problems += exc.problems or [str(exc)]
-        if trace is not None and not problems and (note := dither_frequency_note(trace)):
-            notes.append(note)
+        if trace is not None and not problems and found_dither_Hz is not None:
+            notes.append(no_dither_frequency_note(found_dither_Hz))
     if trace is None:  # describe the log as read, for `clutchlab data check`
         if bases and used_bases:
             t0 = bases[_fastest_base(bases, used_bases)].time_s

@@ -73,7 +73,8 @@ __all__ = [
     "demodulate_dither",
     "demodulate_trace",
     "didt_period_samples",
-    "dither_frequency_note",
+    "dither_in_current",
+    "no_dither_frequency_note",
     "nominal_current",
     "nominal_didt",
 ]
@@ -384,58 +385,56 @@ def didt_period_samples(trace: Trace, estimate: DitherEstimate | None = None) ->
 NO_DITHER_FREQUENCY = "no dither frequency"
 
 
-def _dither_frequency_known(trace: Trace) -> bool:
-    """Whether ``trace`` gives a dither frequency where
-    :func:`~clutchlab.data.derived.dither_period_samples` looks: a positive
-    ``dither_freq_Hz`` sample (a column or a channel map's default), else a positive
-    manifest ``dither_freq_Hz``."""
-    if trace.has("dither_freq_Hz"):
-        f = np.asarray(trace.get("dither_freq_Hz"), dtype=float)
-        if np.any(np.isfinite(f) & (f > 0)):
-            return True
-    meta_f = trace.meta.get("dither_freq_Hz")
-    return isinstance(meta_f, int | float) and not isinstance(meta_f, bool) and meta_f > 0
+def dither_in_current(current_mA: ArrayLike, sample_rate_Hz: float) -> float | None:
+    """The dither frequency of a measured current, when it clearly carries one.
+
+    Parameters
+    ----------
+    current_mA : array_like
+        Measured solenoid current, mA, uniformly sampled.
+    sample_rate_Hz : float
+        Its sample rate, Hz.
+
+    Returns
+    -------
+    float or None
+        Median demodulated frequency (Hz, 3 significant digits) where
+        :func:`demodulate_dither` finds a dither line; None when it finds one over less
+        than a quarter of the samples, or the current cannot be demodulated (too short,
+        not finite).
+    """
+    x = np.asarray(current_mA, dtype=np.float64)
+    if x.ndim != 1 or not math.isfinite(sample_rate_Hz) or sample_rate_Hz <= 0:
+        return None
+    try:
+        with np.errstate(all="ignore"):
+            est = demodulate_dither(x, sample_rate_Hz)
+    except (DataError, ValueError):  # too short or odd to demodulate: nothing to say
+        return None
+    freq = est.frequency_Hz[est.present & np.isfinite(est.frequency_Hz)]
+    if freq.size < 0.25 * x.size:
+        return None
+    return float(f"{np.median(freq):.3g}")
 
 
-def dither_frequency_note(trace: Trace) -> str | None:
-    """A note for an experiment whose dither the analyses cannot average out.
+def no_dither_frequency_note(freq_Hz: float) -> str:
+    """The note on an experiment without a dither frequency whose measured current carries
+    a dither at ``freq_Hz`` (Hz; :func:`dither_in_current`).
 
     Without a dither frequency (no ``dither_freq_Hz`` column, manifest key or channel-map
     default), :func:`~clutchlab.data.derived.dither_period_samples` is 1 sample, so every
     dither-period mean downstream — the physics fit's cost, the ramp rate that picks the
     quasi-static experiments, the report's primary scores — is taken over single samples of
-    a current and pressure that still carry the dither. When the measured current shows a
-    dither, the note gives its demodulated frequency and where to declare it.
-
-    Parameters
-    ----------
-    trace : Trace
-        One experiment, canonical signals (``current_mA`` in mA).
-
-    Returns
-    -------
-    str or None
-        The note, beginning with :data:`NO_DITHER_FREQUENCY`; None when a frequency is
-        given, the trace has no ``current_mA``, or no dither is found in it.
+    a current and pressure that still carry the dither. The note says so and where to
+    declare the frequency; it begins with :data:`NO_DITHER_FREQUENCY`.
     """
-    if _dither_frequency_known(trace) or not trace.has("current_mA") or len(trace) < 2:
-        return None
-    try:
-        with np.errstate(all="ignore"):
-            est = demodulate_trace(trace)
-    except (DataError, ValueError):  # too short or odd to demodulate: nothing to suggest
-        return None
-    freq = est.frequency_Hz[est.present & np.isfinite(est.frequency_Hz)]
-    if freq.size < 0.25 * len(trace):  # a dither over less than a quarter of the log
-        return None
-    f = float(np.median(freq))
     return (
         f"{NO_DITHER_FREQUENCY} (no 'dither_freq_Hz' column, manifest key or channel-map "
-        f"default), but its measured current carries a dither at about {f:.3g} Hz: the "
-        "dither-period means (the physics fit's cost, the ramp rate that picks the "
+        f"default), but its measured current carries a dither at about {freq_Hz:.3g} Hz: "
+        "the dither-period means (the physics fit's cost, the ramp rate that picks the "
         "quasi-static experiments, the report's primary scores) are then taken over single "
-        f'samples; declare it: "dither_freq_Hz": {f:.3g} in its manifest entry, or '
-        f"dither_freq_Hz = {f:.3g} under [defaults] in its channel map"
+        f'samples; declare it: "dither_freq_Hz": {freq_Hz:.3g} in its manifest entry, or '
+        f"dither_freq_Hz = {freq_Hz:.3g} under [defaults] in its channel map"
     )
 
 
