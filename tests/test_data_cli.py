@@ -190,3 +190,16 @@ def test_an_experiment_without_a_dither_frequency_gets_a_note(stand_ds, tmp_path
     assert res.returncode == 0 and "no dither frequency" not in res.stdout, res.stdout
     print_dither_notes(load_dataset(root))
     assert capsys.readouterr().err == ""
+
+
+def test_convert_to_a_file_without_a_known_suffix_names_the_suffixes(stand_ds, tmp_path):
+    # It said "pass format= one of csv, ...": a Python argument, and --format csv would
+    # only have been refused next because the suffix does not match the format.
+    log = stand_ds / "medium_50Hz_B.csv"
+    for dst in (tmp_path / "out", tmp_path / "out.txt"):
+        res = cli("convert", log, dst)
+        assert res.returncode == 2 and not dst.exists(), res.stderr
+        assert "name the file with one of the suffixes .csv, .parquet, .mf4, .mat" in res.stderr
+        assert "format=" not in res.stderr
+    res = cli("convert", log, tmp_path / "out.txt", "--format", "csv")
+    assert res.returncode == 2 and "suffix does not match the format 'csv'" in res.stderr

@@ -68,9 +68,11 @@ def convert(
     if src.is_file() and src.name != MANIFEST_NAME:
         suffix = suffix_of(format) if format is not None else dst.suffix.lower()
         if suffix not in FORMATS:
+            # the file must carry its format's suffix anyway (checked below), so that is
+            # the remedy, not format= / --format
             raise DataError(
-                f"{dst}: cannot tell the output format from the suffix {dst.suffix!r}; pass "
-                f"format= one of {', '.join(f.name for f in FORMATS.values())}"
+                f"{dst}: cannot tell the output format from the suffix {dst.suffix!r}; name "
+                f"the file with one of the suffixes {', '.join(FORMATS)}"
             )
         if dst.suffix.lower() != suffix:
             raise DataError(
