@@ -102,3 +102,23 @@ def test_short_and_long_rows_of_a_semicolon_log_are_named(canonical, tmp_path):
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     with pytest.raises(DataError, match=r"line 6, saw 5"):  # as in a comma-separated log
         read_csv(path)
+
+
+def test_a_windows_1252_spreadsheet_export_is_read_with_a_note(canonical, tmp_path):
+    # Excel's "CSV (semicolon-separated)" on a German Windows writes Windows-1252: the
+    # header "T_Öl [°C]" was refused as "not a UTF-8 text CSV file (... position 40 ...)".
+    src, tr = canonical
+    lines = _as_dialect(src, tmp_path / "x.csv", ";", ",").read_text().splitlines()
+    lines[0] += ";T_Öl [°C]"
+    lines[1:] = [f"{line};40,5" for line in lines[1:]]
+    path = tmp_path / "excel.csv"
+    path.write_bytes(("\r\n".join(lines) + "\r\n").encode("cp1252"))
+    cmap = {"signals": {"oil_temp_C": "T_Öl"}}
+    from clutchlab.data import read_log
+
+    back, report = read_log(path, channel_map=cmap)
+    np.testing.assert_array_equal(back.get("current_cmd_mA"), read_csv(src).get("current_cmd_mA"))
+    np.testing.assert_array_equal(back.get("oil_temp_C"), np.full(len(tr), 40.5))
+    assert f"{path}: read as semicolon-separated, decimal comma, Windows-1252 text (not UTF-8)" in (
+        report.notes
+    )

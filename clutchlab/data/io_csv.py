@@ -21,7 +21,7 @@ import re
 import warnings
 from collections import Counter
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -73,15 +73,22 @@ class CsvDialect:
         Field separator.
     decimal : {".", ","}
         Decimal mark (a comma only with another separator than the comma).
+    encoding : {"utf-8-sig", "cp1252"}
+        Text encoding: UTF-8 (with or without a byte-order mark), or Windows-1252 when the
+        header is not UTF-8 (a spreadsheet's "CSV" export on Windows, ``T_Öl [°C]``).
     """
 
     sep: str = ","
     decimal: str = "."
+    encoding: str = "utf-8-sig"
 
     def describe(self) -> str:
         """``"semicolon-separated, decimal comma"``."""
         sep = {",": "comma", ";": "semicolon", "\t": "tab"}[self.sep]
-        return f"{sep}-separated, decimal {'comma' if self.decimal == ',' else 'point'}"
+        text = f"{sep}-separated, decimal {'comma' if self.decimal == ',' else 'point'}"
+        if self.encoding != "utf-8-sig":
+            text += ", Windows-1252 text (not UTF-8)"
+        return text
 
 
 def _sniff_dialect(header: str, path: Path) -> CsvDialect:
@@ -213,12 +220,21 @@ def _read_header(path: Path, limits: CsvLimits) -> tuple[list[str], CsvDialect]:
             f"{path}: header line longer than {limits.max_header_bytes} bytes (raise the "
             "limit with CLUTCHLAB_CSV_MAX_HEADER_BYTES if the file is right)"
         )
+    encoding = "utf-8-sig"
     try:
-        text = raw.decode("utf-8-sig")
-        dialect = _sniff_dialect(text, path)
+        try:
+            text = raw.decode(encoding)
+        except UnicodeDecodeError as exc:
+            try:  # a spreadsheet's export on Windows: "T_Öl [°C]" in Windows-1252
+                text, encoding = raw.decode("cp1252"), "cp1252"
+            except UnicodeDecodeError:
+                raise exc from None
+        dialect = replace(_sniff_dialect(text, path), encoding=encoding)
         row = next(csv.reader([text], delimiter=dialect.sep), None) if text.strip() else None
     except UnicodeDecodeError as exc:
-        raise DataError(f"{path}: not a UTF-8 text CSV file ({exc})") from None
+        raise DataError(
+            f"{path}: not a UTF-8 (or Windows-1252) text CSV file: line 1 ({exc})"
+        ) from None
     except csv.Error as exc:
         raise DataError(f"{path}: malformed CSV header ({exc})") from None
     if row is None:
@@ -448,7 +464,7 @@ def _parse_values(
     import pandas as pd
 
     options: dict[str, Any] = {
-        "encoding": "utf-8-sig",
+        "encoding": dialect.encoding,
         "skipinitialspace": True,
         "skip_blank_lines": False,  # keep line numbers = data row + 2
         "keep_default_na": False,
