@@ -404,3 +404,20 @@ def test_validate_trace_in_memory():
         "trace 'mem': column 'clutch_pressure_bar': missing values (NaN/inf) at row 4 (1 × NaN)"
     ]
     assert validate_trace(Trace("ok", signals())) == []
+
+
+def test_two_files_with_one_stem_are_named_with_the_remedy(tmp_path):
+    # Logs kept per day (day1/r5s.csv, day2/r5s.csv) share a stem, the experiment name; the
+    # error named neither file nor what to do.
+    root = tmp_path / "ds"
+    for day in ("day1", "day2"):
+        (root / day).mkdir(parents=True)
+        write_raw_csv(root / day / "r5s.csv", signals())
+    entries = [{"file": f"{d}/r5s.csv", "ramp": "fast"} for d in ("day1", "day2")]
+    (root / "manifest.json").write_text(json.dumps({"experiments": entries}))
+    text = problems_of(lambda: load_dataset(root))
+    assert (
+        f"experiments[1]: {root / 'day2' / 'r5s.csv'}: experiment name 'r5s' (file stem) already "
+        f"used by experiments[0] ({root / 'day1' / 'r5s.csv'}); experiments are named by their "
+        "file's stem, so rename one of the files" in text
+    ), text

@@ -254,19 +254,21 @@ def read_manifest(path: str | Path) -> Manifest:
     default_map: Path | object | None = None
     if "channel_map" in data:
         default_map = _map_path(data["channel_map"], root, "channel_map", problems) or _MISSING
-    names: dict[str, int] = {}
+    names: dict[str, tuple[int, Path]] = {}
     for i, entry in enumerate(entries):
         checked = _check_entry(i, entry, root, default_map, problems)
         if checked is None:
             continue
         name = checked.file.stem
         if name in names:
+            first, first_file = names[name]
             problems.append(
-                f"experiments[{i}]: experiment name {name!r} (file stem) already used by "
-                f"experiments[{names[name]}]"
+                f"experiments[{i}]: {checked.file}: experiment name {name!r} (file stem) "
+                f"already used by experiments[{first}] ({first_file}); experiments are named "
+                "by their file's stem, so rename one of the files"
             )
             continue
-        names[name] = i
+        names[name] = (i, checked.file)
         manifest.entries.append(checked)
     manifest.extra = {k: v for k, v in data.items() if k not in TOP_KEYS}
     return manifest
