@@ -417,7 +417,7 @@ def test_two_files_with_one_stem_are_named_with_the_remedy(tmp_path):
     (root / "manifest.json").write_text(json.dumps({"experiments": entries}))
     text = problems_of(lambda: load_dataset(root))
     assert (
-        f"experiments[1]: {root / 'day2' / 'r5s.csv'}: experiment name 'r5s' (file stem) already "
-        f"used by experiments[0] ({root / 'day1' / 'r5s.csv'}); experiments are named by their "
-        "file's stem, so rename one of the files" in text
+        f"experiments[1]: experiment name 'r5s' (file stem of {root / 'day2' / 'r5s.csv'}) "
+        f"already used by experiments[0] ({root / 'day1' / 'r5s.csv'}); experiments are named "
+        "by their file's stem, so rename one of the files" in text
     ), text

@@ -263,7 +263,7 @@ def read_manifest(path: str | Path) -> Manifest:
         if name in names:
             first, first_file = names[name]
             problems.append(
-                f"experiments[{i}]: {checked.file}: experiment name {name!r} (file stem) "
+                f"experiments[{i}]: experiment name {name!r} (file stem of {checked.file}) "
                 f"already used by experiments[{first}] ({first_file}); experiments are named "
                 "by their file's stem, so rename one of the files"
             )
