@@ -122,3 +122,27 @@ def test_a_windows_1252_spreadsheet_export_is_read_with_a_note(canonical, tmp_pa
     assert f"{path}: read as semicolon-separated, decimal comma, Windows-1252 text (not UTF-8)" in (
         report.notes
     )
+
+
+def test_a_trailing_separator_column_without_name_or_values_is_ignored(canonical, tmp_path):
+    # A logger writing "t;I;P;" / "0,0;250,0;3,5;" (a separator after every field) was
+    # refused as "empty column name at position(s) 4"; an unnamed column that holds values
+    # is still a problem, with its position and first line.
+    src, _ = canonical
+    lines = _as_dialect(src, tmp_path / "x.csv", ";", ",").read_text().splitlines()
+    path = tmp_path / "trailing.csv"
+    path.write_text("".join(f"{line};\n" for line in lines))
+    back = read_csv(path)
+    np.testing.assert_array_equal(back.get("current_cmd_mA"), read_csv(src).get("current_cmd_mA"))
+    n = len(lines[0].split(";"))
+    assert f"{path}: column(s) {n + 1} without a name and without values ignored" in " ".join(
+        decode_csv(path).notes
+    )
+    full = tmp_path / "full.csv"
+    full.write_text(lines[0] + ";\n" + "".join(f"{line};7\n" for line in lines[1:]))
+    with pytest.raises(DataError) as info:
+        read_csv(full)
+    assert (
+        f"{full}: column {n + 1} has no name in the header but holds values (first at line 2 "
+        "(data row 1))" in str(info.value)
+    )

@@ -52,6 +52,11 @@ _UNIT_HEADER = re.compile(r"^(?P<name>.*?)\s*\[(?P<unit>[^\[\]]*)\]$")
 _PAREN_UNIT_HEADER = re.compile(r"^(?P<name>.*?)\s*\((?P<unit>[^()]*)\)$")
 
 
+def _unnamed(i: int) -> str:
+    """Placeholder name of the 0-based column ``i`` when its header is empty."""
+    return f"(unnamed column {i + 1})"
+
+
 def _line_label(i: int) -> str:
     """Name the 0-based data row ``i`` by its line in the file (header = line 1)."""
     return f"line {i + 2} (data row {i + 1})"
@@ -306,7 +311,8 @@ def decode_csv(path: str | Path, wanted: Callable[[str], bool] | None = None) ->
     Raises
     ------
     DataError
-        Missing, empty, non-UTF-8 or malformed file, duplicate or empty column names,
+        Missing, empty, non-UTF-8 or malformed file, duplicate column names, a column
+        without a name that holds values (an empty one is ignored, with a note),
         a truncated last line; unparseable cells are listed in ``RawLog.problems``.
     """
     path = check_input_file(path)
@@ -314,15 +320,18 @@ def decode_csv(path: str | Path, wanted: Callable[[str], bool] | None = None) ->
     header, dialect = _read_header(path, CsvLimits.from_env())
     problems: list[str] = []
     names_units = [_split_unit(h, wanted) for h in header]
+    # A column without a name (a trailing separator on every line, a blank spreadsheet
+    # column) is read under a placeholder: dropped below if it is empty, else a problem.
+    unnamed = {i for i, (n, _) in enumerate(names_units) if not n}
+    for i in unnamed:
+        header[i] = _unnamed(i)
+        names_units[i] = (header[i], None)
     names = [n for n, _ in names_units]
     dupes = sorted(c for c, k in Counter(names).items() if k > 1)
     for name in dupes:  # named by the headers that clash: they may differ only in the unit
         clash = [h for h, n in zip(header, names, strict=True) if n == name]
         shown = "" if len(set(clash)) == 1 else f" (headers {', '.join(map(repr, clash))})"
         problems.append(f"{path}: duplicate column {name!r}{shown}")
-    empty = [i + 1 for i, c in enumerate(names) if not c]
-    if empty:
-        problems.append(f"{path}: empty column name at position(s) {', '.join(map(str, empty))}")
     if problems:
         raise DataError(f"{path}: bad CSV header", problems)
 
@@ -349,7 +358,22 @@ def decode_csv(path: str | Path, wanted: Callable[[str], bool] | None = None) ->
         )
     channels = []
     short_mask = np.isin(np.arange(n), short) if short else None
-    for h, (name, unit) in zip(header, names_units, strict=True):
+    dropped = []
+    for i in sorted(unnamed):
+        h = header[i]
+        values = columns[h]
+        if h not in by_column and np.isnan(values).all():
+            dropped.append(i + 1)
+            continue
+        first = int(np.flatnonzero(~np.isnan(values))[0]) if h not in by_column else None
+        at = f" (first at {_line_label(first)})" if first is not None else ""
+        problems.append(
+            f"{path}: column {i + 1} has no name in the header but holds values{at}; name it "
+            "in the header (and in the channel map) or remove it"
+        )
+    for i, (h, (name, unit)) in enumerate(zip(header, names_units, strict=True)):
+        if i in unnamed:
+            continue
         where = f"column {name!r}"
         if h in by_column and wanted is not None and not wanted(name):
             # A column nobody asked for (a comment, a status text) does not fail the file.
@@ -362,6 +386,11 @@ def decode_csv(path: str | Path, wanted: Callable[[str], bool] | None = None) ->
             reported = short_mask if reported is None else reported | short_mask
         channels.append(RawChannel(name, columns[h], unit, where=where, reported=reported))
     notes = [] if dialect == CsvDialect() else [f"{path}: read as {dialect.describe()}"]
+    if dropped:
+        notes.append(
+            f"{path}: column(s) {', '.join(map(str, dropped))} without a name and without values "
+            "ignored (a trailing separator or a blank spreadsheet column)"
+        )
     return RawLog(path, "csv", channels, row_label=_line_label, problems=problems, notes=notes)
 
 
