@@ -176,6 +176,30 @@ def test_didt_features_without_dither_average_the_current_noise():
     assert np.count_nonzero(np.diff(X[:, 1])) < 30
 
 
+def test_features_of_a_command_only_log_name_what_is_missing_and_take_the_manifest():
+    """A log with the command current only (no current_mA) and no dither columns: training
+    failed with "trace 'x': no current_mA to demodulate", which the user never asked for.
+    The error now names the signal the features need and where to give it; given as a
+    manifest constant (as the physics model already takes it), it is used."""
+    from clutchlab.residual_ml import FeatureBuilder
+
+    t = np.arange(0.0, 2.0005, 1e-3)
+    cmd = np.interp(t, [0.0, 1.0, 2.0], [0.0, 1000.0, 0.0])
+    signals = {"time_s": t, "current_cmd_mA": cmd, "clutch_pressure_bar": cmd / 100}
+    features = ("current_mA", "dither_amp_mA", "dither_freq_Hz", "didt_mA_s")
+    bare = Trace("r5s", signals, meta={"ramp": "fast"}, source="logs/r5s.csv")
+    with pytest.raises(DataError) as info:
+        FeatureBuilder(features).build(bare)
+    assert str(info.value).startswith(
+        "r5s (logs/r5s.csv): no dither_amp_mA column, and no measured current_mA to "
+        "demodulate it from; the model's features need dither_amp_mA"
+    ), str(info.value)
+    given = Trace("r5s", signals, meta={"ramp": "fast", "dither_freq_Hz": 50, "dither_amp_mA": 80})
+    X = FeatureBuilder(features).build(given)
+    np.testing.assert_array_equal(X[:, 0], cmd)
+    assert (X[:, 1] == 80.0).all() and (X[:, 2] == 50.0).all()
+
+
 @pytest.mark.parametrize("name", ["model.json", "model.npz"])
 def test_train_json_summary_may_not_replace_the_model(tiny, tmp_path, capsys, name):
     """``--json OUT/model.json`` (or ``model.npz``) was accepted: the summary, written last,

@@ -43,6 +43,7 @@ mistaken for a causal one. The physics features have no causal counterpart yet.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from types import MappingProxyType
 
@@ -140,6 +141,17 @@ def causal_features(features: tuple[str, ...]) -> tuple[str, ...]:
     return tuple(CAUSAL_COUNTERPART.get(f, f) for f in features)
 
 
+def _from_meta(trace: Trace, signal: str) -> np.ndarray | None:
+    """A constant ``signal`` from the trace's manifest metadata (e.g. ``"dither_freq_Hz":
+    50``), per sample in its unit, for a trace with neither the column nor a measured current
+    to demodulate it from; None when the metadata hold no finite number ≥ 0."""
+    value = trace.meta.get(signal)
+    if isinstance(value, int | float) and not isinstance(value, bool) and value >= 0:
+        if math.isfinite(value):
+            return np.full(len(trace), float(value))
+    return None
+
+
 @dataclass(frozen=True)
 class FeatureBuilder:
     """Builds the feature matrix of a trace.
@@ -226,9 +238,17 @@ class FeatureBuilder:
             raise DataError(f"expected a Trace, got {type(trace).__name__}")
         estimate = None
 
-        def est():
+        def est(signal: str):
             nonlocal estimate
             if estimate is None:
+                if not trace.has("current_mA"):
+                    where = trace.name + (f" ({trace.source})" if trace.source else "")
+                    raise DataError(
+                        f"{where}: no {signal} column, and no measured current_mA to "
+                        f"demodulate it from; the model's features need {signal}: log it, or "
+                        f"give a constant ({signal} = ... under [defaults] in the channel map, "
+                        "or in its manifest entry)"
+                    )
                 estimate = demodulate_trace(trace)
             return estimate
 
@@ -239,23 +259,25 @@ class FeatureBuilder:
             if trace.has("current_cmd_mA"):
                 cols["current_mA"] = np.asarray(trace.get("current_cmd_mA"), dtype=float)
             else:
-                cols["current_mA"] = est().nominal_mA
+                cols["current_mA"] = est("current_cmd_mA").nominal_mA
         if "current_lag_mA" in need:
             cols["current_lag_mA"] = first_order_lag(
                 cols["current_mA"], self.lag_s, trace.sample_rate_Hz
             )
+
+        def dither(signal: str, of_estimate: str) -> np.ndarray:
+            # logged; else demodulated from the measured current; else, with no measured
+            # current, the manifest's constant (as the physics model takes it)
+            if trace.has(signal):
+                return np.asarray(trace.get(signal), dtype=float)
+            if not trace.has("current_mA") and (const := _from_meta(trace, signal)) is not None:
+                return const
+            return getattr(est(signal), of_estimate)
+
         if "dither_amp_mA" in need:
-            cols["dither_amp_mA"] = (
-                np.asarray(trace.get("dither_amp_mA"), dtype=float)
-                if trace.has("dither_amp_mA")
-                else est().amplitude_mA
-            )
+            cols["dither_amp_mA"] = dither("dither_amp_mA", "amplitude_mA")
         if need & ({"dither_freq_Hz"} | slopes):
-            cols["dither_freq_Hz"] = (
-                np.asarray(trace.get("dither_freq_Hz"), dtype=float)
-                if trace.has("dither_freq_Hz")
-                else est().frequency_Hz
-            )
+            cols["dither_freq_Hz"] = dither("dither_freq_Hz", "frequency_Hz")
         if need & slopes:
             f = cols["dither_freq_Hz"]
             fpos = f[f > 0]
