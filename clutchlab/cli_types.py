@@ -85,8 +85,10 @@ def add_map_argument(parser: argparse.ArgumentParser) -> None:
 def print_dither_notes(dataset) -> None:
     """Print to stderr, before any work, the experiments of ``dataset`` whose dither the
     analyses cannot average out (no dither frequency given, a dither in the measured
-    current: :func:`~clutchlab.data.demodulate.dither_frequency_note`), as ``data check``
-    lists them.
+    current: :func:`~clutchlab.data.demodulate.no_dither_frequency_note`) or do not know
+    (a command-only log without a dither amplitude:
+    :func:`~clutchlab.data.demodulate.no_dither_amplitude_note`), as ``data check`` lists
+    them.
 
     Parameters
     ----------
@@ -95,9 +97,9 @@ def print_dither_notes(dataset) -> None:
     """
     import sys
 
-    from .data.demodulate import NO_DITHER_FREQUENCY
+    from .data.demodulate import NO_DITHER_AMPLITUDE, NO_DITHER_FREQUENCY
 
     for report in dataset.reports.values():
         for note in report.notes:
-            if note.startswith(NO_DITHER_FREQUENCY):
+            if note.startswith((NO_DITHER_FREQUENCY, NO_DITHER_AMPLITUDE)):
                 print(f"note: {report.file}: {note}", file=sys.stderr)

@@ -203,3 +203,25 @@ def test_convert_to_a_file_without_a_known_suffix_names_the_suffixes(stand_ds, t
         assert "format=" not in res.stderr
     res = cli("convert", log, tmp_path / "out.txt", "--format", "csv")
     assert res.returncode == 2 and "suffix does not match the format 'csv'" in res.stderr
+
+
+def test_a_command_only_log_without_dither_amplitude_gets_a_note(stand_ds, tmp_path, capsys):
+    # The command current only, no dither amplitude anywhere: the physics model ran with
+    # 0 mA of dither and `train` failed later; data check said OK without a word.
+    from clutchlab.cli_types import print_dither_notes
+
+    src = load_dataset(stand_ds)["medium_50Hz_B"]
+    keep = ("time_s", "current_cmd_mA", "dither_freq_Hz", "clutch_pressure_bar")
+    own = Trace("r10s", {k: src.get(k) for k in keep}, meta={"ramp": "r10s"})
+    root = save_dataset(Dataset([own]), tmp_path / "own")
+    res = cli("check", root)
+    assert res.returncode == 0, res.stderr
+    (note,) = [ln for ln in res.stdout.splitlines() if "no dither amplitude" in ln]
+    assert f"{root / 'r10s.csv'}: no dither amplitude (no 'dither_amp_mA' column" in note
+    assert "the physics model is driven without dither" in note
+    print_dither_notes(load_dataset(root))
+    assert capsys.readouterr().err.startswith(f"note: {root / 'r10s.csv'}: no dither amplitude")
+    manifest = json.loads((root / "manifest.json").read_text())
+    manifest["experiments"][0]["dither_amp_mA"] = 100
+    (root / "manifest.json").write_text(json.dumps(manifest))
+    assert "no dither amplitude" not in cli("check", root).stdout

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import DataError
 from .channel_map import ChannelMap, ChannelSpec
-from .demodulate import dither_in_current, no_dither_frequency_note
+from .demodulate import dither_in_current, no_dither_amplitude_note, no_dither_frequency_note
 from .options import ReadOptions
 from .rawlog import RawChannel, RawLog, TimeBase
 from .report import LoadReport
@@ -526,6 +526,8 @@ def assemble(
             problems += exc.problems or [str(exc)]
         if trace is not None and not problems and found_dither_Hz is not None:
             notes.append(no_dither_frequency_note(found_dither_Hz))
+        if trace is not None and not problems and (note := no_dither_amplitude_note(trace)):
+            notes.append(note)
     if trace is None:  # describe the log as read, for `clutchlab data check`
         if bases and used_bases:
             t0 = bases[_fastest_base(bases, used_bases)].time_s

@@ -67,6 +67,7 @@ from .trace import Trace
 
 __all__ = [
     "FUNDAMENTAL_RATIO",
+    "NO_DITHER_AMPLITUDE",
     "NO_DITHER_DIDT_HZ",
     "NO_DITHER_FREQUENCY",
     "DitherEstimate",
@@ -74,6 +75,7 @@ __all__ = [
     "demodulate_trace",
     "didt_period_samples",
     "dither_in_current",
+    "no_dither_amplitude_note",
     "no_dither_frequency_note",
     "nominal_current",
     "nominal_didt",
@@ -383,6 +385,8 @@ def didt_period_samples(trace: Trace, estimate: DitherEstimate | None = None) ->
 
 #: How the note on an experiment without a dither frequency begins (``LoadReport.notes``).
 NO_DITHER_FREQUENCY = "no dither frequency"
+#: How the note on a command-only experiment without a dither amplitude begins.
+NO_DITHER_AMPLITUDE = "no dither amplitude"
 
 
 def dither_in_current(current_mA: ArrayLike, sample_rate_Hz: float) -> float | None:
@@ -435,6 +439,39 @@ def no_dither_frequency_note(freq_Hz: float) -> str:
         "quasi-static experiments, the report's primary scores) are then taken over single "
         f'samples; declare it: "dither_freq_Hz": {freq_Hz:.3g} in its manifest entry, or '
         f"dither_freq_Hz = {freq_Hz:.3g} under [defaults] in its channel map"
+    )
+
+
+def no_dither_amplitude_note(trace: Trace) -> str | None:
+    """The note on a command-only experiment without a dither amplitude, or None.
+
+    With the command current only (no measured ``current_mA`` to demodulate), no
+    ``dither_amp_mA`` column or channel-map default and no manifest ``dither_amp_mA``, the
+    physics model is driven with a dither of 0 mA and the ML variants cannot build their
+    dither-amplitude feature; nothing said so before a fit.
+
+    Parameters
+    ----------
+    trace : Trace
+        One experiment, canonical signals.
+
+    Returns
+    -------
+    str or None
+        The note, beginning with :data:`NO_DITHER_AMPLITUDE`; None when an amplitude is
+        given or can be demodulated.
+    """
+    if trace.has("current_mA") or trace.has("dither_amp_mA"):
+        return None
+    amp = trace.meta.get("dither_amp_mA")
+    if isinstance(amp, int | float) and not isinstance(amp, bool):
+        return None
+    return (
+        f"{NO_DITHER_AMPLITUDE} (no 'dither_amp_mA' column, manifest key or channel-map default) "
+        "and no measured current_mA to demodulate it from: the physics model is driven "
+        "without dither, and the ML variants cannot build their dither features; log it, or "
+        'declare a constant ("dither_amp_mA": ... in its manifest entry, or dither_amp_mA = '
+        "... under [defaults] in its channel map)"
     )
 
 
