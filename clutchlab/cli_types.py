@@ -11,6 +11,7 @@ from collections.abc import Callable
 
 __all__ = [
     "MAP_HELP",
+    "MAX_NOTES_SHOWN",
     "add_map_argument",
     "nonnegative_float",
     "nonnegative_int",
@@ -82,6 +83,10 @@ def add_map_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--map", metavar="MAP.toml", help=MAP_HELP)
 
 
+#: Notes of one kind :func:`print_dither_notes` prints in full; the rest are named.
+MAX_NOTES_SHOWN = 3
+
+
 def print_dither_notes(dataset) -> None:
     """Print to stderr, before any work, the experiments of ``dataset`` whose dither the
     analyses cannot average out (no dither frequency given, a dither in the measured
@@ -99,7 +104,19 @@ def print_dither_notes(dataset) -> None:
 
     from .data.demodulate import NO_DITHER_AMPLITUDE, NO_DITHER_FREQUENCY
 
-    for report in dataset.reports.values():
-        for note in report.notes:
-            if note.startswith((NO_DITHER_FREQUENCY, NO_DITHER_AMPLITUDE)):
-                print(f"note: {report.file}: {note}", file=sys.stderr)
+    for kind in (NO_DITHER_FREQUENCY, NO_DITHER_AMPLITUDE):
+        found = [
+            (report.file, note)
+            for report in dataset.reports.values()
+            for note in report.notes
+            if note.startswith(kind)
+        ]
+        for file, note in found[:MAX_NOTES_SHOWN]:
+            print(f"note: {file}: {note}", file=sys.stderr)
+        if len(found) > MAX_NOTES_SHOWN:
+            more = ", ".join(file.name for file, _ in found[MAX_NOTES_SHOWN:])
+            print(
+                f"note: {kind} either in {len(found) - MAX_NOTES_SHOWN} more experiment(s): "
+                f"{more} (`clutchlab data check` lists each)",
+                file=sys.stderr,
+            )

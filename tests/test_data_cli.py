@@ -225,3 +225,28 @@ def test_a_command_only_log_without_dither_amplitude_gets_a_note(stand_ds, tmp_p
     manifest["experiments"][0]["dither_amp_mA"] = 100
     (root / "manifest.json").write_text(json.dumps(manifest))
     assert "no dither amplitude" not in cli("check", root).stdout
+
+
+def test_the_fitting_commands_print_three_dither_notes_in_full_and_name_the_rest(capsys):
+    # 27 logs without a dither frequency printed 27 notes of ~400 characters before a fit.
+    from pathlib import Path
+    from types import SimpleNamespace
+
+    from clutchlab.cli_types import MAX_NOTES_SHOWN, print_dither_notes
+    from clutchlab.data.demodulate import no_dither_frequency_note
+    from clutchlab.data.report import LoadReport
+
+    reports = {
+        f"r{k}": LoadReport(Path(f"logs/r{k}.csv"), "csv", f"r{k}", notes=(
+            no_dither_frequency_note(50.0),
+        ))
+        for k in range(MAX_NOTES_SHOWN + 2)
+    }  # fmt: skip
+    print_dither_notes(SimpleNamespace(reports=reports))
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == MAX_NOTES_SHOWN + 1, lines
+    assert lines[0].startswith("note: logs/r0.csv: no dither frequency")
+    assert lines[-1] == (
+        f"note: no dither frequency either in 2 more experiment(s): r{MAX_NOTES_SHOWN}.csv, "
+        f"r{MAX_NOTES_SHOWN + 1}.csv (`clutchlab data check` lists each)"
+    )
