@@ -494,3 +494,40 @@ def test_a_time_column_not_in_seconds_gets_a_note(tmp_path):
     cmap["signals"]["time_s"] = {"channel": "Time", "unit": "ms"}
     _, report = read_log(path, channel_map=cmap)
     assert not any("is the time in seconds" in n for n in report.notes)
+
+
+def test_a_clock_time_column_is_read_as_seconds_since_its_first_sample(tmp_path):
+    """A logger's export with the time of day (``12:34:56.789``, or after an ISO date) was
+    refused as 3000 unparseable numbers, and again as 3000 non-finite time stamps."""
+    from clutchlab.data import read_log
+
+    n = 300
+    t = np.arange(n) * 1e-3
+    clock = [f"12:34:{56 + k // 1000:02d}.{k % 1000:03d}" for k in range(n)]
+    rows = "".join(f"{c},{100 + k},{1.0 + t[k]}\n" for k, c in enumerate(clock))
+    path = write_text(tmp_path / "clock.csv", "Time,I,P\n" + rows)
+    cmap = {"signals": {"time_s": "Time", "current_mA": "I", "clutch_pressure_bar": "P"}}
+    trace, report = read_log(path, channel_map=cmap)
+    np.testing.assert_allclose(trace.time_s, t, atol=1e-9)
+    assert f"{path}: column 'Time': clock times read as seconds since its first sample" in (
+        report.notes
+    )
+    dated = [f"2026-11-30 23:59:59.{k:03d}" for k in range(900, 1000)]
+    dated += [f"2026-12-01 00:00:00.{k:03d}" for k in range(100)]
+    rows = "".join(f"{c},{100 + k},{2.0}\n" for k, c in enumerate(dated))
+    path = write_text(tmp_path / "dated.csv", "Time,I,P\n" + rows)
+    trace, _ = read_log(path, channel_map=cmap)
+    np.testing.assert_allclose(trace.time_s, np.arange(200) * 1e-3, atol=1e-9)  # over midnight
+    # a map unit for it is refused (it is already seconds), as for a Parquet timestamp
+    cmap["signals"]["time_s"] = {"channel": "Time", "unit": "ms"}
+    with pytest.raises(DataError, match=r"is a clock time \(hh:mm:ss.fff\), already in seconds"):
+        read_log(path, channel_map=cmap)
+
+
+def test_an_unparseable_time_stamp_is_reported_once(tmp_path):
+    path = write_text(tmp_path / "t.csv", HEADER + "\n0,100,1\nn/a,200,2\n0.002,300,3\n")
+    with pytest.raises(DataError) as info:
+        read_csv(path)
+    text = str(info.value)
+    assert "unparseable number at line 3 (data row 2) 'n/a'" in text
+    assert "non-finite" not in text, text

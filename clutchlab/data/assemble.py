@@ -356,11 +356,12 @@ def assemble(
     time_ok: dict[int, bool] = {}
     for b in used_bases:
         t = bases[b].time_s
-        tp = check_time(t, base_where[b], bases[b].row_label)
+        known = time_sig.channel.reported if raw.tabular and time_sig is not None else None
+        tp = check_time(t, base_where[b], bases[b].row_label, known)
         if t.size < 2:
             tp.append(f"{base_where[b]}: too few samples ({t.size}); at least 2 are needed")
         problems += tp
-        time_ok[b] = not tp
+        time_ok[b] = not tp and bool(np.isfinite(t).all())  # unparseable cells: reported
 
     # -- 3. values: missing runs, units, ranges ----------------------------------------------
     for sig in picked.values():

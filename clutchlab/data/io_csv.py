@@ -52,6 +52,57 @@ _UNIT_HEADER = re.compile(r"^(?P<name>.*?)\s*\[(?P<unit>[^\[\]]*)\]$")
 _PAREN_UNIT_HEADER = re.compile(r"^(?P<name>.*?)\s*\((?P<unit>[^()]*)\)$")
 
 
+#: A clock time as loggers export it: ``12:34:56.789``, optionally after an ISO date.
+_CLOCK = re.compile(
+    r"^(?P<date>\d{4}-\d{2}-\d{2}[ T])?(?P<h>\d{1,2}):(?P<m>\d{2}):(?P<s>\d{2}(?:[.,]\d+)?)$"
+)
+
+
+def _clock_seconds(
+    path: Path, header: list[str], column: str, n: int, dialect: CsvDialect
+) -> np.ndarray | None:
+    """Seconds since the first sample of a column of clock times (``12:34:56.789``, or
+    ``2026-11-30 12:34:56.789``), or None when a non-empty cell of its first ``n`` rows is
+    not one. Empty cells are NaN (reported as missing values)."""
+    import pandas as pd
+
+    cells = pd.read_csv(
+        path,
+        dtype=str,
+        header=0,
+        names=header,
+        usecols=[column],
+        sep=dialect.sep,
+        encoding=dialect.encoding,
+        keep_default_na=False,
+        skip_blank_lines=False,
+        index_col=False,
+    )[column].iloc[:n]
+    cells = cells.fillna("").str.strip()
+    present = cells != ""
+    if not present.any():
+        return None
+    parts = cells[present].str.extract(_CLOCK)
+    if parts["h"].isna().any():
+        return None
+    secs = (
+        parts["h"].astype(float) * 3600.0
+        + parts["m"].astype(float) * 60.0
+        + parts["s"].str.replace(",", ".", regex=False).astype(float)
+    )
+    dated = parts["date"].notna()
+    if dated.any():
+        if not dated.all():
+            return None
+        days = pd.to_datetime(parts["date"].str.strip(), format="%Y-%m-%d").to_numpy()
+        days = (days - days[0]) / np.timedelta64(1, "D")
+        secs = secs + 86400.0 * days
+    out = np.full(n, np.nan)
+    out[present.to_numpy()] = secs.to_numpy(dtype=float)
+    first = out[np.isfinite(out)][0]
+    return out - first
+
+
 def _unnamed(i: int) -> str:
     """Placeholder name of the 0-based column ``i`` when its header is empty."""
     return f"(unnamed column {i + 1})"
@@ -356,6 +407,21 @@ def decode_csv(path: str | Path, wanted: Callable[[str], bool] | None = None) ->
             f"{path}: fewer fields than the {len(header)} columns of the header at {shown}{more} "
             "(a value is missing, so the values after it would land in the wrong columns)"
         )
+    clock_notes = []
+    converted: dict[str, str] = {}
+    for h in list(by_column):
+        name = dict(zip(header, names, strict=True))[h]
+        if wanted is not None and not wanted(name):
+            continue
+        seconds = _clock_seconds(path, header, h, n, dialect)
+        if seconds is not None:  # a logger's clock time: seconds since its first sample
+            columns[h] = seconds
+            del by_column[h]
+            unparseable.pop(h, None)
+            converted[h] = "a clock time (hh:mm:ss.fff)"
+            clock_notes.append(
+                f"{path}: column {name!r}: clock times read as seconds since its first sample"
+            )
     channels = []
     short_mask = np.isin(np.arange(n), short) if short else None
     dropped = []
@@ -384,8 +450,16 @@ def decode_csv(path: str | Path, wanted: Callable[[str], bool] | None = None) ->
         reported = unparseable.get(h)
         if short_mask is not None:  # already reported: not again as missing values
             reported = short_mask if reported is None else reported | short_mask
+        if h in converted:
+            channels.append(
+                RawChannel(
+                    name, columns[h], "s", where=where, reported=reported, converted=converted[h]
+                )
+            )
+            continue
         channels.append(RawChannel(name, columns[h], unit, where=where, reported=reported))
     notes = [] if dialect == CsvDialect() else [f"{path}: read as {dialect.describe()}"]
+    notes += clock_notes
     if dropped:
         notes.append(
             f"{path}: column(s) {', '.join(map(str, dropped))} without a name and without values "

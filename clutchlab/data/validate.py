@@ -111,7 +111,12 @@ def describe_runs(
     return "; ".join(shown) + more, max(b - a for a, b in runs)
 
 
-def check_time(t: np.ndarray, where: str, row_label: RowLabel = _default_row_label) -> list[str]:
+def check_time(
+    t: np.ndarray,
+    where: str,
+    row_label: RowLabel = _default_row_label,
+    reported: np.ndarray | None = None,
+) -> list[str]:
     """Problems of a time column: non-finite, duplicate or decreasing time stamps.
 
     Parameters
@@ -122,13 +127,19 @@ def check_time(t: np.ndarray, where: str, row_label: RowLabel = _default_row_lab
         Prefix naming file and column, e.g. ``"log.csv: column 'time_s'"``.
     row_label : callable, optional
         Maps a 0-based sample index to the text naming its row.
+    reported : numpy.ndarray of bool, optional
+        Samples whose problem the decoder already reported (unparseable cells, read as
+        NaN): not reported again as non-finite.
 
     Returns
     -------
     list of str
     """
     problems = []
-    bad = np.flatnonzero(~np.isfinite(t))
+    missing = ~np.isfinite(t)
+    if reported is not None and reported.shape == t.shape:
+        missing &= ~reported
+    bad = np.flatnonzero(missing)
     if bad.size:
         problems.append(f"{where}: non-finite value at {_rows(bad, row_label)}")
     pair = np.isfinite(t[1:]) & np.isfinite(t[:-1])
