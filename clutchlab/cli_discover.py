@@ -6,7 +6,7 @@ import argparse
 import shlex
 import sys
 
-from .cli_types import add_map_argument, positive_float
+from .cli_types import add_map_argument, positive_float, print_dither_notes
 
 __all__ = ["REPORT_FILES", "register"]
 
@@ -61,6 +61,7 @@ def _cmd_discover(args: argparse.Namespace) -> int:
     from .validation.discover import DiscoverySettings, discover, write_report
 
     dataset = load_dataset(args.dataset, channel_map=args.map)
+    print_dither_notes(dataset)
     train_ramps, test_ramps = _split_labels(dataset, args.train, args.test)
     model = CircuitModel().with_effects(*_csv(args.effects))
     fit = FitSettings(

@@ -119,6 +119,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
             f"{args.variant} has no latched GP of its own on the line pressure"
         )
     dataset = load_dataset(args.dataset, channel_map=args.map)
+    print_dither_notes(dataset)
     train = _training(dataset, _csv(args.train))
     params = {}
     if args.variant == "hybrid":

@@ -7,7 +7,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from .cli_types import add_map_argument, positive_float
+from .cli_types import add_map_argument, positive_float, print_dither_notes
 
 __all__ = ["register"]
 
@@ -44,6 +44,7 @@ def _cmd_select_structure(args: argparse.Namespace) -> int:
     from .physics.fit import FitSettings, StructureSelector
 
     dataset = load_dataset(args.dataset, channel_map=args.map)
+    print_dither_notes(dataset)
     train_ramps = _csv(args.train) or ("fast", "slow")
     dataset.select(ramps=train_ramps)  # an unknown label is an error, not a dropped ramp
     settings = FitSettings(

@@ -250,3 +250,33 @@ def test_the_fitting_commands_print_three_dither_notes_in_full_and_name_the_rest
         f"note: no dither frequency either in 2 more experiment(s): r{MAX_NOTES_SHOWN}.csv, "
         f"r{MAX_NOTES_SHOWN + 1}.csv (`clutchlab data check` lists each)"
     )
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["fit-physics", "--out", "{tmp}/fit.json", "--train", "nope"],
+        ["evaluate", "--out", "{tmp}/rep", "--train", "nope"],
+        ["train", "--variant", "gp_base", "--out", "{tmp}/m", "--train", "nope"],
+        ["classifiers", "--out", "{tmp}/c", "--train", "nope"],
+        ["discover", "--out", "{tmp}/d", "--train", "nope"],
+        ["select-structure", "--out", "{tmp}/s.json", "--train", "nope"],
+    ],
+)
+def test_every_fitting_command_prints_the_dither_note_first(stand_ds, tmp_path, capsys, command):
+    # `train` (and discover, select-structure) loaded the data without a word about a log
+    # whose dither the analyses cannot average out.
+    from clutchlab.cli import main
+
+    src = load_dataset(stand_ds)["medium_50Hz_B"]
+    keep = ("time_s", "current_mA", "clutch_pressure_bar")
+    own = Trace("r10s", {k: src.get(k) for k in keep}, meta={"ramp": "r10s"})
+    root = save_dataset(Dataset([own]), tmp_path / "own")
+    manifest = json.loads((root / "manifest.json").read_text())
+    manifest["experiments"][0].pop("dither_freq_Hz", None)
+    (root / "manifest.json").write_text(json.dumps(manifest))
+    args = [command[0], str(root), *(a.format(tmp=tmp_path) for a in command[1:])]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"note: {root / 'r10s.csv'}: no dither frequency"), err
+    assert "nope" in err
