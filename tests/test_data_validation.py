@@ -421,3 +421,26 @@ def test_two_files_with_one_stem_are_named_with_the_remedy(tmp_path):
         f"already used by experiments[0] ({root / 'day1' / 'r5s.csv'}); experiments are named "
         "by their file's stem, so rename one of the files" in text
     ), text
+
+
+def test_a_clutch_pressure_far_below_line_pressure_gets_a_unit_note(tmp_path):
+    # A psi channel declared as kPa in the channel map reads 6.9× low: 0.05 – 2.6 bar on a
+    # ramp to 1180 mA, and data check said OK.
+    n = 4000
+    t = np.arange(n) * 1e-3
+    current = np.interp(t, [0.0, 2.0, 4.0], [0.0, 1150.0, 0.0])
+    pressure = np.clip(current / 60.0, 0.5, 17.7)  # latched to line above ~1060 mA
+    sig = signals(n=n, current_mA=current, clutch_pressure_bar=pressure)
+    sig["line_pressure_bar"] = np.full(n, 17.7)
+    ok = write_raw_csv(tmp_path / "ok.csv", sig)
+    _, report = read_log(ok)
+    assert not [m for m in report.notes if "clutch pressure reaches" in m], report.notes
+    sig["clutch_pressure_bar"] = pressure * 14.5038 / 100.0  # psi, read as kPa
+    low = write_raw_csv(tmp_path / "low.csv", sig)
+    _, report = read_log(low)
+    (note,) = [m for m in report.notes if "clutch pressure reaches" in m]
+    assert note.startswith("clutch pressure reaches at most 2.57 bar, 15 % of the line pressure")
+    assert "check the clutch pressure's unit" in note
+    sig["current_mA"] = current * 0.5  # never above 1000 mA: need not have latched
+    _, report = read_log(write_raw_csv(tmp_path / "half.csv", sig))
+    assert not [m for m in report.notes if "clutch pressure reaches" in m], report.notes

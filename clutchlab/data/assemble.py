@@ -29,6 +29,7 @@ from .validate import (
     check_dither_rate,
     check_time,
     check_values,
+    clutch_pressure_scale_note,
     describe_runs,
     fill_runs,
     nonfinite_runs,
@@ -528,6 +529,8 @@ def assemble(
         if trace is not None and not problems and found_dither_Hz is not None:
             notes.append(no_dither_frequency_note(found_dither_Hz))
         if trace is not None and not problems and (note := no_dither_amplitude_note(trace)):
+            notes.append(note)
+        if trace is not None and not problems and (note := clutch_pressure_scale_note(trace)):
             notes.append(note)
     if trace is None:  # describe the log as read, for `clutchlab data check`
         if bases and used_bases:

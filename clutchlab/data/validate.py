@@ -24,6 +24,7 @@ __all__ = [
     "check_dither_rate",
     "check_time",
     "check_values",
+    "clutch_pressure_scale_note",
     "fill_runs",
     "nonfinite_runs",
     "validate_trace",
@@ -33,6 +34,12 @@ __all__ = [
 MIN_SAMPLES_PER_DITHER_PERIOD = 10.0
 
 RowLabel = Callable[[int], str]
+
+#: Below this share of the line pressure, a clutch pressure that never rises further gets a
+#: note on its unit (a latching circuit reaches line pressure at high current).
+LOW_CLUTCH_SHARE = 0.25
+#: Nominal current (mA) above which a clutch circuit is expected to have latched.
+LATCHED_CURRENT_MA = 1000.0
 
 
 def _rows(idx: np.ndarray, row_label: RowLabel) -> str:
@@ -185,6 +192,50 @@ def _unit_problem(signal: str, values: np.ndarray) -> tuple[str, int] | None:
         unit = "kelvin or °F" if low >= 233.15 else "°F"  # -40 °C = 233.15 K = -40 °F
         return f"values look like {unit} ({low:g} to {peak:g}); the unit must be °C", i_max
     return None
+
+
+def clutch_pressure_scale_note(trace: Trace) -> str | None:
+    """A note when the clutch pressure stays far below the line pressure although the
+    current went high enough to latch: a unit off by a factor (psi declared as kPa reads
+    6.9× low, bar as kPa 100×) that no range check catches.
+
+    Parameters
+    ----------
+    trace : Trace
+        One experiment, canonical signals (bar, mA).
+
+    Returns
+    -------
+    str or None
+        The note when the 99.5th percentile of ``clutch_pressure_bar`` is below
+        :data:`LOW_CLUTCH_SHARE` of the median line pressure (17.7 bar when not logged) and
+        the current (command, else measured) exceeds :data:`LATCHED_CURRENT_MA`; else None.
+    """
+    current = "current_cmd_mA" if trace.has("current_cmd_mA") else "current_mA"
+    if not trace.has("clutch_pressure_bar") or not trace.has(current):
+        return None
+    i = np.asarray(trace.get(current), dtype=float)
+    p = np.asarray(trace.get("clutch_pressure_bar"), dtype=float)
+    if not (np.isfinite(i).any() and np.isfinite(p).any()):
+        return None
+    if np.nanpercentile(i, 99.5) < LATCHED_CURRENT_MA:
+        return None
+    logged = trace.has("line_pressure_bar")
+    line = (
+        float(np.nanmedian(trace.get("line_pressure_bar")))
+        if logged
+        else float(SIGNALS["line_pressure_bar"].default)
+    )
+    top = float(np.nanpercentile(p, 99.5))
+    if not line > 0 or top >= LOW_CLUTCH_SHARE * line:
+        return None
+    return (
+        f"clutch pressure reaches at most {top:.3g} bar, {100 * top / line:.0f} % of the line "
+        f"pressure ({line:.3g} bar{'' if logged else ', the default'}), although the current "
+        f"goes above {LATCHED_CURRENT_MA:g} mA where a clutch circuit latches to line "
+        "pressure: check the clutch pressure's unit (psi read as kPa is 6.9× low, bar read "
+        "as kPa 100×)"
+    )
 
 
 def check_values(
