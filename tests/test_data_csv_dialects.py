@@ -138,6 +138,13 @@ def test_a_trailing_separator_column_without_name_or_values_is_ignored(canonical
     assert f"{path}: column(s) {n + 1} without a name and without values ignored" in " ".join(
         decode_csv(path).notes
     )
+    # a separator after the header only: the data rows lack the unnamed field; before the
+    # unnamed column was read, this said "empty column name"; it must not now say that
+    # every line is short
+    head_only = tmp_path / "head_only.csv"
+    head_only.write_text(lines[0] + ";\n" + "".join(f"{line}\n" for line in lines[1:]))
+    back = read_csv(head_only)
+    np.testing.assert_array_equal(back.get("current_cmd_mA"), read_csv(src).get("current_cmd_mA"))
     full = tmp_path / "full.csv"
     full.write_text(lines[0] + ";\n" + "".join(f"{line};7\n" for line in lines[1:]))
     with pytest.raises(DataError) as info:

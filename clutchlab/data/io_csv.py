@@ -392,10 +392,16 @@ def decode_csv(path: str | Path, wanted: Callable[[str], bool] | None = None) ->
         )
         n = next(iter(columns.values())).size
         fields = len(next(csv.reader([_last_line(path)], delimiter=dialect.sep), []))
-        short = _short_rows(path, len(header), n, dialect.sep)
+        # unnamed columns at the end (a separator after the last header only) may be absent
+        # from a row: nothing lands in a wrong column then
+        trailing = 0
+        while trailing < len(header) and len(header) - 1 - trailing in unnamed:
+            trailing += 1
+        needed = len(header) - trailing
+        short = _short_rows(path, needed, n, dialect.sep)
     except csv.Error as exc:  # e.g. a field longer than the csv module's field size limit
         raise DataError(f"{path}: malformed CSV ({exc})") from None
-    if fields < len(header):
+    if fields < needed:
         problems.append(
             f"{path}: file truncated: {_line_label(n - 1)} has {fields} of {len(header)} fields"
         )
