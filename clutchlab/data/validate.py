@@ -194,6 +194,13 @@ def _unit_problem(signal: str, values: np.ndarray) -> tuple[str, int] | None:
     return None
 
 
+def _share_at_least(x: np.ndarray, level) -> float:
+    """Share of the finite samples of ``x`` at or above ``level`` (a number, or one per
+    sample); 0 when none is finite."""
+    finite = np.count_nonzero(np.isfinite(x))
+    return np.count_nonzero(x >= level) / finite if finite else 0.0
+
+
 def clutch_pressure_scale_note(trace: Trace) -> str | None:
     """A note when the clutch pressure stays far below the line pressure although the
     current went high enough to latch: a unit off by a factor (psi declared as kPa reads
@@ -218,17 +225,19 @@ def clutch_pressure_scale_note(trace: Trace) -> str | None:
     p = np.asarray(trace.get("clutch_pressure_bar"), dtype=float)
     if not (np.isfinite(i).any() and np.isfinite(p).any()):
         return None
-    if np.nanpercentile(i, 99.5) < LATCHED_CURRENT_MA:
+    # "the 99.5th percentile is below x" read as "at most 0.5 % of the samples reach x":
+    # counts, not sorts, so that every load of 10⁶ samples does not pay ~30 ms for a note
+    if _share_at_least(i, LATCHED_CURRENT_MA) <= 0.005:
         return None
     logged = trace.has("line_pressure_bar")
-    line = (
-        float(np.nanmedian(trace.get("line_pressure_bar")))
-        if logged
-        else float(SIGNALS["line_pressure_bar"].default)
-    )
-    top = float(np.nanpercentile(p, 99.5))
-    if not line > 0 or top >= LOW_CLUTCH_SHARE * line:
+    default = float(SIGNALS["line_pressure_bar"].default)
+    line_at = np.asarray(trace.get("line_pressure_bar"), dtype=float) if logged else default
+    if _share_at_least(p, LOW_CLUTCH_SHARE * line_at) > 0.005:
         return None
+    line = float(np.nanmedian(line_at)) if logged else default  # for the note's text only
+    if not line > 0:
+        return None
+    top = float(np.nanpercentile(p, 99.5))
     return (
         f"clutch pressure reaches at most {top:.3g} bar, {100 * top / line:.0f} % of the line "
         f"pressure ({line:.3g} bar{'' if logged else ', the default'}), although the current "
