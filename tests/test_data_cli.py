@@ -9,7 +9,15 @@ import sys
 import numpy as np
 import pytest
 
-from clutchlab.data import FORMATS, Dataset, FileFormat, Trace, load_dataset, save_dataset
+from clutchlab.data import (
+    FORMATS,
+    Dataset,
+    FileFormat,
+    Trace,
+    dither_period_samples,
+    load_dataset,
+    save_dataset,
+)
 from clutchlab.data.convert import convert
 from clutchlab.errors import DataError
 from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
@@ -181,9 +189,14 @@ def test_an_experiment_without_a_dither_frequency_gets_a_note(stand_ds, tmp_path
     (note,) = [ln for ln in res.stdout.splitlines() if "no dither frequency" in ln]
     assert f"{root / 'r10s_run2.csv'}: no dither frequency" in note
     assert "carries a dither at about 50 Hz" in note and '"dither_freq_Hz": 50' in note
-    print_dither_notes(load_dataset(root))  # what fit-physics, evaluate and train print
+    loaded = load_dataset(root)
+    print_dither_notes(loaded)  # what fit-physics, evaluate and train print
     err = capsys.readouterr().err
     assert err.startswith(f"note: {root / 'r10s_run2.csv'}: no dither frequency"), err
+    # the frequency found is the period of the means downstream (was 1 sample: DESIGN §3
+    # says "demodulated if absent")
+    assert loaded[0].meta["dither_freq_found_Hz"] == pytest.approx(50.0, rel=0.01)
+    assert dither_period_samples(loaded[0]) == pytest.approx(20.0, rel=0.01)
     manifest["experiments"][0]["dither_freq_Hz"] = 50
     (root / "manifest.json").write_text(json.dumps(manifest))
     res = cli("check", root)

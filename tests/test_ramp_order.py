@@ -36,6 +36,23 @@ def test_ramp_rate_is_the_ramps_slope_from_the_command_or_the_measured_current(m
     assert rate == pytest.approx(1100.0 / 0.5, rel=0.03)
 
 
+def test_a_measured_currents_noise_does_not_make_a_slow_ramp_fast():
+    """Stand-like measured current: 2 mA noise, 0.5 mA quantization, 100 mA dither at 50 Hz
+    on a 27.5 mA/s ramp (the slow one). Its two-sample slope after the period mean read
+    ~180 mA/s, faster than a 110 mA/s ramp (logger-data pass, session 43)."""
+    rng = np.random.default_rng(0)
+    t = np.arange(0.0, 40.0, 1e-3)
+    cmd = np.interp(t, [0.0, 40.0], [0.0, 1100.0])
+    measured = cmd + 100.0 * np.sin(2 * np.pi * 50.0 * t) + rng.normal(0.0, 2.0, t.size)
+    signals = {
+        "time_s": t,
+        "current_mA": np.round(measured / 0.5) * 0.5,
+        "clutch_pressure_bar": cmd / 100.0,
+    }
+    slow = Trace("slow", signals, meta={"ramp": "slow", "dither_freq_Hz": 50.0})
+    assert ramp_rate_mA_s(slow) == pytest.approx(27.5, rel=0.1)
+
+
 def test_a_held_current_has_rate_zero_and_its_label_comes_last():
     held = make_trace([0, 1.0], [500, 500], ramp="hold")
     assert ramp_rate_mA_s(held) == 0.0

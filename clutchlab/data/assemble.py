@@ -18,6 +18,7 @@ import numpy as np
 from ..errors import DataError
 from .channel_map import ChannelMap, ChannelSpec
 from .demodulate import dither_in_current, no_dither_amplitude_note, no_dither_frequency_note
+from .derived import FOUND_DITHER_KEY
 from .options import ReadOptions
 from .rawlog import RawChannel, RawLog, TimeBase
 from .report import LoadReport
@@ -522,6 +523,8 @@ def assemble(
                     signals[signal] = np.full(grid.size, value)
                     defaults[signal] = value
                     sources[signal] = f"default {value:g} {SIGNALS[signal].unit} ({cmap.label})"
+        if found_dither_Hz is not None:  # the period of the means downstream (DESIGN §3)
+            meta = {**meta, FOUND_DITHER_KEY: found_dither_Hz}
         try:
             trace = Trace(name, signals, meta=meta, source=raw.path)
         except DataError as exc:

@@ -426,19 +426,20 @@ def no_dither_frequency_note(freq_Hz: float) -> str:
     a dither at ``freq_Hz`` (Hz; :func:`dither_in_current`).
 
     Without a dither frequency (no ``dither_freq_Hz`` column, manifest key or channel-map
-    default), :func:`~clutchlab.data.derived.dither_period_samples` is 1 sample, so every
-    dither-period mean downstream — the physics fit's cost, the ramp rate that picks the
-    quasi-static experiments, the report's primary scores — is taken over single samples of
-    a current and pressure that still carry the dither. The note says so and where to
-    declare the frequency; it begins with :data:`NO_DITHER_FREQUENCY`.
+    default) every dither-period mean downstream — the physics fit's cost, the ramp rate that
+    picks the quasi-static experiments, the report's primary scores — is taken over the
+    period of the frequency found here (the log's ``dither_freq_found_Hz`` metadata,
+    :func:`~clutchlab.data.derived.dither_period_samples`; before session 43, over single
+    samples of a dithered current and pressure). The note says so and where to declare the
+    frequency; it begins with :data:`NO_DITHER_FREQUENCY`.
     """
     return (
         f"{NO_DITHER_FREQUENCY} (no 'dither_freq_Hz' column, manifest key or channel-map "
         f"default), but its measured current carries a dither at about {freq_Hz:.3g} Hz: "
-        "the dither-period means (the physics fit's cost, the ramp rate that picks the "
-        "quasi-static experiments, the report's primary scores) are then taken over single "
-        f'samples; declare it: "dither_freq_Hz": {freq_Hz:.3g} in its manifest entry, or '
-        f"dither_freq_Hz = {freq_Hz:.3g} under [defaults] in its channel map"
+        "that frequency, demodulated, sets the dither-period means (the physics fit's cost, "
+        "the ramp rate that picks the quasi-static experiments, the report's primary "
+        f'scores); declare it to be sure: "dither_freq_Hz": {freq_Hz:.3g} in its manifest '
+        f"entry, or dither_freq_Hz = {freq_Hz:.3g} under [defaults] in its channel map"
     )
 
 

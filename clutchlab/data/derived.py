@@ -244,13 +244,21 @@ def first_order_lag(x: np.ndarray, tau_s: float, sample_rate_Hz: float) -> np.nd
     return y
 
 
+#: Trace metadata key of the dither frequency (Hz) found in the measured current when a log
+#: declares none (set when the log is read; see :func:`dither_period_samples`).
+FOUND_DITHER_KEY = "dither_freq_found_Hz"
+
+
 def dither_period_samples(trace) -> float:
     """Samples in one dither period of ``trace`` (fractional; 1.0 without dither).
 
     The dither frequency (Hz) is the median of the ``dither_freq_Hz`` signal where it is
     positive (a logger that writes 0 Hz while the dither is off, over half the samples, gave
-    a 1-sample period), else the manifest's ``dither_freq_Hz``; the sample rate (Hz) is the
-    trace's.
+    a 1-sample period), else the manifest's ``dither_freq_Hz``, else the frequency
+    demodulated from the measured current when the log was read (metadata
+    :data:`FOUND_DITHER_KEY`: DESIGN §3's "demodulated if absent"; before, such a log's
+    "dither-period means" were single samples of a dithered pressure); the sample rate (Hz)
+    is the trace's.
     """
     if trace.has("dither_freq_Hz"):
         f = np.asarray(trace.get("dither_freq_Hz"), dtype=float)
@@ -258,6 +266,8 @@ def dither_period_samples(trace) -> float:
         f = float(np.median(f)) if f.size else 0.0
     else:
         f = float(trace.meta.get("dither_freq_Hz", 0.0) or 0.0)
+        if not f > 0:
+            f = float(trace.meta.get(FOUND_DITHER_KEY, 0.0) or 0.0)
     return max(1.0, trace.sample_rate_Hz / f) if f > 0 else 1.0
 
 
