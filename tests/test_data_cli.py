@@ -171,19 +171,26 @@ def test_a_path_that_does_not_exist_is_an_error_of_the_call(tmp_path, command):
     assert not (tmp_path / "out").exists()
 
 
-def test_an_experiment_without_a_dither_frequency_gets_a_note(stand_ds, tmp_path, capsys):
-    # A logger's export with the measured current only, no dither_freq_Hz column and none in
-    # the manifest: dither_period_samples is then 1 sample, so the fit's cost, the ramp rate
-    # and the report's "dither-period mean" scores average nothing, and nothing said so.
-    from clutchlab.cli_types import print_dither_notes
-
+def _undeclared_log(stand_ds, tmp_path, name: str):
+    """A logger's export of one stand experiment: measured current and clutch pressure only,
+    no dither frequency anywhere; its folder and manifest."""
     src = load_dataset(stand_ds)["medium_50Hz_B"]
     keep = ("time_s", "current_mA", "clutch_pressure_bar")
-    own = Trace("r10s_run2", {k: src.get(k) for k in keep}, meta={"ramp": "r10s"})
+    own = Trace(name, {k: src.get(k) for k in keep}, meta={"ramp": "r10s"})
     root = save_dataset(Dataset([own]), tmp_path / "own")
     manifest = json.loads((root / "manifest.json").read_text())
     manifest["experiments"][0].pop("dither_freq_Hz", None)
     (root / "manifest.json").write_text(json.dumps(manifest))
+    return root, manifest
+
+
+def test_an_experiment_without_a_dither_frequency_gets_a_note(stand_ds, tmp_path, capsys):
+    # A logger's export with the measured current only, no dither_freq_Hz column and none in
+    # the manifest: dither_period_samples was then 1 sample, so the fit's cost, the ramp rate
+    # and the report's "dither-period mean" scores averaged nothing, and nothing said so.
+    from clutchlab.cli_types import print_dither_notes
+
+    root, manifest = _undeclared_log(stand_ds, tmp_path, "r10s_run2")
     res = cli("check", root)
     assert res.returncode == 0, res.stderr
     (note,) = [ln for ln in res.stdout.splitlines() if "no dither frequency" in ln]
@@ -281,13 +288,7 @@ def test_every_fitting_command_prints_the_dither_note_first(stand_ds, tmp_path, 
     # whose dither the analyses cannot average out.
     from clutchlab.cli import main
 
-    src = load_dataset(stand_ds)["medium_50Hz_B"]
-    keep = ("time_s", "current_mA", "clutch_pressure_bar")
-    own = Trace("r10s", {k: src.get(k) for k in keep}, meta={"ramp": "r10s"})
-    root = save_dataset(Dataset([own]), tmp_path / "own")
-    manifest = json.loads((root / "manifest.json").read_text())
-    manifest["experiments"][0].pop("dither_freq_Hz", None)
-    (root / "manifest.json").write_text(json.dumps(manifest))
+    root, _ = _undeclared_log(stand_ds, tmp_path, "r10s")
     args = [command[0], str(root), *(a.format(tmp=tmp_path) for a in command[1:])]
     assert main(args) == 2
     err = capsys.readouterr().err

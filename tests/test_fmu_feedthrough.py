@@ -11,10 +11,32 @@ outputs that never moved. Also what such a master may send: input derivatives of
 from __future__ import annotations
 
 import shutil
+from contextlib import contextmanager
 
 import fmpy
 from fmpy.fmi2 import FMU2Slave
 from fmu_support import exported
+
+
+@contextmanager
+def _initialized(path, vr: dict, current_mA: float):
+    """An instance of the FMU ``path`` out of initialization at ``current_mA`` (mA)."""
+    md = fmpy.read_model_description(str(path))
+    unzip = fmpy.extract(str(path))
+    fmu = FMU2Slave(
+        guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.coSimulation.modelIdentifier
+    )
+    try:
+        fmu.instantiate()
+        fmu.setupExperiment(startTime=0.0)
+        fmu.enterInitializationMode()
+        fmu.setReal([vr["current_cmd_mA"]], [current_mA])
+        fmu.exitInitializationMode()
+        yield fmu
+        fmu.terminate()
+    finally:
+        fmu.freeInstance()
+        shutil.rmtree(unzip, ignore_errors=True)
 
 
 def test_outputs_declare_no_dependency_on_the_inputs():
@@ -30,16 +52,7 @@ def test_an_input_set_after_a_step_does_not_change_the_outputs_until_the_next_st
     md = fmpy.read_model_description(str(path))
     vr = {v.name: v.valueReference for v in md.modelVariables}
     outs = [v.valueReference for v in md.modelVariables if v.causality == "output"]
-    unzip = fmpy.extract(str(path))
-    fmu = FMU2Slave(
-        guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.coSimulation.modelIdentifier
-    )
-    try:
-        fmu.instantiate()
-        fmu.setupExperiment(startTime=0.0)
-        fmu.enterInitializationMode()
-        fmu.setReal([vr["current_cmd_mA"]], [500.0])
-        fmu.exitInitializationMode()
+    with _initialized(path, vr, 500.0) as fmu:
         for k in range(20):
             fmu.doStep(k * 1e-3, 1e-3)
         before = fmu.getReal(outs)
@@ -47,10 +60,6 @@ def test_an_input_set_after_a_step_does_not_change_the_outputs_until_the_next_st
         assert fmu.getReal(outs) == before
         fmu.doStep(20e-3, 1e-3)
         assert fmu.getReal(outs) != before
-        fmu.terminate()
-    finally:
-        fmu.freeInstance()
-        shutil.rmtree(unzip, ignore_errors=True)
 
 
 def test_higher_input_derivative_orders_are_accepted_and_unused():
@@ -64,16 +73,7 @@ def test_higher_input_derivative_orders_are_accepted_and_unused():
     cur, p = vr["current_cmd_mA"], vr["clutch_pressure_bar"]
     out = []
     for orders in ([1], [1, 2]):
-        unzip = fmpy.extract(str(path))
-        fmu = FMU2Slave(
-            guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.coSimulation.modelIdentifier
-        )
-        try:
-            fmu.instantiate()
-            fmu.setupExperiment(startTime=0.0)
-            fmu.enterInitializationMode()
-            fmu.setReal([cur], [400.0])
-            fmu.exitInitializationMode()
+        with _initialized(path, vr, 400.0) as fmu:
             for k in range(50):
                 fmu.setReal([cur], [400.0 + 4000.0 * k * 1e-3])
                 fmu.setRealInputDerivatives(
@@ -81,8 +81,4 @@ def test_higher_input_derivative_orders_are_accepted_and_unused():
                 )
                 fmu.doStep(k * 1e-3, 1e-3)
             out.append(fmu.getReal([p])[0])
-            fmu.terminate()
-        finally:
-            fmu.freeInstance()
-            shutil.rmtree(unzip, ignore_errors=True)
     assert out[0] == out[1]

@@ -120,10 +120,11 @@ def load_predictor(path: str | Path, substeps: int | None = None) -> LoadedModel
     try:
         circuit, params = physics_source(path)
     except ClutchlabError as exc:
-        raise ModelError(
-            f"{path}: not a model clutchlab can predict with (a `clutchlab train` model.json, "
-            "a `fit-physics` result or a `params --out` design file)",
-            getattr(exc, "problems", None) or [str(exc)],
+        raise _refused(
+            path,
+            "not a model clutchlab can predict with (a `clutchlab train` model.json, a "
+            "`fit-physics` result or a `params --out` design file)",
+            exc,
         ) from exc
     trained = tuple(doc.get("train") or ()) if isinstance(doc.get("train"), list) else ()
     kind = "fitted physics model (clutchlab fit-physics)" if trained else "physics design"
@@ -141,12 +142,19 @@ def _fmu(path: Path, substeps: int | None) -> LoadedModel:
     try:
         model = FmuPhysics(path)
     except ClutchlabError as exc:
-        raise ModelError(
-            f"{path}: an FMU clutchlab cannot predict with (`clutchlab evaluate --physics-fmu` "
-            "maps other input names and sets parameters)",
-            getattr(exc, "problems", None) or [str(exc)],
+        raise _refused(
+            path,
+            "an FMU clutchlab cannot predict with (`clutchlab evaluate --physics-fmu` maps "
+            "other input names and sets parameters)",
+            exc,
         ) from exc
     return LoadedModel(model, "FMU", False, ())
+
+
+def _refused(path: Path, why: str, exc: ClutchlabError) -> ModelError:
+    """The error for a model file refused by its loader: the file, why, and every problem
+    the loader listed (or its message)."""
+    return ModelError(f"{path}: {why}", getattr(exc, "problems", None) or [str(exc)])
 
 
 #: The ``train`` variant each saved estimator class stands for (``paper_faithful`` saves as
