@@ -507,6 +507,10 @@ def _check_replaceable(path: str | Path, args: argparse.Namespace, flag: str, ki
             "it; choose another name (or remove the file)"
         )
     if kind == "json":
+        # a --json summary never replaces a model, nor an --out one of another kind
+        # (export-fmu --json fit.json once replaced the fit it had just exported)
+        from .data import MODEL_FILE_KINDS, model_file_kind
+
         have = model_file_kind(target)
         writes = getattr(args, "out_writes" if flag == "--out" else "json_writes", None)
         if have is not None and have != writes:
@@ -515,36 +519,6 @@ def _check_replaceable(path: str | Path, args: argparse.Namespace, flag: str, ki
                 f"{flag} {target}: holds {MODEL_FILE_KINDS[have]}, which {what} would "
                 "replace; choose another name"
             )
-
-
-#: The model files clutchlab writes as JSON, by kind (what :func:`model_file_kind` returns).
-MODEL_FILE_KINDS = {
-    "fit": "a fitted physics model (clutchlab fit-physics)",
-    "ml": "a model of clutchlab train",
-    "physics": "a physics model description (PhysicsPredictor)",
-    "design": "a design's parameter file (clutchlab params --out)",
-}
-
-
-def model_file_kind(path: str | Path) -> str | None:
-    """Which model a JSON file holds (a key of :data:`MODEL_FILE_KINDS`), None for anything
-    else (a summary, a report's metrics, not JSON). A command's ``--json`` summary must not
-    replace a model, nor its ``--out`` one of another kind (``export-fmu --json fit.json``
-    once replaced the fit it had just exported)."""
-    from .data import read_json_object
-
-    doc = read_json_object(path)
-    if doc is None:
-        return None
-    if "format" in doc:
-        return "ml"
-    if doc.get("kind") == "PhysicsPredictor":
-        return "physics"
-    if set(doc) == {"parameters"}:
-        return "design"
-    if {"values", "free", "status", "effects"} <= set(doc):
-        return "fit"
-    return None
 
 
 def check_json_apart(

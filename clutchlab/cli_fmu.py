@@ -10,12 +10,11 @@ __all__ = ["register"]
 
 
 def _is_ml_model(path: str) -> bool:
-    """Whether ``path`` claims to be a model saved by ``clutchlab.residual_ml.save_model``
-    (a ``"format"`` key: a fit result has none); the loader then checks it."""
-    from .data import read_json_object
+    """Whether ``path`` claims to be a model saved by ``clutchlab.residual_ml.save_model``;
+    the loader then checks it."""
+    from .data import model_file_kind
 
-    doc = read_json_object(path)
-    return doc is not None and "format" in doc
+    return model_file_kind(path) == "ml"
 
 
 def _export(args: argparse.Namespace) -> Path:

@@ -35,7 +35,7 @@ from .io_dataset import DatasetScan, load_dataset, save_dataset, scan_dataset
 from .io_mat import write_mat, write_mat73
 from .io_mf4 import read_mf4, write_mf4
 from .io_parquet import read_parquet, write_parquet
-from .json_file import read_json_object
+from .json_file import MODEL_FILE_KINDS, model_doc_kind, model_file_kind, read_json_object
 from .metrics import pressure_metrics
 from .options import ReadOptions
 from .output import OWNED_NAME, check_output, owned_files, write_file_atomic, write_folder_atomic
@@ -51,6 +51,7 @@ from .validate import validate_trace
 __all__ = [
     "CANONICAL_ORDER",
     "FORMATS",
+    "MODEL_FILE_KINDS",
     "OWNED_NAME",
     "SIGNALS",
     "ChannelMap",
@@ -82,6 +83,8 @@ __all__ = [
     "first_order_lag",
     "load_channel_map",
     "load_dataset",
+    "model_doc_kind",
+    "model_file_kind",
     "nominal_current",
     "nominal_didt",
     "order_ramps",

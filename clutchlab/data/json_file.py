@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-__all__ = ["read_json_object"]
+__all__ = ["MODEL_FILE_KINDS", "model_doc_kind", "model_file_kind", "read_json_object"]
 
 
 def read_json_object(path: str | Path, max_bytes: int | None = None) -> dict[str, Any] | None:
@@ -36,3 +36,38 @@ def read_json_object(path: str | Path, max_bytes: int | None = None) -> dict[str
     except (OSError, ValueError, RecursionError):
         return None
     return doc if isinstance(doc, dict) else None
+
+
+#: The model files clutchlab writes as JSON, by kind (what :func:`model_file_kind` returns).
+MODEL_FILE_KINDS = {
+    "fit": "a fitted physics model (clutchlab fit-physics)",
+    "ml": "a model of clutchlab train",
+    "physics": "a physics model description (PhysicsPredictor)",
+    "design": "a design's parameter file (clutchlab params --out)",
+}
+
+
+def model_doc_kind(doc: dict[str, Any] | None) -> str | None:
+    """Which model a JSON object is by its keys (a key of :data:`MODEL_FILE_KINDS`), None for
+    anything else; only recognized here, checked by the kind's own loader.
+
+    ``ml``: a ``"format"`` key (``residual_ml.save_model``); ``physics``: ``"kind":
+    "PhysicsPredictor"``; ``design``: a ``"parameters"`` key only (``ParameterSet.to_json``);
+    ``fit``: ``values``, ``free``, ``status`` and ``effects`` (``FitResult.to_json``).
+    """
+    if doc is None:
+        return None
+    if "format" in doc:
+        return "ml"
+    if doc.get("kind") == "PhysicsPredictor":
+        return "physics"
+    if set(doc) == {"parameters"}:
+        return "design"
+    if {"values", "free", "status", "effects"} <= set(doc):
+        return "fit"
+    return None
+
+
+def model_file_kind(path: str | Path) -> str | None:
+    """:func:`model_doc_kind` of the JSON object in ``path`` (None when there is none)."""
+    return model_doc_kind(read_json_object(path))

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..data import Trace, read_json_object, write_file_atomic
+from ..data import Trace, model_file_kind, write_file_atomic
 from ..errors import ModelError
 from ..physics import CircuitModel, SimulationSettings, simulate
 
@@ -178,8 +178,7 @@ class PhysicsPredictor:
     def describes(path: str | Path) -> bool:
         """Whether ``path`` holds a JSON object that says it is a PhysicsPredictor
         (``"kind": "PhysicsPredictor"``), valid or not; False when it cannot be read."""
-        doc = read_json_object(path)
-        return doc is not None and doc.get("kind") == "PhysicsPredictor"
+        return model_file_kind(path) == "physics"
 
 
 def DefaultPhysics(substeps: int = 4) -> PhysicsPredictor:

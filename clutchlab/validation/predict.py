@@ -19,6 +19,7 @@ from ..data import (
     Trace,
     dither_period_mean,
     dither_period_samples,
+    model_doc_kind,
     nominal_current,
     pressure_metrics,
     read_json_object,
@@ -95,7 +96,8 @@ def load_predictor(path: str | Path, substeps: int | None = None) -> LoadedModel
         raise ModelError(
             f"{path}: not a model file (it is missing, or neither a JSON object nor an FMU)"
         )
-    if "format" in doc:  # a residual_ml model; the loader checks the rest
+    kind = model_doc_kind(doc)
+    if kind == "ml":  # a residual_ml model; the loader checks the rest
         if substeps is not None:
             raise ModelError(
                 f"{path}: --substeps sets the ROS2 steps of a physics model; an ML model has "
@@ -112,7 +114,7 @@ def load_predictor(path: str | Path, substeps: int | None = None) -> LoadedModel
     steps = 4 if substeps is None else substeps
     if not is_integer(steps) or not 1 <= steps <= MAX_SUBSTEPS:
         raise ModelError(f"substeps {steps!r} is not an integer in 1..{MAX_SUBSTEPS}")
-    if PhysicsPredictor.describes(path):
+    if kind == "physics":
         model = PhysicsPredictor.load(path)
         if substeps is not None:
             model = PhysicsPredictor(model.effects, model.params, steps, model.train_experiments)

@@ -6,7 +6,7 @@ import warnings
 import zipfile
 from pathlib import Path
 
-from ...data import read_json_object
+from ...data import model_file_kind, read_json_object
 from ...errors import ClutchlabError, FitError, FitResultError, FitWarning
 from ..model import CircuitModel
 from ..parameters import ParameterSet
@@ -156,8 +156,7 @@ def design_source(path: str | Path) -> tuple[CircuitModel, ParameterSet]:
 
 def _is_parameter_file(path: Path) -> bool:
     """Whether ``path`` is a JSON object whose only key is ``parameters``."""
-    doc = read_json_object(path)
-    return doc is not None and set(doc) == {"parameters"}
+    return model_file_kind(path) == "design"
 
 
 def export_physics_fmu(
