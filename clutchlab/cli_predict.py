@@ -59,7 +59,6 @@ def _cmd_predict(args: argparse.Namespace) -> int:
 
     from .data import load_dataset, write_folder_atomic
     from .data.output import check_report_out
-    from .errors import ModelError
     from .validation.predict import (
         load_predictor,
         overall_metrics,
@@ -68,8 +67,8 @@ def _cmd_predict(args: argparse.Namespace) -> int:
     )
 
     loaded = load_predictor(args.model, args.substeps)  # checked before the data are read
-    if args.std and not loaded.has_std:
-        raise ModelError(f"--std: the {loaded.kind} {args.model} has no predictive std")
+    if args.std:
+        loaded.check_std(f"--std: {args.model}: ")
     dataset = load_dataset(args.dataset, channel_map=args.map)
     chosen = dataset.select(ramps=_names(args.ramps), names=_names(args.experiments))
     ext = "parquet" if args.format == "parquet" else "csv"

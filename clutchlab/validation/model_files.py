@@ -42,7 +42,7 @@ def _estimator_files(name: str, model: Any) -> dict[str, bytes]:
         }
 
 
-def model_files(models: dict[str, Any]) -> tuple[dict[str, bytes], dict[str, str]]:
+def model_files(models: dict[str, Any]) -> tuple[dict[str, dict[str, bytes]], dict[str, str]]:
     """Files of the fitted models of an evaluation (``Evaluation.models``).
 
     ``physics_fitted`` is written as a ``fit-physics`` result (``models/physics_fitted.json``),
@@ -56,11 +56,11 @@ def model_files(models: dict[str, Any]) -> tuple[dict[str, bytes], dict[str, str
 
     Returns
     -------
-    (dict of str to bytes, dict of str to str)
-        Relative path → content; and variant name → why it has no file (nothing of its own
-        to save, or a part that cannot be saved without pickle).
+    (dict of str to dict of str to bytes, dict of str to str)
+        Variant name → its files (relative path → content); and variant name → why it has
+        no file (nothing of its own to save, or a part that cannot be saved without pickle).
     """
-    files: dict[str, bytes] = {}
+    saved: dict[str, dict[str, bytes]] = {}
     skipped: dict[str, str] = {}
     for name, model in models.items():
         if name in _NOT_SAVED:
@@ -69,9 +69,9 @@ def model_files(models: dict[str, Any]) -> tuple[dict[str, bytes], dict[str, str
         target = getattr(model, "hybrid_", None) or model  # augmented_hybrid: its hybrid
         try:
             if hasattr(target, "fitter_"):
-                files |= _fit_result_files(name, target)
+                saved[name] = _fit_result_files(name, target)
             else:
-                files |= _estimator_files(name, target)
+                saved[name] = _estimator_files(name, target)
         except ClutchlabError as exc:
             skipped[name] = str(exc).splitlines()[0]
-    return files, skipped
+    return saved, skipped

@@ -48,16 +48,29 @@ class LoadedModel:
         ``predict(trace, return_std=True)`` → (mean, std) (bar).
     kind : str
         What the file held, in words (e.g. ``"paper_svc_gp model (clutchlab train)"``).
-    has_std : bool
-        Whether the model gives a predictive standard deviation.
     train_experiments : tuple of str
         Experiments the model was trained or fitted on (empty when not known or none).
     """
 
     model: object
     kind: str
-    has_std: bool
     train_experiments: tuple[str, ...]
+
+    @property
+    def has_std(self) -> bool:
+        """Whether the model gives a predictive standard deviation (``return_std``)."""
+        return supports_std(self.model)
+
+    def check_std(self, what: str = "") -> None:
+        """Refuse a predictive std the model does not give.
+
+        Raises
+        ------
+        ModelError
+            Naming the model (and ``what`` asked for it, e.g. ``"--std: "``).
+        """
+        if not self.has_std:
+            raise ModelError(f"{what}the {self.kind} has no predictive std (standard deviation)")
 
 
 def load_predictor(path: str | Path, substeps: int | None = None) -> LoadedModel:
@@ -105,12 +118,9 @@ def load_predictor(path: str | Path, substeps: int | None = None) -> LoadedModel
             )
         model = load_model(path)
         check_model(model, str(path))
-        return LoadedModel(
-            model,
-            f"{_ML_NAMES.get(type(model).__name__, type(model).__name__)} model (clutchlab train)",
-            supports_std(model),
-            tuple(getattr(model, "train_experiments_", ()) or ()),
-        )
+        name = _variant_name(model)
+        trained = tuple(getattr(model, "train_experiments_", ()) or ())
+        return LoadedModel(model, f"{name} model (clutchlab train)", trained)
     steps = 4 if substeps is None else substeps
     if not is_integer(steps) or not 1 <= steps <= MAX_SUBSTEPS:
         raise ModelError(f"substeps {steps!r} is not an integer in 1..{MAX_SUBSTEPS}")
@@ -118,7 +128,7 @@ def load_predictor(path: str | Path, substeps: int | None = None) -> LoadedModel
         model = PhysicsPredictor.load(path)
         if substeps is not None:
             model = PhysicsPredictor(model.effects, model.params, steps, model.train_experiments)
-        return LoadedModel(model, "physics model", False, model.train_experiments)
+        return LoadedModel(model, "physics model", model.train_experiments)
     try:
         circuit, params = physics_source(path)
     except ClutchlabError as exc:
@@ -131,7 +141,7 @@ def load_predictor(path: str | Path, substeps: int | None = None) -> LoadedModel
     trained = tuple(doc.get("train") or ()) if isinstance(doc.get("train"), list) else ()
     kind = "fitted physics model (clutchlab fit-physics)" if trained else "physics design"
     model = PhysicsPredictor(tuple(circuit.effect_names), params.changed(), steps, trained)
-    return LoadedModel(model, kind, False, trained)
+    return LoadedModel(model, kind, trained)
 
 
 def _fmu(path: Path, substeps: int | None) -> LoadedModel:
@@ -150,7 +160,7 @@ def _fmu(path: Path, substeps: int | None) -> LoadedModel:
             "other input names and sets parameters)",
             exc,
         ) from exc
-    return LoadedModel(model, "FMU", False, ())
+    return LoadedModel(model, "FMU", ())
 
 
 def _refused(path: Path, why: str, exc: ClutchlabError) -> ModelError:
@@ -159,14 +169,13 @@ def _refused(path: Path, why: str, exc: ClutchlabError) -> ModelError:
     return ModelError(f"{path}: {why}", getattr(exc, "problems", None) or [str(exc)])
 
 
-#: The ``train`` variant each saved estimator class stands for (``paper_faithful`` saves as
-#: an ``SVCPartitionedGP``).
-_ML_NAMES = {
-    "GPBaseline": "gp_base",
-    "GPWithDerivative": "gp_didt",
-    "SVCPartitionedGP": "paper_svc_gp",
-    "HybridModel": "hybrid",
-}
+def _variant_name(model) -> str:
+    """The ``train`` variant a saved estimator's class stands for (residual_ml.VARIANTS;
+    ``paper_faithful`` saves as an ``SVCPartitionedGP``), else the class name."""
+    from ..residual_ml import VARIANTS
+
+    names = {f.__name__: n for n, f in VARIANTS.items() if isinstance(f, type)}
+    return names.get(type(model).__name__, type(model).__name__)
 
 
 @dataclass(frozen=True)
@@ -252,8 +261,8 @@ def predict_traces(
     DataError
         From the model, naming the experiment (e.g. a signal it needs is not logged).
     """
-    if with_std and not loaded.has_std:
-        raise ModelError(f"the {loaded.kind} has no predictive standard deviation")
+    if with_std:
+        loaded.check_std()
     trained = set(loaded.train_experiments)
     items = list(traces)
     out, wall = [], 0.0

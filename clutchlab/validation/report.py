@@ -877,9 +877,8 @@ def write_report(ev: Evaluation, out: str | Path, interactive: bool = True) -> R
     doc = ev.to_dict()
     doc["figures"] = {"drawn": [f.key for f in figures], "missing": missing}
     saved, not_saved = model_files(ev.models)
-    by_variant = {n: sorted(f for f in saved if Path(f).stem == n) for n in ev.models}
     doc["models"] = {
-        "files": {n: f for n, f in by_variant.items() if f},
+        "files": {n: sorted(files) for n, files in saved.items()},
         "not_saved": not_saved,
     }
     doc = jsonable(doc)
@@ -887,7 +886,8 @@ def write_report(ev: Evaluation, out: str | Path, interactive: bool = True) -> R
     pngs = [(spec, _png(spec.figure)) for spec in figures]
     rel = [(spec.title, f"figures/{spec.key}.png", spec.caption) for spec, _ in pngs]
     files: dict[str, bytes] = {f"figures/{spec.key}.png": png for spec, png in pngs}
-    files |= saved
+    for variant_files in saved.values():
+        files |= variant_files
     files["metrics.csv"] = metrics_csv(doc).encode("utf-8")
     files["report.md"] = render_markdown(doc, rel).encode("utf-8")
     iplots = interactive_figures(ev, [spec.key for spec in figures]) if interactive else {}
