@@ -7,9 +7,9 @@ measured current when the log is read is the period of every dither-period mean 
 (DESIGN §3; before, those "means" were single samples), and the ramp rate of a measured
 current is a least-squares slope over five periods (before, the noise of a two-sample slope
 made a 27 mA/s ramp read faster than a 110 mA/s one). This study measures both over
-structurally different circuits, seed 0, three dither settings each: the ramp rate per label
-against the protocol's, and ``gp_didt`` / ``paper_svc_gp`` trained on fast + slow, scored on
-medium (scored only; nothing is chosen on it).
+structurally different circuits (``--seed``, 0 by default), three dither settings each: the
+ramp rate per label against the protocol's, and ``gp_didt`` / ``paper_svc_gp`` trained on
+fast + slow, scored on medium (scored only; nothing is chosen on it).
 
 Usage: ``python studies/undeclared_dither_spread.py --make DIR`` writes the five datasets;
 ``PYTHONPATH=<code> python studies/undeclared_dither_spread.py --score DIR`` reads them with
@@ -29,7 +29,7 @@ PLANTS = ("stand", "quadratic_play", "saturating_lugre", "stribeck_supply", "pre
 DROPPED = ("dither_amp_mA", "dither_freq_Hz", "current_cmd_mA")
 
 
-def make(root: Path) -> None:
+def make(root: Path, seed: int = 0) -> None:
     """The five datasets, as a logger of the measured current and pressures writes them."""
     from clutchlab.physics.stand import DEFAULT_SETTINGS, StandConfig, run_stand
     from clutchlab.physics.stand.plants import PlantConfig, run_plant
@@ -37,9 +37,9 @@ def make(root: Path) -> None:
     settings = DEFAULT_SETTINGS[::4]
     for plant in PLANTS:
         if plant == "stand":
-            data = run_stand(StandConfig(settings=settings, seed=0), progress=False).dataset
+            data = run_stand(StandConfig(settings=settings, seed=seed), progress=False).dataset
         else:
-            data = run_plant(PlantConfig(plant=plant, settings=settings, seed=0), progress=False)
+            data = run_plant(PlantConfig(plant=plant, settings=settings, seed=seed), progress=False)
             data = data.dataset
         out = []
         for t in data:
@@ -73,6 +73,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--make", type=Path, help="write the five datasets into this folder")
     ap.add_argument("--score", type=Path, help="score the datasets in this folder")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the datasets --make writes")
     args = ap.parse_args()
     print(
         "rule (written before the runs): the new code must order every circuit's ramps "
@@ -82,7 +83,7 @@ def main() -> None:
         flush=True,
     )
     if args.make:
-        make(args.make)
+        make(args.make, args.seed)
     if args.score:
         score(args.score)
 
