@@ -119,6 +119,41 @@ def test_csv_header_units_are_used_when_the_map_gives_none(tmp_path):
     assert "declare unit = 'A' in a channel map" in text
 
 
+def test_parquet_column_name_units_are_used_as_in_a_csv_header(tmp_path):
+    """A spreadsheet or logger export to Parquet names its columns ``p [kPa]``: the unit
+    in the name is the column's (was: column 'p' not found, and a map naming ``p [kPa]``
+    whole read kPa as the map's unit without a word)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    path = tmp_path / "u.parquet"
+    table = pa.table(
+        {
+            "t [s]": [0.0, 0.001, 0.002],
+            "I (A)": [0.5, 0.6, 0.7],
+            "p [kPa]": [100.0, 110.0, 120.0],
+            "P(clutch)": [1.0, 1.0, 1.0],  # not a unit: stays in the name
+        }
+    )
+    pq.write_table(table, path)
+    cmap = {"signals": {"time_s": "t", "current_mA": "I", "clutch_pressure_bar": "p"}}
+    trace = read_log(path, channel_map=cmap)[0]
+    np.testing.assert_allclose(trace.get("current_mA"), [500.0, 600.0, 700.0])
+    np.testing.assert_allclose(trace.get("clutch_pressure_bar"), [1.0, 1.1, 1.2])
+    # a map giving another unit than the name's is refused, naming the file's column
+    cmap["signals"]["clutch_pressure_bar"] = {"channel": "p", "unit": "bar"}
+    with pytest.raises(DataError, match=r"column 'p \[kPa\]'.*'bar'.*'kPa'"):
+        read_log(path, channel_map=cmap)
+    # two columns that differ only in the unit are named with both headers
+    pq.write_table(
+        pa.table({"t [s]": [0.0, 0.001], "p [kPa]": [1.0, 2.0], "p [bar]": [1.0, 2.0]}), path
+    )
+    with pytest.raises(
+        DataError, match=r"duplicate column\(s\) 'p' \(columns 'p \[kPa\]', 'p \[bar\]'\)"
+    ):
+        read_log(path, channel_map={"signals": {"time_s": "t", "clutch_pressure_bar": "p"}})
+
+
 def test_map_unit_conflicting_with_file_unit(tmp_path):
     n = 50
     t = np.arange(n) * 1e-3

@@ -33,7 +33,7 @@ from .paths import check_input_file
 from .rawlog import RawChannel, RawLog
 from .signals import CANONICAL_ORDER
 from .trace import _MAX_ROWS_LISTED, Trace
-from .units import parse_unit
+from .units import split_header_unit
 
 if TYPE_CHECKING:
     from .channel_map import ChannelMap
@@ -46,10 +46,6 @@ _FLOAT_FORMAT = "%.9g"
 _EXACT_FORMAT = "%.17g"
 #: Cell texts read as NaN (a missing value), not as unparseable.
 _NA_VALUES = ("", "nan", "NaN", "NAN")
-#: ``name [unit]`` column header.
-_UNIT_HEADER = re.compile(r"^(?P<name>.*?)\s*\[(?P<unit>[^\[\]]*)\]$")
-#: ``name (unit)`` column header (a unit only if :func:`~.units.parse_unit` knows it).
-_PAREN_UNIT_HEADER = re.compile(r"^(?P<name>.*?)\s*\((?P<unit>[^()]*)\)$")
 
 
 #: A clock time as loggers export it: ``12:34:56.789``, optionally after an ISO date.
@@ -303,30 +299,6 @@ def _read_header(path: Path, limits: CsvLimits) -> tuple[list[str], CsvDialect]:
     return [c.strip() for c in row], dialect
 
 
-def _split_unit(header: str, wanted: Callable[[str], bool] | None = None) -> tuple[str, str | None]:
-    """Column name and unit of a header: ``"P_CL [kPa]"`` or ``"P_CL (kPa)"`` → ``("P_CL", "kPa")``.
-
-    An array index (``"P[0]"``) stays in the name, as does text in parentheses that is not a
-    known unit (``"P(clutch)"``, ``"pressure (gauge)"``). A header in parentheses that a
-    channel map names whole (``wanted(header)``, a map written for the header as it stands)
-    keeps its name whole, and its unit is still the file's: a map that gives another unit
-    for it is refused as for ``name [unit]``, not applied to values logged in the header's
-    unit (``"P_clutch (bar)"`` read as kPa would be 100 × off).
-    """
-    match = _UNIT_HEADER.match(header)
-    if match and match["name"] and not match["unit"].strip().isdigit():
-        return match["name"], match["unit"].strip() or None
-    match = _PAREN_UNIT_HEADER.match(header)
-    if match and match["name"]:
-        try:
-            parse_unit(match["unit"])
-        except DataError:
-            return header, None
-        named_whole = wanted is not None and wanted(header)
-        return (header if named_whole else match["name"]), match["unit"].strip()
-    return header, None
-
-
 def _last_line(path: Path) -> str:
     """Text of the last non-blank line of ``path`` (read from the end of the file)."""
     with path.open("rb") as fh:
@@ -370,7 +342,7 @@ def decode_csv(path: str | Path, wanted: Callable[[str], bool] | None = None) ->
 
     header, dialect = _read_header(path, CsvLimits.from_env())
     problems: list[str] = []
-    names_units = [_split_unit(h, wanted) for h in header]
+    names_units = [split_header_unit(h, wanted) for h in header]
     # A column without a name (a trailing separator on every line, a blank spreadsheet
     # column) is read under a placeholder: dropped below if it is empty, else a problem.
     unnamed = {i for i, (n, _) in enumerate(names_units) if not n}

@@ -1,11 +1,13 @@
 """Parquet reader and writer (pyarrow).
 
 Written files hold one float64 column per canonical signal present, in canonical order, each
-field with its unit in the field metadata (``unit``), and the trace name and metadata as JSON
-in the schema metadata (key ``clutchlab``). Read files may hold any names and numeric types
-(integers, floats, decimals; a timestamp or duration time column is turned into seconds since
-its first sample, exactly in integer ticks, and is then in seconds: a channel map may not
-declare another unit for it); rows are named ``row N`` (1-based) in messages.
+field with its unit in the field metadata (``unit``), and the trace name and metadata as
+JSON in the schema metadata (key ``clutchlab``). Read files may hold any names (a unit in a
+name, ``P_clutch [kPa]``, is read as in a CSV header when the field metadata has none) and
+numeric types (integers, floats, decimals; a timestamp or duration time column is turned
+into seconds since its first sample, exactly in integer ticks, and is then in seconds: a
+channel map may not declare another unit for it); rows are named ``row N`` (1-based) in
+messages.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from .paths import check_input_file
 from .rawlog import RawChannel, RawLog
 from .signals import CANONICAL_ORDER, SIGNALS
 from .trace import Trace
+from .units import split_header_unit
 
 if TYPE_CHECKING:
     from .channel_map import ChannelMap
@@ -182,13 +185,25 @@ def decode_parquet(path: str | Path, wanted: Callable[[str], bool] | None = None
         meta = parse_embedded_meta(schema_meta[META_KEY])
     channels: list[RawChannel] = []
     notes: list[str] = [f"pandas index column(s) {dropped} ignored"] if index else []
+    # A unit in the column name (``P_CL [kPa]``, a spreadsheet's or logger's export) is
+    # read as in a CSV header; a unit in the field metadata comes first.
+    headers = names
+    split = [split_header_unit(h, wanted) for h in headers]
+    names = [n for n, _ in split]
+    clash = sorted({n for n in names if names.count(n) > 1})
+    if clash:
+        by_name = {
+            n: [repr(h) for h, m in zip(headers, names, strict=True) if m == n] for n in clash
+        }
+        shown = [f"{n!r} (columns {', '.join(h)})" for n, h in by_name.items()]
+        raise DataError(f"{path}: duplicate column(s) {', '.join(shown)}")
     for i, name in enumerate(names):
-        unit = None
+        unit = split[i][1]
         if b"unit" in field_meta[i]:
-            unit = field_meta[i][b"unit"].decode("utf-8", errors="replace") or None
+            unit = field_meta[i][b"unit"].decode("utf-8", errors="replace") or unit
         if wanted is not None and not wanted(name):
             channels.append(
-                RawChannel(name, None, unit, where=f"column {name!r}", problem="not loaded")
+                RawChannel(name, None, unit, where=f"column {headers[i]!r}", problem="not loaded")
             )
             continue
         try:
@@ -205,7 +220,12 @@ def decode_parquet(path: str | Path, wanted: Callable[[str], bool] | None = None
             unit = "s"
         channels.append(
             RawChannel(
-                name, values, unit, where=f"column {name!r}", problem=problem, converted=converted
+                name,
+                values,
+                unit,
+                where=f"column {headers[i]!r}",
+                problem=problem,
+                converted=converted,
             )
         )
     return RawLog(path, "parquet", channels, meta=meta, notes=notes)

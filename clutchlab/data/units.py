@@ -12,6 +12,8 @@ in its channel map entry.
 
 from __future__ import annotations
 
+import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from types import MappingProxyType
 
@@ -19,7 +21,15 @@ import numpy as np
 
 from ..errors import DataError
 
-__all__ = ["CANONICAL_UNITS", "UNITS", "Unit", "convert_units", "dimension_of", "parse_unit"]
+__all__ = [
+    "CANONICAL_UNITS",
+    "UNITS",
+    "Unit",
+    "convert_units",
+    "dimension_of",
+    "parse_unit",
+    "split_header_unit",
+]
 
 
 @dataclass(frozen=True)
@@ -180,3 +190,50 @@ def convert_units(values: np.ndarray, unit: str, to: str) -> np.ndarray:
     with np.errstate(over="ignore", invalid="ignore"):
         canonical = x * src.scale + src.offset
         return (canonical - dst.offset) / dst.scale
+
+
+#: ``name [unit]`` column header.
+_UNIT_HEADER = re.compile(r"^(?P<name>.*?)\s*\[(?P<unit>[^\[\]]*)\]$")
+#: ``name (unit)`` column header (a unit only if :func:`parse_unit` knows it).
+_PAREN_UNIT_HEADER = re.compile(r"^(?P<name>.*?)\s*\((?P<unit>[^()]*)\)$")
+
+
+def split_header_unit(
+    header: str, wanted: Callable[[str], bool] | None = None
+) -> tuple[str, str | None]:
+    """Column name and unit of a column header: ``"P_CL [kPa]"`` or ``"P_CL (kPa)"`` →
+    ``("P_CL", "kPa")``.
+
+    Used for CSV headers and Parquet column names alike (a spreadsheet's or a logger's
+    export carries the unit in the name). An array index (``"P[0]"``) stays in the name,
+    as does text in parentheses that is not a known unit (``"P(clutch)"``,
+    ``"pressure (gauge)"``). A header in parentheses that a channel map names whole
+    (``wanted(header)``, a map written for the header as it stands) keeps its name whole,
+    and its unit is still the file's: a map that gives another unit for it is refused as
+    for ``name [unit]``, not applied to values logged in the header's unit
+    (``"P_clutch (bar)"`` read as kPa would be 100 × off).
+
+    Parameters
+    ----------
+    header : str
+        The column's name as the file holds it.
+    wanted : callable, optional
+        ``wanted(name)``: whether a channel map names this column (see above).
+
+    Returns
+    -------
+    tuple of (str, str or None)
+        The name, and the unit text (None when the header carries none).
+    """
+    match = _UNIT_HEADER.match(header)
+    if match and match["name"] and not match["unit"].strip().isdigit():
+        return match["name"], match["unit"].strip() or None
+    match = _PAREN_UNIT_HEADER.match(header)
+    if match and match["name"]:
+        try:
+            parse_unit(match["unit"])
+        except DataError:
+            return header, None
+        named_whole = wanted is not None and wanted(header)
+        return (header if named_whole else match["name"]), match["unit"].strip()
+    return header, None
