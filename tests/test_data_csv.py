@@ -518,6 +518,16 @@ def test_a_clock_time_column_is_read_as_seconds_since_its_first_sample(tmp_path)
     path = write_text(tmp_path / "dated.csv", "Time,I,P\n" + rows)
     trace, _ = read_log(path, channel_map=cmap)
     np.testing.assert_allclose(trace.time_s, np.arange(200) * 1e-3, atol=1e-9)  # over midnight
+    # without the date too (was refused as a time going back by 86 400 s)
+    undated = [c.split(" ")[1] for c in dated]
+    rows = "".join(f"{c},{100 + k},{2.0}\n" for k, c in enumerate(undated))
+    path = write_text(tmp_path / "undated.csv", "Time,I,P\n" + rows)
+    trace, _ = read_log(path, channel_map=cmap)
+    np.testing.assert_allclose(trace.time_s, np.arange(200) * 1e-3, atol=1e-9)
+    # a clock going back by less than half a day is not a midnight: still refused
+    back = "".join(f"12:00:0{k % 5}.000,{100 + k},2.0\n" for k in range(10))
+    with pytest.raises(DataError, match="time"):
+        read_log(write_text(tmp_path / "back.csv", "Time,I,P\n" + back), channel_map=cmap)
     # a map unit for it is refused (it is already seconds), as for a Parquet timestamp
     cmap["signals"]["time_s"] = {"channel": "Time", "unit": "ms"}
     with pytest.raises(DataError, match=r"is a clock time \(hh:mm:ss.fff\), already in seconds"):

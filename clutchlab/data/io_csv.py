@@ -54,12 +54,19 @@ _CLOCK = re.compile(
 )
 
 
+#: A step back (s) of an undated clock time that is read as passing midnight: more than half a
+#: day (a test-stand log is sampled far faster; a clock set back is not a midnight).
+_MIDNIGHT_STEP_S = 43200.0
+
+
 def _clock_seconds(
     path: Path, header: list[str], column: str, n: int, dialect: CsvDialect
 ) -> np.ndarray | None:
     """Seconds since the first sample of a column of clock times (``12:34:56.789``, or
     ``2026-11-30 12:34:56.789``), or None when a non-empty cell of its first ``n`` rows is
-    not one. Empty cells are NaN (reported as missing values)."""
+    not one. Empty cells are NaN (reported as missing values). Without a date, a clock that
+    goes back by more than half a day has passed midnight (``23:59:59.999`` →
+    ``00:00:00.000`` is 1 ms)."""
     import pandas as pd
 
     cells = pd.read_csv(
@@ -93,6 +100,9 @@ def _clock_seconds(
         days = pd.to_datetime(parts["date"].str.strip(), format="%Y-%m-%d").to_numpy()
         days = (days - days[0]) / np.timedelta64(1, "D")
         secs = secs + 86400.0 * days
+    else:  # no date: a clock that goes back by more than half a day passed midnight
+        steps = np.diff(secs.to_numpy(dtype=float), prepend=float(secs.iloc[0]))
+        secs = secs + 86400.0 * np.cumsum(steps < -_MIDNIGHT_STEP_S)
     out = np.full(n, np.nan)
     out[present.to_numpy()] = secs.to_numpy(dtype=float)
     first = out[np.isfinite(out)][0]
