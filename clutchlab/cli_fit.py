@@ -136,8 +136,9 @@ def _cmd_fit_physics(args: argparse.Namespace) -> int:
     if not res.success:
         hint = limit_hint(res.status)
         print(
-            f"warning: NOT CONVERGED ({res.status}): the best iterate is the model, written to "
-            f'{out} with "success": false; '
+            f"warning: NOT CONVERGED ({res.status}): "
+            + (res.note or "the best iterate is the model")
+            + f', written to {out} with "success": false; '
             + (f"{hint}, " if hint else "")
             + "--strict makes this an error",
             file=sys.stderr,

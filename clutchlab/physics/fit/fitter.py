@@ -235,6 +235,7 @@ class PhysicsFitter:
         free = resolve_free(model, settings)
         self._check_bounds(model, free, settings, start)
         self.staged_ = None
+        datasheet = (model, start, free)  # what the staged start starts from
         if settings.staged_start and self.start is None and not settings.per_experiment:
             # the main stages' Jacobian code compiles on the other core meanwhile
             self._compile_ahead(model, traces, free, settings)
@@ -286,6 +287,7 @@ class PhysicsFitter:
         # Jacobian) and at its best; stages fit different experiments, so costs are
         # compared within a stage only
         stage_costs: list[tuple[float, float]] = []
+        cost_stages: list[int] = []  # the stage of each entry of stage_costs
         stages = self._stages(traces, settings)
         sample_s = None  # wall time of one iteration per sample, measured on the last stage
         try:
@@ -335,6 +337,7 @@ class PhysicsFitter:
                     stage_costs.append(
                         (history[h0] if len(history) > h0 else math.inf, best["cost"])
                     )
+                    cost_stages.append(stage)
                 elif kept is not None:  # keep the previous stage's iterate, not the start
                     problem, best = kept
                 if len(stages) > 1 and stage == 0 and statuses and statuses[0] not in _OK:
@@ -366,6 +369,16 @@ class PhysicsFitter:
             # starts from the previous one's best)
             improved = best["z"] is not None and any(b < a for a, b in stage_costs)
             start_cost = stage_costs[-1][0] if stage_costs else math.inf
+            # No solver stage got below its start, but the staged start (the static
+            # characteristic and the latch from the data) may have got below the datasheet
+            # values: then the model is the staged start, as good a best iterate as any
+            staged_gain = None
+            if not improved and self.staged_ is not None and best["z"] is not None:
+                stage_traces, stage_settings = stages[cost_stages[0]]
+                staged_gain = _staged_start_gain(
+                    *datasheet, stage_traces, stage_settings, stage_costs[0][0]
+                )
+                improved = staged_gain is not None
             wall = time.perf_counter() - t_start
             if settings.strict or not improved:
                 why = "" if improved else " and did not improve on its start"
@@ -379,10 +392,21 @@ class PhysicsFitter:
                 )
                 err.result = result
                 raise err
+            if staged_gain is None:
+                what = (
+                    f"its best iterate (cost ½Σe² {best['cost']:.6g} bar², {start_cost:.6g} at "
+                    "the start of its stage) is the model"
+                )
+            else:
+                what = result.note = (
+                    "the solver did not get below the staged start, which had lowered the "
+                    f"cost ½Σe² on the {staged_gain[2]} experiment(s) of its first stage from "
+                    f"{staged_gain[0]:.6g} bar² (datasheet values) to {staged_gain[1]:.6g}: "
+                    "the staged start is the model"
+                )
             warnings.warn(
                 f"the fit stopped at a limit before converging ({status}) after {wall:.1f} s: "
-                f"its best iterate (cost ½Σe² {best['cost']:.6g} bar², {start_cost:.6g} at the "
-                "start of its stage) is the model, marked not converged",
+                f"{what}, marked not converged",
                 FitWarning,
                 stacklevel=2,
             )
@@ -577,3 +601,29 @@ class PhysicsFitter:
         fitter.model_ = result.model()
         fitter.params_ = result.params()
         return fitter
+
+
+def _staged_start_gain(
+    model: CircuitModel,
+    start: ParameterSet,
+    free: tuple[str, ...],
+    traces: list[Trace],
+    settings: FitSettings,
+    staged_cost: float,
+) -> tuple[float, float, int] | None:
+    """(datasheet cost, staged-start cost, experiments) on one stage's experiments when the
+    staged start lowered the cost ½Σe² (bar²) below the datasheet values', else None.
+
+    One simulation of ``traces`` (this process) at the datasheet values; a model that
+    diverges there counts as the highest cost.
+    """
+    if not math.isfinite(staged_cost):
+        return None
+    try:
+        problem = FitProblem(model, traces, free, settings, start)
+        datasheet_cost = problem.cost(problem.initial_z())
+    except FitError:  # the integrator diverges at the datasheet values
+        datasheet_cost = math.inf
+    if not datasheet_cost > staged_cost:
+        return None
+    return datasheet_cost, staged_cost, len(traces)

@@ -89,6 +89,10 @@ class FitResult:
         Experiments fitted on.
     settings : dict
         The fit settings used.
+    note : str
+        What the model is when that is not the solver's best iterate, in words (empty
+        otherwise; written to JSON only when not empty): a fit whose solver never got
+        below its staged start keeps the staged start.
     """
 
     effects: list[str]
@@ -109,6 +113,7 @@ class FitResult:
     wall_s: float
     train: list[str]
     settings: dict = field(default_factory=dict)
+    note: str = ""
 
     def model(self) -> CircuitModel:
         """The fitted model structure (base circuit + the effects)."""
@@ -131,7 +136,10 @@ class FitResult:
 
     def to_json(self, path: str | Path | None = None) -> str:
         """JSON text (written to ``path`` when given, atomically)."""
-        text = json.dumps(asdict(self), indent=2, ensure_ascii=False, allow_nan=True)
+        doc = asdict(self)
+        if not doc["note"]:
+            del doc["note"]  # files of fits without one stay as they were
+        text = json.dumps(doc, indent=2, ensure_ascii=False, allow_nan=True)
         if path is not None:
             write_file_atomic(path, (text + "\n").encode("utf-8"), overwrite=True)
         return text
@@ -195,8 +203,9 @@ _FIELDS: dict[str, tuple[str, object]] = {
     "wall_s": ("a number of seconds", _is_real),
     "train": ("a list of experiment names", lambda v: _list_of(str, v)),
     "settings": ("an object", lambda v: isinstance(v, dict)),
+    "note": ("a string", lambda v: isinstance(v, str)),
 }
-_OPTIONAL = ("settings",)
+_OPTIONAL = ("settings", "note")
 
 
 def check_fit_document(doc, source: str = "fit result") -> None:

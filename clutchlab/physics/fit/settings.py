@@ -160,7 +160,8 @@ class FitSettings:
         A fit stopped at a limit (iterations, wall time) raises ``FitError`` (with the best
         iterate in ``exc.result``). Default False: the best iterate *is* the model, marked
         not converged (``result_.success`` False, its status) with a ``FitWarning``; only a
-        fit that did not improve on its start raises.
+        fit that did not improve on its start raises (a staged start that improved on the
+        datasheet values counts: it is then the model, ``result_.note`` says so).
 
     Raises
     ------
