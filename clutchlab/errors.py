@@ -15,6 +15,7 @@ __all__ = [
     "ModelError",
     "ModelFileError",
     "OutputError",
+    "ParameterWarning",
     "ProblemListError",
     "SimulationError",
     "SimulationWarning",
@@ -107,3 +108,8 @@ class FitWarning(UserWarning):
 class SimulationWarning(UserWarning):
     """A simulation finished, but a pressure left the range the circuit can reach: the
     integration step was too long for the parameters' dynamics, or the design is unstable."""
+
+
+class ParameterWarning(UserWarning):
+    """A parameter set within its bounds whose values defeat what a component is for (a
+    latch valve whose areas and spring leave it no snap action, so it cannot latch)."""

@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import contextvars
 import difflib
 import json
 import math
+import os
+import sys
+import warnings
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,7 +18,7 @@ from typing import Literal
 import numpy as np
 
 from ..data.output import write_file_atomic
-from ..errors import ModelError
+from ..errors import ModelError, ParameterWarning
 from .units import SI_FACTOR
 
 __all__ = ["Parameter", "ParameterSet"]
@@ -127,6 +131,15 @@ class ParameterSet(Mapping[str, float]):
         Every parameter's value (engineering units), read-only
         (:class:`types.MappingProxyType`): a value is changed with :meth:`replace`,
         which checks its bounds.
+
+    Warns
+    -----
+    ParameterWarning
+        Once per Python process, for values within their bounds that leave a component
+        unable to do its job: a latch valve that cannot latch (latch-off pressure not below
+        latch-on, e.g. ``latch_d2 ≤ latch_d1``;
+        :func:`~clutchlab.physics.components.latch_snap_problem`). The set is accepted (a
+        design sweep may mean it); :meth:`from_vector` does not warn.
     """
 
     parameters: tuple[Parameter, ...]
@@ -156,6 +169,8 @@ class ParameterSet(Mapping[str, float]):
         if problems:
             raise ModelError("invalid parameter values:\n  - " + "\n  - ".join(problems))
         object.__setattr__(self, "values", MappingProxyType(full))
+        if _DESIGN_CHECKS.get():
+            _warn_design(full)
 
     def __reduce__(self):
         # a mappingproxy does not pickle (nor deep-copy): rebuild from a plain dict, which
@@ -191,12 +206,17 @@ class ParameterSet(Mapping[str, float]):
 
     @classmethod
     def from_vector(cls, parameters: Iterable[Parameter], vector) -> ParameterSet:
-        """Inverse of :meth:`vector`."""
+        """Inverse of :meth:`vector` (checks the bounds; gives no :class:`ParameterWarning`:
+        fitters call it at every iterate)."""
         parameters = tuple(parameters)
         vec = np.asarray(vector, dtype=float).ravel()
         if vec.size != len(parameters):
             raise ModelError(f"expected {len(parameters)} values, got {vec.size}")
-        return cls(parameters, {p.name: float(v) for p, v in zip(parameters, vec, strict=True)})
+        token = _DESIGN_CHECKS.set(False)
+        try:
+            return cls(parameters, {p.name: float(v) for p, v in zip(parameters, vec, strict=True)})
+        finally:
+            _DESIGN_CHECKS.reset(token)
 
     def changed(self) -> dict[str, float]:
         """Values that differ from the defaults."""
@@ -306,6 +326,48 @@ class ParameterSet(Mapping[str, float]):
         if problems:
             raise ModelError(f"invalid {where}:\n  - " + "\n  - ".join(problems))
         return cls(parameters, values)
+
+
+#: Whether a new set is checked for values that defeat a component (off inside from_vector).
+_DESIGN_CHECKS: contextvars.ContextVar[bool] = contextvars.ContextVar(
+    "clutchlab_design_checks", default=True
+)
+
+#: Kinds of :class:`ParameterWarning` given so far in this process (each is given once).
+_WARNED: set[str] = set()
+
+_PACKAGE_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def _warn_design(values: Mapping[str, float]) -> None:
+    """Warn (once per process) when ``values`` leave the latch valve unable to latch."""
+    if "latch" in _WARNED:
+        return
+    from .components.latch import latch_snap_problem  # the components import this module
+
+    problem = latch_snap_problem(values)
+    if problem is None:
+        return
+    warnings.warn(
+        f"{problem} (this warning is given once per Python process)",
+        ParameterWarning,
+        stacklevel=_caller_level(),
+    )
+    _WARNED.add("latch")  # after warn: a warning turned into an error is raised every time
+
+
+def _caller_level() -> int:
+    """The ``stacklevel`` of the first frame outside clutchlab, seen from the caller."""
+    level, frame = 1, sys._getframe(1)
+    while frame is not None and _inside(frame.f_code):
+        frame, level = frame.f_back, level + 1
+    return level
+
+
+def _inside(code) -> bool:
+    """A frame of clutchlab's, or the ``__init__`` a dataclass generates (``<string>``)."""
+    name = code.co_filename
+    return name.startswith(_PACKAGE_DIR) or (name == "<string>" and code.co_name == "__init__")
 
 
 def _unknown(name: str) -> str:

@@ -4,7 +4,7 @@ from .base import Component, param
 from .clutch_node import ClutchNode
 from .current_driver import CurrentDriver, dither_waveform
 from .fluid import Fluid, flow
-from .latch import LatchValve, latch_thresholds
+from .latch import LatchValve, latch_snap_problem, latch_thresholds
 from .pilot_node import PilotNode
 from .regulator import FeedbackChamber, RegulatorSpool
 from .sensor import PressureSensor
@@ -24,6 +24,7 @@ __all__ = [
     "default_components",
     "dither_waveform",
     "flow",
+    "latch_snap_problem",
     "latch_thresholds",
     "param",
 ]

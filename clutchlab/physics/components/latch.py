@@ -9,7 +9,7 @@ from ..smooth import logistic, smooth_max0
 from .base import Component, param
 from .fluid import flow
 
-__all__ = ["LatchValve", "latch_thresholds"]
+__all__ = ["LatchValve", "latch_snap_problem", "latch_thresholds"]
 
 _C = "latch"
 
@@ -34,6 +34,59 @@ def latch_thresholds(values) -> tuple[float, float]:
     p_on = values["latch_F0"] / a1 / 1e5
     p_off = (values["latch_F0"] + values["latch_k"] * 1e3 * values["latch_stroke"] * 1e-3) / a2
     return p_on, p_off / 1e5
+
+
+def latch_snap_problem(values) -> str | None:
+    """Why the latch valve of ``values`` cannot latch, or None when it snaps.
+
+    The valve snaps (and latches) only when its latch-off pressure lies below its latch-on
+    pressure, ``p_off < p_on``: then the force gained as it opens (the pilot pressure on the
+    differential area ``A2 − A1``) exceeds the spring force it adds (``k·s``). With
+    ``p_off ≥ p_on`` — ``latch_d2 ≤ latch_d1`` (no differential area), or a spring too stiff
+    for the area step — it opens gradually and closes at the same pressure: no snap, no
+    hysteresis, no latched state. The bounds of the single parameters cannot exclude this.
+
+    Parameters
+    ----------
+    values : mapping
+        Parameter values in engineering units (``latch_d1``, ``latch_d2`` mm, ``latch_F0``
+        N, ``latch_k`` N/mm, ``latch_stroke`` mm; ``lthr_p_on``, ``lthr_p_off`` bar with the
+        ``latch_free_thresholds`` law; ``ldrift_dp_on``, ``ldrift_dp_off`` bar with the
+        ``latch_threshold_drift`` effect).
+
+    Returns
+    -------
+    str or None
+        The problem, naming ``latch_d1`` and ``latch_d2`` (mm) and both thresholds (bar);
+        None when the valve latches or ``values`` has no latch valve.
+    """
+    free = "lthr_p_on" in values and "lthr_p_off" in values  # the law retires F0 and k
+    needed = ("latch_d1", "latch_d2") + (() if free else ("latch_F0", "latch_k", "latch_stroke"))
+    if not all(n in values for n in needed):
+        return None
+    p_on, p_off = latch_thresholds(values)
+    p_on += float(values.get("ldrift_dp_on", 0.0))
+    p_off += float(values.get("ldrift_dp_off", 0.0))
+    if p_off < p_on:
+        return None
+    d1, d2 = float(values["latch_d1"]), float(values["latch_d2"])
+    if free:
+        why = "the latch-off pressure lthr_p_off is not below the latch-on pressure lthr_p_on"
+    elif d2 <= d1:
+        why = f"latch_d2 = {d2:.12g} mm ≤ latch_d1 = {d1:.12g} mm leaves no differential area"
+    else:
+        why = (
+            f"latch_d2 = {d2:.12g} mm > latch_d1 = {d1:.12g} mm, but the differential area is too "
+            f"small for the spring (latch_k·latch_stroke = "
+            f"{float(values['latch_k']) * float(values['latch_stroke']):g} N)"
+        )
+    return (
+        f"the latch valve cannot latch: {why}, so it would close at p_off = {p_off:.3g} bar, "
+        f"not below where it opens, p_on = {p_on:.3g} bar: it opens and closes gradually, "
+        "without snap action, hysteresis or a latched state. A latching valve needs "
+        "p_off < p_on (latch_d2 > latch_d1 and (F0 + k·stroke)/A2 < F0/A1); a non-latching "
+        "valve may be intended (a design sweep), so the set is accepted"
+    )
 
 
 class LatchValve(Component):
