@@ -73,3 +73,16 @@ def test_a_step_simulates_without_data_and_the_unit_is_checked():
     # a current written in amperes is named, not simulated to the prime pressure
     with pytest.raises(DataError, match="amperes"):
         simulate(model, params, drive_trace(t, i / 1000.0))
+
+
+def test_a_dither_amplitude_without_a_frequency_is_refused_not_ignored():
+    """drive_trace(..., dither_amp_mA=100) kept the 0 Hz default frequency: the model's
+    dither sin(2π·0·t) is zero, so the amplitude was silently ignored."""
+    t, i = knot_profile([0.0, 0.3, 0.3, 1.0], [0.0, 0.0, 700.0, 700.0])
+    with pytest.raises(DataError, match=r"dither_amp_mA is 100 mA at dither_freq_Hz = 0 Hz"):
+        drive_trace(t, i, dither_amp_mA=100.0)
+    freq = np.where(t < 0.5, 50.0, 0.0)  # the dither stops but its amplitude does not
+    with pytest.raises(DataError, match=r"row 500, 501 rows in total"):
+        drive_trace(t, i, dither_amp_mA=100.0, dither_freq_Hz=freq)
+    drive_trace(t, i)  # no dither at all: no frequency needed
+    drive_trace(t, i, dither_amp_mA=np.where(t < 0.5, 100.0, 0.0), dither_freq_Hz=freq)

@@ -120,7 +120,8 @@ def drive_trace(
     dither_amp_mA : float or array_like
         Dither amplitude (mA); 0, no dither, by default.
     dither_freq_Hz : float or array_like
-        Dither frequency (Hz); only used with a dither amplitude.
+        Dither frequency (Hz); 0 by default, which only a zero dither amplitude may have
+        (a dither amplitude at 0 Hz would be ignored: it is refused).
     dither_waveform : {"sine", "triangle", "square"}
         Dither waveform (what the trace's ``dither_waveform`` metadata says).
     line_pressure_bar, prime_pressure_bar : float or array_like
@@ -141,8 +142,9 @@ def drive_trace(
     ------
     DataError
         Listing every problem: columns whose length is not ``time_s``'s, a waveform that is
-        not one of the three, and whatever the trace's own checks find (times not
-        increasing, values that are not finite or outside a signal's physical range).
+        not one of the three, a dither amplitude without a dither frequency, and whatever
+        the trace's own checks find (times not increasing, values that are not finite or
+        outside a signal's physical range).
 
     Examples
     --------
@@ -166,6 +168,16 @@ def drive_trace(
     signals = {"time_s": t} | {k: _column(k, v, n, problems) for k, v in columns.items()}
     if dither_waveform not in WAVEFORMS:
         problems.append(f"dither_waveform {dither_waveform!r} is not one of {WAVEFORMS}")
+    if not problems:
+        amp, freq = signals["dither_amp_mA"], signals["dither_freq_Hz"]
+        idle = np.flatnonzero((amp != 0.0) & (freq == 0.0))
+        if idle.size:
+            problems.append(
+                f"dither_amp_mA is {amp[idle[0]]:g} mA at dither_freq_Hz = 0 Hz (row "
+                f"{idle[0]}, {idle.size} rows in total): a 0 Hz dither is no dither, the "
+                "amplitude would be ignored; give dither_freq_Hz (e.g. 50.0), or "
+                "dither_amp_mA=0 for no dither"
+            )
     if problems:
         raise DataError(f"{name}: invalid drive profile", problems)
     signals["clutch_pressure_bar"] = np.full(n, np.nan)
