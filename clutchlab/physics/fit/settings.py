@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -35,11 +36,12 @@ class FitSettings:
     ----------
     free : tuple of str or None
         Parameters to estimate. ``None``: :data:`DEFAULT_FREE` plus the fit
-        parameters of every switched-on effect.
+        parameters of every switched-on effect. One name alone (a string) is one parameter.
     per_experiment : tuple of str
         Free parameters estimated separately for each experiment (the rest are shared).
     bounds : dict
-        Bound overrides ``name -> (lower, upper)`` in the parameter's unit.
+        Bound overrides ``name -> (lower, upper)`` in the parameter's unit, for free
+        parameters only.
     method : {"single_shooting", "multiple_shooting"}
         Single shooting (default): one simulation per experiment from its settled
         state. Multiple shooting: experiments cut into segments of ``segment_s``
@@ -82,7 +84,8 @@ class FitSettings:
         and hid the pilot-volume non-identifiability, for no fewer iterations on the
         stand data.
     train_ramps : tuple of str
-        Ramp labels fitted on; the others (the test ramp) are never seen.
+        Ramp labels fitted on; the others (the test ramp) are never seen. One label alone
+        (a string) is one ramp.
     max_iter : int
         IPOPT iteration limit.
     prefit_samples : int or None
@@ -169,7 +172,9 @@ class FitSettings:
         At construction, listing every invalid setting: a count that is not an integer in
         its range (``substeps`` 1..16; ``decimate``, ``max_iter``, ``refine_max_iter``,
         ``workers``, ``static_max_iter`` ≥ 1; ``multistart``, ``prefit_samples``, the
-        plateau counts ≥ 0), a time, tolerance or span that is not finite or out of range.
+        plateau counts ≥ 0), a time, tolerance or span that is not finite or out of range,
+        a name list holding something other than names, a bound that is not two finite
+        numbers.
     """
 
     free: tuple[str, ...] | None = None
@@ -210,6 +215,23 @@ class FitSettings:
 
     def __post_init__(self) -> None:
         problems = []
+        # names: one name alone is a one-name tuple, not a sequence of its characters
+        for name, optional in (("free", True), ("per_experiment", False), ("train_ramps", False)):
+            value = getattr(self, name)
+            if value is None and optional:
+                continue
+            if isinstance(value, str):
+                value = (value,)
+            try:
+                value = tuple(value)
+            except TypeError:
+                problems.append(f"{name} must be a name or a sequence of names, not {value!r}")
+                continue
+            bad = [v for v in value if not (isinstance(v, str) and v)]
+            if bad:
+                problems.append(f"{name}: {', '.join(map(repr, bad))} not a name (a string)")
+            object.__setattr__(self, name, value)
+        problems += _bounds_problems(self.bounds)
         if self.method not in ("multiple_shooting", "single_shooting"):
             problems.append(f"method {self.method!r} is not multiple_shooting or single_shooting")
         if self.objective not in ("period_mean", "raw"):
@@ -267,3 +289,24 @@ class FitSettings:
             problems.append(f"regulator_lag {self.regulator_lag!r} is not auto or off")
         if problems:
             raise FitError("invalid fit settings: " + "; ".join(problems))
+
+
+def _bounds_problems(bounds) -> list[str]:
+    """Every problem of ``FitSettings.bounds``: not a mapping ``name -> (lower, upper)`` of
+    finite numbers (that lower < upper within the physical range is checked at the fit)."""
+    if not isinstance(bounds, Mapping):
+        return [f"bounds must be a dict name -> (lower, upper), not {bounds!r:.60}"]
+    problems = []
+    for name, pair in bounds.items():
+        ok = (
+            isinstance(pair, Sequence)
+            and not isinstance(pair, str)
+            and len(pair) == 2
+            and all(is_finite_real(v) for v in pair)
+        )
+        if not ok:
+            problems.append(
+                f"bounds[{name!r}] must be (lower, upper), two finite numbers in the "
+                f"parameter's unit, not {pair!r:.60}"
+            )
+    return problems
