@@ -22,6 +22,8 @@ import numpy as np
 from ..data import Trace, model_file_kind, write_file_atomic
 from ..errors import ModelError
 from ..physics import CircuitModel, SimulationSettings, simulate
+from ..physics.effects import effect_names
+from ..physics.settings import MAX_SUBSTEPS, is_integer
 
 __all__ = ["DefaultPhysics", "PhysicsPredictor"]
 
@@ -31,12 +33,14 @@ class PhysicsPredictor:
 
     Parameters
     ----------
-    effects : tuple of str
-        Effects switched on (names of :data:`clutchlab.physics.EFFECTS`; default none).
+    effects : tuple of str or str
+        Effects switched on (names of :data:`clutchlab.physics.EFFECTS`; default none); one
+        name alone, or names separated by commas, as a string.
     params : mapping of str to float, optional
         Parameter values differing from the datasheet defaults, engineering units.
     substeps : int
-        ROS2 steps per sample (default 4).
+        ROS2 steps per sample, 1 to :data:`~clutchlab.physics.settings.MAX_SUBSTEPS`
+        (default 4).
     train_experiments : sequence of str
         Experiments the parameter values were fitted on (default none: datasheet values or
         values of unknown origin). A hybrid model on this physics declares them among its
@@ -50,7 +54,8 @@ class PhysicsPredictor:
     Raises
     ------
     ModelError
-        If an effect or parameter name is unknown.
+        If an effect or parameter name is unknown, or ``substeps`` is not an integer in
+        its range.
     """
 
     def __init__(
@@ -60,8 +65,15 @@ class PhysicsPredictor:
         substeps: int = 4,
         train_experiments: tuple[str, ...] = (),
     ) -> None:
+        if isinstance(effects, str):  # one name (or "a, b"), not a sequence of letters
+            effects = effect_names(effects, "PhysicsPredictor effects")
         self.effects = tuple(effects)
         self.params = dict(params or {})
+        if not is_integer(substeps) or not 1 <= substeps <= MAX_SUBSTEPS:
+            raise ModelError(
+                f"PhysicsPredictor substeps {substeps!r} is not an integer in 1..{MAX_SUBSTEPS} "
+                "(ROS2 steps per sample)"
+            )
         self.substeps = int(substeps)
         if isinstance(train_experiments, str):
             raise ModelError("train_experiments must be a sequence of experiment names")
