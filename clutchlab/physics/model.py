@@ -110,6 +110,13 @@ class CircuitModel:
         if dupes:
             raise ModelError(f"effect(s) switched on twice: {', '.join(dupes)}")
 
+    def __repr__(self) -> str:
+        # the dataclass repr printed each component as <... object at 0x...>
+        parts = ", ".join(c.name for c in self.components)
+        return (
+            f"CircuitModel(name={self.name!r}, effects={self.effect_names!r}, components=({parts}))"
+        )
+
     # ---- structure ----------------------------------------------------------------
     @property
     def effect_names(self) -> tuple[str, ...]:

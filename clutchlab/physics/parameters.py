@@ -177,6 +177,18 @@ class ParameterSet(Mapping[str, float]):
         # also checks the values again
         return (type(self), (self.parameters, dict(self.values)))
 
+    def __repr__(self) -> str:
+        # the dataclass repr printed every Parameter with bounds and description (~9000
+        # characters for the base circuit): name the count and what differs from the defaults
+        changed = self.changed()
+        if not changed:
+            return f"ParameterSet({len(self)} parameters, all at their datasheet defaults)"
+        units = {p.name: p.unit for p in self.parameters}
+        shown = [f"{n}={v:.6g} {units[n]}" for n, v in list(changed.items())[:_REPR_CHANGED]]
+        if len(changed) > _REPR_CHANGED:
+            shown.append(f"… {len(changed) - _REPR_CHANGED} more (see .changed())")
+        return f"ParameterSet({len(self)} parameters; changed: {', '.join(shown)})"
+
     def __getitem__(self, name: str) -> float:
         try:
             return self.values[name]
@@ -327,6 +339,9 @@ class ParameterSet(Mapping[str, float]):
             raise ModelError(f"invalid {where}:\n  - " + "\n  - ".join(problems))
         return cls(parameters, values)
 
+
+#: Most changed values a ParameterSet's repr lists.
+_REPR_CHANGED = 12
 
 #: Whether a new set is checked for values that defeat a component (off inside from_vector).
 _DESIGN_CHECKS: contextvars.ContextVar[bool] = contextvars.ContextVar(

@@ -66,6 +66,16 @@ class SimulationResult:
     wall_s: float
     inputs: dict[str, np.ndarray] = field(default_factory=dict)
 
+    def __repr__(self) -> str:
+        # the dataclass repr printed every output array and the whole parameter set
+        t = self.time_s
+        span = f"{t[0]:.6g}–{t[-1]:.6g} s" if len(t) else "empty"
+        return (
+            f"SimulationResult(trace={self.trace_name!r}, {len(t)} samples, {span}, "
+            f"drive={self.drive!r}, outputs=[{', '.join(self.outputs)}], "
+            f"wall_s={self.wall_s:.3g})"
+        )
+
     @property
     def pressure_bar(self) -> np.ndarray:
         """Clutch pressure as the sensor reads it (bar)."""

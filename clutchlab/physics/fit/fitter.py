@@ -142,6 +142,11 @@ class PhysicsFitter:
         self.settings = settings
         self.start = start
 
+    def __repr__(self) -> str:
+        # as scikit-learn's: the constructor arguments that were given
+        given = [(k, getattr(self, k)) for k in ("model", "settings", "start")]
+        return f"PhysicsFitter({', '.join(f'{k}={v!r}' for k, v in given if v is not None)})"
+
     # ---- validation ---------------------------------------------------------------
     def _training(self, data) -> list[Trace]:
         settings = self.settings or FitSettings()

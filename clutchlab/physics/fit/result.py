@@ -115,6 +115,15 @@ class FitResult:
     settings: dict = field(default_factory=dict)
     note: str = ""
 
+    def __repr__(self) -> str:
+        # the dataclass repr printed every value, the correlation matrix and the cost history
+        return (
+            f"FitResult(status={self.status!r}, success={self.success}, "
+            f"effects={list(self.effects)!r}, free={list(self.free)!r}, "
+            f"train={len(self.train)} experiment(s), iterations={self.iterations}, "
+            f"wall_s={self.wall_s:.3g}; .table() lists the values)"
+        )
+
     def model(self) -> CircuitModel:
         """The fitted model structure (base circuit + the effects)."""
         return CircuitModel().with_effects(*(make_effect(e) for e in self.effects))

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import MISSING, dataclass, field, fields
 from typing import Literal
 
 from ...budgets import FIT_BUDGET_S
@@ -212,6 +212,16 @@ class FitSettings:
     static_max_iter: int = 15
     static_time_fraction: float = 0.2
     strict: bool = False
+
+    def __repr__(self) -> str:
+        # thirty-odd fields: name the ones that differ from their defaults
+        changed = []
+        for f in fields(self):
+            default = f.default_factory() if f.default is MISSING else f.default
+            value = getattr(self, f.name)
+            if value != default:
+                changed.append(f"{f.name}={value!r}")
+        return f"FitSettings({', '.join(changed)})"
 
     def __post_init__(self) -> None:
         problems = []
