@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from clutchlab.data import Trace
 from clutchlab.errors import DataError, ModelError, SimulationError
 from clutchlab.physics import CircuitModel, SimulationSettings, simulate, simulate_inputs
 from clutchlab.physics.inputs import input_matrix
@@ -112,6 +113,22 @@ def test_result_object_tabulates_and_plots(fast_ramp_trace):
     assert res.real_time_factor > 0
     fig = res.plot(measured=fast_ramp_trace.slice_time(0, 1.0))
     assert len(fig.axes) == 2
+
+
+def test_plot_refuses_a_measured_trace_off_the_simulated_grid(fast_ramp_trace):
+    """The whole trace of a simulated slice failed inside matplotlib ("x and y must have same
+    first dimension"); another trace of the same length was drawn against this result's
+    current without a word."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    part = fast_ramp_trace.slice_time(0, 1.0)
+    res = simulate(MODEL, PARAMS, part, SimulationSettings(compile="never"))
+    with pytest.raises(ModelError, match=r"not on the time grid .*slice_time"):
+        res.plot(measured=fast_ramp_trace)
+    shifted = Trace("other", dict(part.signals) | {"time_s": part.time_s + 2.0}, part.meta)
+    with pytest.raises(ModelError, match=r"measured trace 'other' \(1001 samples, 2–3 s\)"):
+        res.plot(measured=shifted)
 
 
 def test_bad_settings_and_missing_inputs_are_clear_errors(fast_ramp_trace):

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..errors import SimulationError
+from ..errors import ModelError, SimulationError
 from .model import OutputSpec
 from .parameters import ParameterSet
 
@@ -160,14 +160,24 @@ class SimulationResult:
         Parameters
         ----------
         measured : Trace, optional
-            Overlay its measured clutch pressure.
+            Overlay its measured clutch pressure: the trace that was simulated, on the same
+            time grid (slice it as the simulated one was).
         axes : pair of matplotlib Axes, optional
             Where to draw; a new figure when omitted.
 
         Returns
         -------
         matplotlib.figure.Figure
+
+        Raises
+        ------
+        ModelError
+            If ``measured`` is not on this result's time grid (another trace, or the whole
+            trace of a simulated slice): its pressure would be drawn against this result's
+            current.
         """
+        if measured is not None:
+            self._check_same_grid(measured)
         import matplotlib.pyplot as plt
 
         if axes is None:
@@ -197,3 +207,17 @@ class SimulationResult:
             ax.grid(alpha=0.3)
             ax.legend(loc="upper left")
         return fig
+
+    def _check_same_grid(self, measured) -> None:
+        """Refuse a measured trace whose samples are not this result's (ModelError)."""
+        t = np.asarray(measured.time_s)
+        if t.shape == self.time_s.shape and np.allclose(t, self.time_s, rtol=0.0, atol=1e-9):
+            return
+        span = f"{t[0]:.6g}–{t[-1]:.6g} s" if t.size else "no samples"
+        mine = f"{self.time_s[0]:.6g}–{self.time_s[-1]:.6g} s" if len(self.time_s) else "none"
+        raise ModelError(
+            f"plot: the measured trace {measured.name!r} ({t.size} samples, {span}) is not on "
+            f"the time grid of the simulated trace {self.trace_name!r} ({len(self.time_s)} "
+            f"samples, {mine}); pass the trace that was simulated (a slice: slice the "
+            "measured trace the same way, trace.slice_time(t0, t1))"
+        )
