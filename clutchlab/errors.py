@@ -6,6 +6,10 @@ clutchlab error or the generic Python one.
 
 from __future__ import annotations
 
+import os
+import sys
+import warnings
+
 __all__ = [
     "ClutchlabError",
     "DataError",
@@ -19,6 +23,7 @@ __all__ = [
     "ProblemListError",
     "SimulationError",
     "SimulationWarning",
+    "warn_at_caller",
 ]
 
 
@@ -111,5 +116,31 @@ class SimulationWarning(UserWarning):
 
 
 class ParameterWarning(UserWarning):
-    """A parameter set within its bounds whose values defeat what a component is for (a
-    latch valve whose areas and spring leave it no snap action, so it cannot latch)."""
+    """Values accepted that do not do what they say: a parameter set within its bounds that
+    defeats what a component is for (a latch valve whose areas and spring leave it no snap
+    action, so it cannot latch), or an estimator option the fitted model does not use."""
+
+
+_PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__))
+
+
+def warn_at_caller(message: str, category: type[Warning]) -> None:
+    """``warnings.warn`` attributed to the first frame outside clutchlab: the user's line.
+
+    Parameters
+    ----------
+    message : str
+        The warning's text.
+    category : type of Warning
+        Its class.
+    """
+    level, frame = 1, sys._getframe(1)
+    while frame is not None and _inside(frame.f_code):
+        frame, level = frame.f_back, level + 1
+    warnings.warn(message, category, stacklevel=level + 1)
+
+
+def _inside(code) -> bool:
+    """A frame of clutchlab's, or the ``__init__`` a dataclass generates (``<string>``)."""
+    name = code.co_filename
+    return name.startswith(_PACKAGE_DIR) or (name == "<string>" and code.co_name == "__init__")

@@ -6,9 +6,6 @@ import contextvars
 import difflib
 import json
 import math
-import os
-import sys
-import warnings
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,7 +15,7 @@ from typing import Literal
 import numpy as np
 
 from ..data.output import write_file_atomic
-from ..errors import ModelError, ParameterWarning
+from ..errors import ModelError, ParameterWarning, warn_at_caller
 from .units import SI_FACTOR
 
 __all__ = ["Parameter", "ParameterSet"]
@@ -351,8 +348,6 @@ _DESIGN_CHECKS: contextvars.ContextVar[bool] = contextvars.ContextVar(
 #: Kinds of :class:`ParameterWarning` given so far in this process (each is given once).
 _WARNED: set[str] = set()
 
-_PACKAGE_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-
 
 def _warn_design(values: Mapping[str, float]) -> None:
     """Warn (once per process) when ``values`` leave the latch valve unable to latch."""
@@ -363,26 +358,8 @@ def _warn_design(values: Mapping[str, float]) -> None:
     problem = latch_snap_problem(values)
     if problem is None:
         return
-    warnings.warn(
-        f"{problem} (this warning is given once per Python process)",
-        ParameterWarning,
-        stacklevel=_caller_level(),
-    )
+    warn_at_caller(f"{problem} (this warning is given once per Python process)", ParameterWarning)
     _WARNED.add("latch")  # after warn: a warning turned into an error is raised every time
-
-
-def _caller_level() -> int:
-    """The ``stacklevel`` of the first frame outside clutchlab, seen from the caller."""
-    level, frame = 1, sys._getframe(1)
-    while frame is not None and _inside(frame.f_code):
-        frame, level = frame.f_back, level + 1
-    return level
-
-
-def _inside(code) -> bool:
-    """A frame of clutchlab's, or the ``__init__`` a dataclass generates (``<string>``)."""
-    name = code.co_filename
-    return name.startswith(_PACKAGE_DIR) or (name == "<string>" and code.co_name == "__init__")
 
 
 def _unknown(name: str) -> str:

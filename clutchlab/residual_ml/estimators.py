@@ -16,12 +16,13 @@ by marginal likelihood); see :mod:`~clutchlab.residual_ml.base` for the accepted
 
 from __future__ import annotations
 
+import inspect
 from types import MappingProxyType
 
 import numpy as np
 
 from ..data import Trace
-from ..errors import DataError, ModelError
+from ..errors import DataError, ModelError, ParameterWarning, warn_at_caller
 from ._threads import map_folds
 from .base import Block, TraceEstimator
 from .classifiers import lean_decision, make_classifier
@@ -378,15 +379,18 @@ class GPWithDerivative(GPBaseline):
 
 
 class SVCPartitionedGP(_GPParams, TraceEstimator):
-    """The paper's final model: a latch classifier partitions the data, one GP per partition.
+    """The paper's final model: a latch decision partitions the data, one GP per partition.
 
     Training: latch labels from the measured pressure
-    (:class:`~clutchlab.residual_ml.labels.LatchLabelRule`); the classifier (RBF SVC by
-    default) is trained on latched / unlatched samples; one GP (RBF by default, see ``kernel``)
-    per latch state on that state's samples. Prediction: the classifier picks the GP of every
-    sample. The paper chose the rational-quadratic kernel for the local GPs; here the default
-    is the RBF kernel, which leave-one-experiment-out preferred on the default stand data
-    (``kernel="rq"`` gives the paper's choice).
+    (:class:`~clutchlab.residual_ml.labels.LatchLabelRule`); a latch decision is fitted on
+    latched / unlatched samples — by default the local latch-event law
+    (``latch_model="local_event"``), with ``latch_model="classifier"`` the paper's classifier
+    (RBF SVC by default, the ``classifier`` and ``svc_*`` options), which is otherwise only
+    the fallback; one GP (RBF by default, see ``kernel``) per latch state on that state's
+    samples. Prediction: the decision picks the GP of every sample. The paper chose the
+    rational-quadratic kernel for the local GPs; here the default is the RBF kernel, which
+    leave-one-experiment-out preferred on the default stand data (``kernel="rq"`` gives the
+    paper's choice).
 
     Parameters
     ----------
@@ -409,7 +413,9 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
     classifier : str
         Classifier of :data:`~clutchlab.residual_ml.classifiers.CLASSIFIERS` (default
         ``"rbf_svc"``); only ``rbf_svc``, ``logistic_regression`` and ``linear_svc`` can be
-        saved.
+        saved. It decides the latch state with ``latch_model="classifier"``, or when a
+        latch-event law cannot be fitted; set otherwise while a law decides, it has no
+        effect and :meth:`fit` says so (``ParameterWarning``), as for the ``svc_*`` options.
     svc_C, svc_gamma : float
         RBF-SVC penalty and width (on weighted standardized features; defaults 100, 1).
     svc_max_points : int
@@ -479,7 +485,7 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         Lean decision function of the classifier (> 0: latched).
     classifier_train_accuracy_ : float
         Classifier accuracy on its (non-event) training samples.
-    latch_model_ : {"classifier", "event", "none"}
+    latch_model_ : {"classifier", "event", "local_event", "none"}
         What decides the latch state as fitted (``none``: the training data hold one latch
         state, which is then predicted everywhere).
     latched_reference_ : {"line", "none"}
@@ -656,6 +662,31 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
         if self.latch_uncertainty == "mixture" and self.decision_ is not None:
             self.latch_timing_ = self._estimate_latch_timing(blocks)
         self.train_log_rates_ = self._trained_log_rates(blocks)
+        self._warn_unused_classifier_options()
+
+    #: Options that act only when a classifier decides the latch state.
+    _CLASSIFIER_OPTIONS = ("classifier", "svc_C", "svc_gamma", "svc_max_points")
+
+    def _warn_unused_classifier_options(self) -> None:
+        """A ParameterWarning naming the classifier options set away from their defaults
+        when a latch-event law, not the classifier, decided the latch state."""
+        if self.decision_ is None or self.classifier_ is not None:
+            return  # one latch state, or the classifier decides: nothing is ignored
+        defaults = inspect.signature(type(self).__init__).parameters
+        given = [
+            f"{n}={getattr(self, n)!r}"
+            for n in self._CLASSIFIER_OPTIONS
+            if getattr(self, n) != defaults[n].default
+        ]
+        if given:
+            warn_at_caller(
+                f"{type(self).__name__}: {', '.join(given)} had no effect: the latch state is "
+                f"decided by the {self.latch_model_} law (latch_model={self.latch_model!r}), "
+                "not by a classifier (the classifier is only its fallback when the training "
+                "data hold too few latch events); latch_model='classifier' uses them, as the "
+                "paper did",
+                ParameterWarning,
+            )
 
     def _freq_column(self) -> int:
         names = self.feature_names_
