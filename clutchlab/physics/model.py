@@ -19,13 +19,27 @@ __all__ = ["OUTPUTS", "CircuitModel", "ModelFunctions", "OutputSpec"]
 
 @dataclass(frozen=True)
 class OutputSpec:
-    """An output of the model (what a simulation returns per sample)."""
+    """An output of the model (what a simulation returns per sample).
+
+    Attributes
+    ----------
+    name : str
+        Column name in results (``clutch_pressure_bar`` ...), ending in its unit.
+    unit : str
+        Unit of the output (``bar``, ``mm``, ``mA``, ``N``, ``-``).
+    description : str
+        What the output is.
+    signal : str
+        The model signal it reads (SI units).
+    factor : float
+        Factor from the signal's SI unit to ``unit`` (1e-5 for Pa → bar).
+    """
 
     name: str
     unit: str
     description: str
     signal: str
-    factor: float  # SI → unit
+    factor: float
 
 
 #: Outputs of every model, in order. The first is what the sensor reads.

@@ -370,8 +370,9 @@ class GPWithDerivative(GPBaseline):
     """Stage 2 of the paper: :class:`GPBaseline` plus the filtered dI/dt as a feature.
 
     Same parameters as :class:`GPBaseline`; the default features are
-    ``("current_mA", "dither_amp_mA", "dither_freq_Hz", "didt_mA_s", "direction")`` and the
-    default kernel is the rational quadratic.
+    ``("current_lag_mA", "dither_amp_mA", "dither_freq_Hz", "didt_mA_s", "direction")`` (the
+    nominal current through the circuit's lag, ``lag_s``) and the default kernel is the
+    rational quadratic.
     """
 
     _default_features = LAG_DIDT_FEATURES
@@ -395,10 +396,12 @@ class SVCPartitionedGP(_GPParams, TraceEstimator):
     Parameters
     ----------
     features : tuple of str, optional
-        Feature names (default I, A_d, f_d, dI/dt).
-    didt_periods, target, kernel, ard, bin_width, bin_frac, max_points, n_hyper, n_restarts,
-    knot_tol, max_knot_gap, random_state
-        As in :class:`GPBaseline`.
+        Feature names (default
+        ``("current_lag_mA", "dither_amp_mA", "dither_freq_Hz", "didt_mA_s", "direction")``:
+        the nominal current through the circuit's lag, ``lag_s``).
+    didt_periods, target, lag_s, kernel, ard, bin_width, bin_frac, max_points, n_hyper,
+    n_restarts, knot_tol, max_knot_gap, random_state
+        As in :class:`GPBaseline` (``didt_periods`` in dither periods, ``lag_s`` in s).
     label_rule : LatchLabelRule, optional
         Latch-label rule (default parameters when None).
     event_points : {"exclude", "assign"}

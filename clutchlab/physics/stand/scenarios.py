@@ -93,7 +93,18 @@ def dither_amplitude(shape: str, current_mA: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class DitherSetting:
-    """Dither frequency (Hz), amplitude shape and waveform of one experiment."""
+    """Dither frequency (Hz), amplitude shape and waveform of one experiment.
+
+    Attributes
+    ----------
+    freq_Hz : float
+        Dither frequency, Hz.
+    shape : str
+        Amplitude shape, a key of :data:`DITHER_SHAPES` (``"A"`` flat 100 mA, ``"B"``
+        rising with current to 225 mA, ``"C"`` falling to 40 mA); amplitudes in mA.
+    waveform : {"sine", "triangle", "square"}
+        Dither waveform.
+    """
 
     freq_Hz: float
     shape: str

@@ -166,7 +166,22 @@ class StandConfig:
 
 @dataclass(frozen=True)
 class StandRun:
-    """A generated dataset with its truth."""
+    """A generated dataset with its truth.
+
+    Attributes
+    ----------
+    dataset : Dataset
+        The measured experiments (noise, quantization and wander included).
+    model : CircuitModel
+        The stand's truth model (built-in and requested effects).
+    params : ParameterSet
+        The truth parameter values, engineering units.
+    config : StandConfig
+        What was run.
+    true_pressure : dict of str to numpy.ndarray
+        Per experiment, the noise-free clutch pressure at the clutch node (bar) on the
+        experiment's time grid.
+    """
 
     dataset: Dataset
     model: CircuitModel
