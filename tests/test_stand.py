@@ -271,6 +271,21 @@ def test_stand_config_lists_its_problems_before_any_work(tmp_path, config, needl
     assert needle in str(err.value)
 
 
+def test_an_override_the_stand_model_lacks_names_its_effect_or_a_close_name():
+    """It said only "override of unknown parameter(s): sup_r, reg_Fc"."""
+    from clutchlab.errors import ModelError
+    from clutchlab.physics.stand import StandConfig
+
+    with pytest.raises(ModelError, match="invalid stand overrides") as err:
+        StandConfig(overrides={"sup_r": 1.0, "reg_Fc": 1.0}).truth_params()
+    text = str(err.value)
+    assert "sup_r: it belongs to the effect 'supply_droop'" in text
+    assert "StandConfig(effects=('supply_droop',)" in text
+    assert "reg_Fc: unknown parameter (did you mean 'reg_F_c'" in text
+    truth = StandConfig(effects=("supply_droop",), overrides={"sup_r": 1.0}).truth_params()
+    assert truth["sup_r"] == 1.0
+
+
 def test_plant_refuses_a_waveform_it_cannot_make():
     """A plant drew a square dither as a sine, and wrote "square" in the manifest."""
     from clutchlab.errors import ModelError

@@ -10,6 +10,7 @@ never inside it.
 
 from __future__ import annotations
 
+import difflib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,7 +23,7 @@ from ...data.io_dataset import MANIFEST_NAME, experiment_name_problems
 from ...data.output import check_folder_files, check_output, write_file_atomic
 from ...errors import DataError, ModelError, OutputError
 from ..assembly import MODEL_INPUTS
-from ..effects import effect_names
+from ..effects import effect_names, missing_effect
 from ..model import CircuitModel
 from ..parameters import ParameterSet
 from ..settings import SimulationSettings
@@ -159,7 +160,10 @@ class StandConfig:
         names = {p.name for p in model.parameters}
         unknown = sorted(set(self.overrides) - names)
         if unknown:
-            raise ModelError(f"override of unknown parameter(s): {', '.join(unknown)}")
+            raise ModelError(
+                "invalid stand overrides:\n  - "
+                + "\n  - ".join(_unknown_override(n, names) for n in unknown)
+            )
         values = {k: v for k, v in as_built_values().items() if k in names}
         return model.params(**(values | self.overrides))
 
@@ -241,6 +245,18 @@ def run_stand(config: StandConfig | None = None, progress: bool = True) -> Stand
         },
     )
     return StandRun(dataset, model, params, config, truth_p)
+
+
+def _unknown_override(name: str, known: set[str]) -> str:
+    """The problem of an override of a parameter the stand's model lacks: the effect that
+    owns it (to add with ``StandConfig(effects=...)``), or the closest known names."""
+    missing = missing_effect(name)
+    if missing is not None:
+        owner, text = missing
+        return f"{name}: it {text} (StandConfig(effects=({owner!r},), overrides=...))"
+    close = difflib.get_close_matches(name, sorted(known), n=3)
+    hint = f" (did you mean {', '.join(map(repr, close))}?)" if close else ""
+    return f"{name}: unknown parameter{hint}"
 
 
 def truth_path(out: str | Path) -> Path:
