@@ -199,3 +199,9 @@ def test_a_parameter_of_an_effect_the_model_lacks_names_the_effect():
     assert "unknown parameter 'slag_tau': it belongs to the effect 'sensor_lag'" in text
     assert "CircuitModel().with_effects('sensor_lag')" in text
     assert "unknown parameter 'nope'\n" in text + "\n"
+
+
+def test_a_misspelt_parameter_names_the_close_ones():
+    """``replace(reg_Fc=1.2)`` said "unknown parameter 'reg_Fc'" without the name meant."""
+    with pytest.raises(ModelError, match=r"unknown parameter 'reg_Fc' \(did you mean 'reg_F_c'"):
+        CircuitModel().default_params().replace(reg_Fc=1.2)

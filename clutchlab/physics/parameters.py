@@ -145,7 +145,7 @@ class ParameterSet(Mapping[str, float]):
     def __post_init__(self) -> None:
         known = {p.name: p for p in self.parameters}
         unknown = sorted(set(self.values) - set(known))
-        problems = [_unknown(n) for n in unknown]
+        problems = [_unknown(n, known) for n in unknown]
         full = {}
         for p in self.parameters:
             raw = self.values.get(p.name, p.default)
@@ -362,13 +362,16 @@ def _warn_design(values: Mapping[str, float]) -> None:
     _WARNED.add("latch")  # after warn: a warning turned into an error is raised every time
 
 
-def _unknown(name: str) -> str:
-    """The problem of an unknown parameter; one of an effect the model lacks names it."""
+def _unknown(name: str, known: Iterable[str] = ()) -> str:
+    """The problem of an unknown parameter; one of an effect the model lacks names it, a
+    misspelt one the closest known names."""
     from .effects import missing_effect  # the effects declare their parameters here
 
     missing = missing_effect(name)
     if missing is None:
-        return f"unknown parameter {name!r}"
+        close = difflib.get_close_matches(str(name), list(known), n=3)
+        hint = f" (did you mean {', '.join(map(repr, close))}?)" if close else ""
+        return f"unknown parameter {name!r}{hint}"
     owner, text = missing
     return f"unknown parameter {name!r}: it {text} (CircuitModel().with_effects({owner!r}))"
 
