@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from clutchlab.data import Trace
+from clutchlab.data import Dataset, Trace
 from clutchlab.errors import DataError, ModelError, SimulationError
 from clutchlab.physics import CircuitModel, SimulationSettings, simulate, simulate_inputs
 from clutchlab.physics.inputs import input_matrix
@@ -296,3 +296,18 @@ def test_inputs_in_a_wrong_unit_are_refused_not_simulated():
     assert "signal 'line_pressure_bar'" in text and "kPa or psi" in text
     assert "signal 'oil_temp_C'" in text and "kelvin" in text
     assert np.all(np.isfinite(simulate(MODEL, PARAMS, Trace("ok", ok)).pressure_bar))
+
+
+def test_arguments_of_the_wrong_type_are_named_not_attribute_errors(fast_ramp_trace):
+    """simulate(model, None, dataset) failed with "'Dataset' object has no attribute 'has'",
+    a DataFrame or a name likewise, settings={...} with "'dict' object has no attribute
+    'drive'", swapped arguments with "'Trace' object has no attribute 'default_params'"."""
+    dataset = Dataset([fast_ramp_trace])
+    with pytest.raises(ModelError, match=r"trace must be one Trace, not a Dataset"):
+        simulate(MODEL, None, dataset)
+    with pytest.raises(ModelError, match=r"not DataFrame \(Trace.from_pandas\(df, name\)"):
+        simulate(MODEL, None, fast_ramp_trace.to_pandas())
+    with pytest.raises(ModelError, match=r"SimulationSettings\(\*\*settings\)"):
+        simulate(MODEL, None, fast_ramp_trace, {"substeps": 2})
+    with pytest.raises(ModelError, match="model must be a CircuitModel, not Trace"):
+        simulate(fast_ramp_trace, None, MODEL)

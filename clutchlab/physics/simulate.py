@@ -7,7 +7,7 @@ import warnings
 
 import numpy as np
 
-from ..data import Trace
+from ..data import Dataset, Trace
 from ..errors import ModelError, SimulationError, SimulationWarning
 from .assembly import MODEL_INPUTS
 from .dense_call import DenseCall
@@ -48,8 +48,9 @@ def simulate(
     Raises
     ------
     ModelError
-        If ``params`` is not a :class:`ParameterSet` of ``model`` (built for another
-        model: the message lists the missing and extra parameter names).
+        If an argument has the wrong type (``trace`` a Dataset, ``settings`` a dict, ...:
+        the message names it), or ``params`` is not a :class:`ParameterSet` of ``model``
+        (built for another model: the message lists the missing and extra parameter names).
     DataError
         If the trace has fewer than 2 samples, an input signal that is not finite (the
         message names it and its first bad sample) or metadata standing for an absent
@@ -68,6 +69,7 @@ def simulate(
         step is too long for the parameters' dynamics. The message names the output, its
         value and time, and the remedy (more ``substeps``, or ``method="radau"``).
     """
+    _check_types(model, trace, settings)
     settings = settings or SimulationSettings()
     params = model_params(model, params)
     drive = choose_drive(trace, settings)
@@ -94,6 +96,30 @@ def simulate(
     elif settings.out_of_range == "warn" and (why := result.out_of_range()) is not None:
         warnings.warn(why, SimulationWarning, stacklevel=2)
     return result
+
+
+def _check_types(model, trace, settings) -> None:
+    """ModelError naming the argument of :func:`simulate` that has the wrong type (they
+    failed deep inside with an AttributeError such as "'Dataset' object has no attribute
+    'has'")."""
+    problems = []
+    if not isinstance(model, CircuitModel):
+        problems.append(f"model must be a CircuitModel, not {type(model).__name__}")
+    if isinstance(trace, Dataset):
+        problems.append(
+            "trace must be one Trace, not a Dataset: simulate each experiment "
+            "([simulate(model, params, tr) for tr in dataset]) or pick one (dataset['name'])"
+        )
+    elif not isinstance(trace, Trace):
+        hint = " (Trace.from_pandas(df, name) builds one)" if hasattr(trace, "columns") else ""
+        problems.append(f"trace must be a Trace, not {type(trace).__name__}{hint}")
+    if settings is not None and not isinstance(settings, SimulationSettings):
+        hint = " (SimulationSettings(**settings))" if isinstance(settings, dict) else ""
+        problems.append(
+            f"settings must be a SimulationSettings or None, not {type(settings).__name__}{hint}"
+        )
+    if problems:
+        raise ModelError("simulate: " + "; ".join(problems))
 
 
 def model_params(model: CircuitModel, params: ParameterSet | None) -> ParameterSet:
