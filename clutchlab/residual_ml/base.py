@@ -15,6 +15,7 @@ Every estimator of :mod:`clutchlab.residual_ml` accepts two kinds of input:
 
 from __future__ import annotations
 
+import os
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -73,11 +74,16 @@ def as_traces(X, role: str = "") -> list[Trace] | None:
     Raises
     ------
     DataError
-        If ``X`` is an empty dataset, an empty list or tuple, or a sequence mixing traces
-        and other objects.
+        If ``X`` is an empty dataset, an empty list or tuple, a sequence mixing traces
+        and other objects, or a path (a str or os.PathLike).
     """
     if isinstance(X, Trace):
         return [X]
+    if isinstance(X, str | os.PathLike):
+        raise DataError(
+            f"expected experiments (a Trace, a Dataset or a list of Traces) or a feature "
+            f"matrix, not a path ({str(X)!r}): load it first, clutchlab.data.load_dataset(path)"
+        )
     if isinstance(X, Dataset):
         traces = list(X)
     elif isinstance(X, list | tuple) and not X:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 import time
 import warnings
 from dataclasses import asdict
@@ -148,8 +149,31 @@ class PhysicsFitter:
         return f"PhysicsFitter({', '.join(f'{k}={v!r}' for k, v in given if v is not None)})"
 
     # ---- validation ---------------------------------------------------------------
+    def _check_arguments(self) -> None:
+        """FitError naming a constructor argument of the wrong type (they failed inside the
+        fit with an AttributeError such as "'dict' object has no attribute 'train_ramps'")."""
+        problems = []
+        for name, cls, hint in (
+            ("model", CircuitModel, "CircuitModel().with_effects(...)"),
+            ("settings", FitSettings, "FitSettings(**settings)"),
+        ):
+            value = getattr(self, name)
+            if value is not None and not isinstance(value, cls):
+                problems.append(
+                    f"{name} must be a {cls.__name__} or None, not {type(value).__name__} ({hint})"
+                )
+        if problems:
+            raise FitError("PhysicsFitter: " + "; ".join(problems))
+
     def _training(self, data) -> list[Trace]:
         settings = self.settings or FitSettings()
+        if isinstance(data, str | os.PathLike):
+            raise FitError(
+                f"fit takes the experiments, not a path ({str(data)!r}): "
+                "fit(clutchlab.data.load_dataset(path))"
+            )
+        if isinstance(data, Trace):
+            data = [data]  # one experiment
         if isinstance(data, Dataset):
             missing = [r for r in settings.train_ramps if r not in data.ramps]
             if missing:  # never train silently on fewer ramps than asked for
@@ -159,7 +183,15 @@ class PhysicsFitter:
                 )
             traces = list(data.select(ramps=[r for r in settings.train_ramps if r in data.ramps]))
         else:
-            traces = list(data)
+            try:
+                traces = list(data)
+            except TypeError:
+                raise FitError(
+                    f"fit takes a Dataset, a Trace or a list of Traces, not {type(data).__name__}"
+                ) from None
+            bad = sorted({type(t).__name__ for t in traces if not isinstance(t, Trace)})
+            if bad:
+                raise FitError(f"fit takes Traces; the experiments hold also {', '.join(bad)}")
         if not traces:
             raise FitError("no training experiments")
         problems = []
@@ -219,17 +251,30 @@ class PhysicsFitter:
             raise FitError("infeasible bounds:\n  - " + "\n  - ".join(problems))
 
     # ---- fit ----------------------------------------------------------------------------
-    def fit(self, data: Dataset | list[Trace]) -> PhysicsFitter:
+    def fit(self, data: Dataset | Trace | list[Trace]) -> PhysicsFitter:
         """Estimate the free parameters on the training experiments of ``data``.
+
+        Parameters
+        ----------
+        data : Dataset, Trace or list of Trace
+            A dataset: its experiments of the ramps ``settings.train_ramps`` are fitted on.
+            One trace, or a list of them: every one is fitted on, whatever its ramp.
+
+        Returns
+        -------
+        PhysicsFitter
+            ``self``, fitted (``result_``, ``params_``, ``model_``).
 
         Raises
         ------
         FitError
-            Bad settings or bounds, experiments without excitation, a model that
-            diverges at the start, or a solver that fails or runs out of time
-            (``exc.result`` then holds the best iterate found).
+            Bad settings or bounds, a constructor argument or ``data`` of the wrong type (a
+            path: load it with :func:`~clutchlab.data.load_dataset`), experiments without
+            excitation, a model that diverges at the start, or a solver that fails or runs
+            out of time (``exc.result`` then holds the best iterate found).
         """
         t_start = time.perf_counter()
+        self._check_arguments()
         model = self.model or CircuitModel()
         settings = self.settings or FitSettings()
         try:
