@@ -221,6 +221,27 @@ class CircuitModel:
             y_expr=y,
         )
 
+    def custom_components(self) -> list[str]:
+        """Names of the components that are not the base circuit's (another class, or
+        another order): what a file that records only the effects cannot rebuild.
+
+        Returns
+        -------
+        list of str
+            ``"<position>: <class name>"`` of each differing component, and a note when the
+            count differs; empty for the base circuit.
+        """
+        base = [type(c) for c in default_components()]
+        mine = [type(c) for c in self.components]
+        out = [
+            f"{k}: {m.__name__}"
+            for k, (m, b) in enumerate(zip(mine, base, strict=False))
+            if m is not b
+        ]
+        if len(mine) != len(base):
+            out.append(f"{len(mine)} components, the base circuit has {len(base)}")
+        return out
+
     def describe(self) -> str:
         """Human-readable summary: components, effects, parameter count."""
         lines = [

@@ -27,6 +27,7 @@ from sklearn.base import BaseEstimator
 from ..data.json_file import read_json_object
 from ..data.output import check_output, write_file_atomic
 from ..errors import ClutchlabError, ModelError, ModelFileError, OutputError
+from ..physics.fit.fitter import check_savable
 from .estimators import SVCPartitionedGP
 from .hybrid import HybridModel
 from .labels import LatchLabelRule
@@ -119,6 +120,7 @@ def _as_predictor(phys) -> PhysicsPredictor:
         if hasattr(phys, "_check_fitted"):  # a fitted PhysicsFitter
             return PhysicsPredictor.from_fitter(phys)
         trained = tuple(getattr(phys, "train_experiments_", None) or ())
+        check_savable(phys.model_)
         return PhysicsPredictor(tuple(phys.model_.effect_names), phys.params_.changed(), 4, trained)
     raise ModelError(
         f"physics of type {type(phys).__name__} cannot be saved; use a PhysicsPredictor or a "

@@ -23,6 +23,7 @@ from ..data import Trace, model_file_kind, write_file_atomic
 from ..errors import ModelError
 from ..physics import CircuitModel, SimulationSettings, simulate
 from ..physics.effects import effect_names
+from ..physics.fit.fitter import check_savable
 from ..physics.settings import MAX_SUBSTEPS, is_integer
 
 __all__ = ["DefaultPhysics", "PhysicsPredictor"]
@@ -121,9 +122,13 @@ class PhysicsPredictor:
         ------
         sklearn.exceptions.NotFittedError
             If the fitter is not fitted.
+        ModelError
+            If the fitted model has components other than the base circuit's (a
+            PhysicsPredictor rebuilds the base circuit with the effects).
         """
         fitter._check_fitted()
         model, params = fitter.model_, fitter.params_
+        check_savable(model)  # a predictor is its effects and values: no custom components
         result = getattr(fitter, "result_", None)
         trained = tuple(getattr(result, "train", None) or ())
         return cls(tuple(model.effect_names), params.changed(), substeps, trained)

@@ -1,6 +1,6 @@
 """Multi-experiment fitting of the physics model (CasADi sensitivities + IPOPT)."""
 
-from .fitter import PhysicsFitter, resolve_free
+from .fitter import PhysicsFitter, check_savable, resolve_free
 from .problem import FitProblem
 from .rate import FIT_RATE_MARGIN, SUGGESTED_FIT_RATE_HZ, at_fit_rate, faster_than_fit
 from .result import FitResult, identifiability
@@ -39,6 +39,7 @@ __all__ = [
     "StructureSelection",
     "StructureSelector",
     "at_fit_rate",
+    "check_savable",
     "compile_fit_code",
     "compile_sensitivities_for",
     "compile_sensitivities_in_background",

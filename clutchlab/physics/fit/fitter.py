@@ -34,7 +34,7 @@ from .staged import (
 )
 from .stages import prefit_settings, prefit_subset, refine_settings
 
-__all__ = ["PhysicsFitter", "resolve_free"]
+__all__ = ["PhysicsFitter", "check_savable", "resolve_free"]
 
 _OK = ("Solve_Succeeded", "Solved_To_Acceptable_Level", COST_PLATEAU)
 #: Share of the time limit the solver stages may use; the rest is kept for the result (the
@@ -102,6 +102,29 @@ def _per_experiment_metrics(
     order = sorted(range(len(traces)), key=lambda e: -len(traces[e]))
     rows = fork_map(metrics, len(traces), workers, order)
     return {tr.name: row for tr, row in zip(traces, rows, strict=True)}
+
+
+def check_savable(model: CircuitModel) -> None:
+    """ModelError when ``model`` has components a saved fit or physics file cannot record.
+
+    Parameters
+    ----------
+    model : CircuitModel
+        The fitted model.
+
+    Raises
+    ------
+    ModelError
+        Naming the custom components and what to save instead.
+    """
+    custom = model.custom_components()
+    if custom:
+        raise ModelError(
+            f"cannot save a model with components other than the base circuit's "
+            f"({'; '.join(custom)}): the file records the effects and parameter values only, "
+            "and loading it would build the base circuit, which predicts differently; save "
+            "the values (fitter.params_.to_json(path)) and rebuild the model in code"
+        )
 
 
 class PhysicsFitter:
@@ -638,8 +661,24 @@ class PhysicsFitter:
         return simulate(self.model_, self.params_, trace, settings).pressure_bar
 
     def save(self, path) -> None:
-        """Write the fit result as JSON."""
+        """Write the fit result as JSON.
+
+        Parameters
+        ----------
+        path : str or Path
+            The JSON file (written atomically).
+
+        Raises
+        ------
+        NotFittedError
+            If the fitter is not fitted.
+        ModelError
+            If the fitted model has components other than the base circuit's: the file
+            records the effects and values only, and :meth:`load` would rebuild the base
+            circuit, which predicts differently.
+        """
         self._check_fitted()
+        check_savable(self.model_)
         self.result_.to_json(path)
 
     @classmethod
