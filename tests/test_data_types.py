@@ -246,6 +246,13 @@ def test_dataset_access_and_select():
         ds.select(names=["nope"])
     with pytest.raises(KeyError, match="nope"):
         ds["nope"]
+    # a position out of range, or a key of the wrong type, says what the dataset holds
+    # (were Python's bare "tuple index out of range" and "indices must be integers")
+    with pytest.raises(IndexError, match=r"position 99 is out of range: the dataset has 4 "):
+        ds[99]
+    assert ds[-4].name == "fast_30Hz_A" and ds[np.int64(3)].name == "fast_70Hz_B"
+    with pytest.raises(TypeError, match=r"name, an integer position or a slice, not float 1\.5"):
+        ds[1.5]
 
 
 def test_dataset_rejects_duplicates_and_builds_manifest():

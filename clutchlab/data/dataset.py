@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import operator
 from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from types import MappingProxyType
@@ -106,7 +107,9 @@ class Dataset:
         KeyError
             If no experiment has the name ``key``.
         IndexError
-            If the position is out of range.
+            If the position is out of range (the message gives the number of experiments).
+        TypeError
+            If ``key`` is neither a name, an integer position nor a slice.
         """
         if isinstance(key, str):
             try:
@@ -117,7 +120,23 @@ class Dataset:
                 ) from None
         if isinstance(key, slice):
             return self._derive(self._experiments[key])
-        return self._experiments[key]
+        try:
+            if isinstance(key, bool):
+                raise TypeError
+            position = operator.index(key)
+        except TypeError:
+            raise TypeError(
+                "an experiment is looked up by its name, an integer position or a slice, "
+                f"not {type(key).__name__} {key!r}"
+            ) from None
+        n = len(self._experiments)
+        if not -n <= position < n:
+            names = ", ".join(list(self._index)[:5]) + (" …" if n > 5 else "")
+            held = f"{n} experiment(s) (positions 0 … {n - 1}; names {names})" if n else "none"
+            raise IndexError(
+                f"experiment position {position} is out of range: the dataset has {held}"
+            )
+        return self._experiments[position]
 
     def __contains__(self, name: object) -> bool:
         return name in self._index
