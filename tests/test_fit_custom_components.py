@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from fit_support import synthetic_fit
 
 from clutchlab.errors import ModelError
 from clutchlab.physics import CircuitModel, default_components
 from clutchlab.physics.components import PressureSensor
-from clutchlab.physics.fit import FitResult, PhysicsFitter
+from clutchlab.physics.fit import PhysicsFitter
 from clutchlab.residual_ml import PhysicsPredictor, persist
 
 
@@ -20,24 +22,11 @@ class MySensor(PressureSensor):
 
 def _fitted(model: CircuitModel) -> PhysicsFitter:
     params = model.default_params()
-    result = FitResult(
-        effects=list(model.effect_names),
-        values=dict(params.values),
-        units={p.name: p.unit for p in model.parameters},
+    result = replace(
+        synthetic_fit(effects=model.effect_names, train=["fast_50Hz_B"]),
         free=["reg_F_c"],
         std_errors={"reg_F_c": 0.01},
-        correlation=[[1.0]],
-        singular_values=[1.0],
-        unidentifiable=[],
-        weak_directions=[],
-        per_experiment={},
-        per_experiment_values={},
-        cost_history=[1.0],
         status="Solve_Succeeded",
-        success=True,
-        iterations=1,
-        wall_s=1.0,
-        train=["fast_50Hz_B"],
     )
     fitter = PhysicsFitter(model)
     fitter.result_, fitter.model_, fitter.params_ = result, model, params

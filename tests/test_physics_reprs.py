@@ -3,10 +3,13 @@ numbers, no <object at 0x...>)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
+from fit_support import synthetic_fit
 
 from clutchlab.physics import CircuitModel, drive_trace, knot_profile, simulate
-from clutchlab.physics.fit import FitResult, FitSettings, PhysicsFitter
+from clutchlab.physics.fit import FitSettings, PhysicsFitter
 
 MODEL = CircuitModel().with_effects("sensor_lag")
 
@@ -43,24 +46,13 @@ def test_fit_objects_say_what_they_are_in_a_line():
     fitter = PhysicsFitter(MODEL, settings)
     assert repr(fitter) == f"PhysicsFitter(model={MODEL!r}, settings={settings!r})"
     assert repr(PhysicsFitter()) == "PhysicsFitter()"
-    result = FitResult(
-        effects=[],
-        values={},
-        units={},
+    result = replace(
+        synthetic_fit(train=["fast_50Hz_A", "fast_50Hz_B"]),
         free=["reg_F_c"],
-        std_errors={},
-        correlation=[[1.0]],
-        singular_values=[1.0],
-        unidentifiable=[],
-        weak_directions=[],
-        per_experiment={},
-        per_experiment_values={},
         cost_history=list(np.linspace(1.0, 0.1, 500)),
         status="Solve_Succeeded",
-        success=True,
         iterations=12,
         wall_s=3.25,
-        train=["fast_50Hz_A", "fast_50Hz_B"],
     )
     text = repr(result)
     assert "status='Solve_Succeeded'" in text and "free=['reg_F_c']" in text
