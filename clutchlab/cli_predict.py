@@ -44,14 +44,22 @@ def _figure_writer(prediction):
 
 
 def _metrics_csv(predictions) -> bytes:
-    rows = ["experiment,ramp,trained,rmse_bar,mae_bar,max_abs_bar,fit_pct"]
+    """One row per experiment: its scores (bar, %) and the window they average over
+    (``window_samples``, ``window_ms``: one dither period; 1 sample, the raw signal, for a
+    log without a dither)."""
+    rows = ["experiment,ramp,trained,rmse_bar,mae_bar,max_abs_bar,fit_pct,window_samples,window_ms"]
     for p in predictions:
-        m = p.metrics
+        m, w = p.metrics, p.averaging or {}
         rows.append(
             f"{p.name},{p.ramp},{int(p.trained)},{m['rmse_bar']:.6g},{m['mae_bar']:.6g},"
-            f"{m['max_abs_bar']:.6g},{m['fit_pct']:.6g}"
+            f"{m['max_abs_bar']:.6g},{m['fit_pct']:.6g},{p.period_samples:.6g},"
+            f"{_g(w.get('window_ms'))}"
         )
     return ("\n".join(rows) + "\n").encode("utf-8")
+
+
+def _g(value) -> str:
+    return "" if value is None else f"{value:.6g}"
 
 
 def _cmd_predict(args: argparse.Namespace) -> int:
@@ -59,6 +67,7 @@ def _cmd_predict(args: argparse.Namespace) -> int:
 
     from .data import load_dataset, write_folder_atomic
     from .data.output import check_report_out
+    from .validation.averaging import averaging_note, scored_signal
     from .validation.predict import (
         load_predictor,
         overall_metrics,
@@ -95,8 +104,11 @@ def _cmd_predict(args: argparse.Namespace) -> int:
             f"note: {n_train} of these experiments were used to train or fit the model "
             "(marked train): their scores are in-sample"
         )
+    windows = {p.name: p.averaging for p in predictions if p.averaging}
+    if scored_signal(windows) != scored_signal(None):
+        print(averaging_note(windows))
     print(
-        f"scores on dither-period means; predictions {wall:.1f} s; written to {out} "
+        f"scores on the {scored_signal(windows)}; predictions {wall:.1f} s; written to {out} "
         f"(predictions/*.{ext}, metrics.csv" + (", figures/*.png)" if args.figures else ")")
     )
     if args.json:
@@ -132,7 +144,8 @@ def register(sub) -> None:
             "a `params --out` design file or an FMU (`export-fmu`'s). Writes "
             "predictions/<experiment>.csv (time, nominal current, measured, predicted, "
             "residual [, std]), metrics.csv (RMSE, MAE, max |e| and fit % of the dither-period "
-            "means, as `evaluate` scores) and figures/<experiment>.png into --out. Experiments "
+            "means, as `evaluate` scores, and the averaging window: 1 sample, the raw signal, "
+            "for a log without a dither) and figures/<experiment>.png into --out. Experiments "
             "the model was trained on are marked: their scores are in-sample. Exit status 0: "
             "written; 2: refused, nothing written."
         ),

@@ -308,6 +308,9 @@ class Evaluation:
                 else None
             ),
             "analysis": asdict(p.settings),
+            # over what the primary ("dither-period mean") scores are averaged, per test
+            # experiment: a log without a dither has a 1-sample window (its raw signal)
+            "averaging": {n: ref.averaging for n, ref in self.references.items()},
             "timings": dict(self.timings),
             "versions": versions(),
             "command": self.command,

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from matplotlib.figure import Figure
 
+from .averaging import scored_signal
 from .hysteresis import HysteresisCurve
 
 if TYPE_CHECKING:
@@ -33,6 +34,7 @@ __all__ = [
     "plot_uncertainty",
     "ramps_in_summary_order",
     "report_figures",
+    "signal_of",
 ]
 
 #: Line colour of each variant (and of the measurement) in every figure.
@@ -63,6 +65,13 @@ def _thin(n: int) -> slice:
 def featured_experiment(ev: Evaluation) -> str:
     """The test experiment drawn in the single-experiment figures (the middle one by name)."""
     return ev.protocol.featured
+
+
+def signal_of(ev: Evaluation) -> str:
+    """What the figures' pressure is, for labels and captions: ``"dither-period mean"``, or
+    what it really is when a test log has no dither to average over
+    (:func:`~clutchlab.validation.averaging.scored_signal`)."""
+    return scored_signal({n: ref.averaging for n, ref in ev.references.items()})
 
 
 def _present(ev: Evaluation, wanted: Sequence[str]) -> list[str]:
@@ -118,7 +127,7 @@ def plot_pressure_vs_current(ev: Evaluation, experiment: str | None = None) -> F
         ax.plot(ref.current_mA[sl], p[sl], color=_color(v, k), lw=1.0, label=v)
     ax.set(
         xlabel="nominal VFS current (mA)",
-        ylabel="clutch pressure, dither-period mean (bar)",
+        ylabel=f"clutch pressure, {signal_of(ev)} (bar)",
         title=f"Pressure vs current on the unseen test ramp — {name}",
     )
     ax.grid(alpha=0.3)
@@ -235,7 +244,7 @@ def plot_residuals(ev: Evaluation) -> Figure | None:
         axes[r, 0].set_ylabel(f"{v}\nresidual (bar)", fontsize=8)
     axes[-1, 0].set_xlabel("time (s)")
     axes[-1, 1].set_xlabel("nominal VFS current (mA)")
-    fig.suptitle("Residuals on the test experiments (predicted − measured, dither-period mean)")
+    fig.suptitle(f"Residuals on the test experiments (predicted − measured, {signal_of(ev)})")
     return fig
 
 
@@ -357,6 +366,7 @@ def report_figures(ev: Evaluation) -> tuple[list[FigureSpec], dict[str, str]]:
     missing : dict
         Figure key → reason it is not drawn.
     """
+    sig = signal_of(ev) if ev.scores else "dither-period mean"
     entries = [
         (
             "classifier_comparison",
@@ -369,7 +379,7 @@ def report_figures(ev: Evaluation) -> tuple[list[FigureSpec], dict[str, str]]:
         (
             "prediction_vs_time",
             "Evolution of the prediction (paper Fig. 3)",
-            "Measured vs predicted clutch pressure (dither-period mean, bar) over time on one "
+            f"Measured vs predicted clutch pressure ({sig}, bar) over time on one "
             "test experiment; nominal current (mA) below.",
             plot_prediction_vs_time,
             "no variant scored",
@@ -377,7 +387,7 @@ def report_figures(ev: Evaluation) -> tuple[list[FigureSpec], dict[str, str]]:
         (
             "pressure_vs_current",
             "Pressure vs current on the test ramp (paper Fig. 4)",
-            "Clutch pressure (dither-period mean, bar) vs nominal current (mA), measured and "
+            f"Clutch pressure ({sig}, bar) vs nominal current (mA), measured and "
             "predicted, on one test experiment.",
             plot_pressure_vs_current,
             "no variant scored",
@@ -385,7 +395,7 @@ def report_figures(ev: Evaluation) -> tuple[list[FigureSpec], dict[str, str]]:
         (
             "hysteresis_bands",
             "Hysteresis bands for the ramp rates (paper Fig. 5)",
-            "Rising minus falling dither-period-mean pressure (bar) in 25 mA bins vs nominal "
+            f"Rising minus falling pressure ({sig}, bar) in 25 mA bins vs nominal "
             "current (mA); line: mean over a ramp's experiments, band: their range. Training "
             "ramps are in sample for the models; bins at the latch snap are left out.",
             plot_hysteresis_bands,
@@ -394,7 +404,7 @@ def report_figures(ev: Evaluation) -> tuple[list[FigureSpec], dict[str, str]]:
         (
             "residuals",
             "Residuals vs time and vs current",
-            "Predicted minus measured clutch pressure (dither-period mean, bar) on every test "
+            f"Predicted minus measured clutch pressure ({sig}, bar) on every test "
             "experiment, per variant.",
             plot_residuals,
             "no variant scored",
@@ -402,7 +412,7 @@ def report_figures(ev: Evaluation) -> tuple[list[FigureSpec], dict[str, str]]:
         (
             "uncertainty",
             "Predictive uncertainty",
-            "Predictive mean ± 2σ (dither-period mean, bar) against the measurement on one "
+            f"Predictive mean ± 2σ ({sig}, bar) against the measurement on one "
             "test experiment, for the variants that give a standard deviation.",
             plot_uncertainty,
             "no scored variant gives a predictive standard deviation",

@@ -30,7 +30,13 @@ from .._plotly import (
     thin,
 )
 from .._plotly import f32 as _f32
-from .figures import VARIANT_COLORS, _band, featured_experiment, ramps_in_summary_order
+from .figures import (
+    VARIANT_COLORS,
+    _band,
+    featured_experiment,
+    ramps_in_summary_order,
+    signal_of,
+)
 
 if TYPE_CHECKING:
     import plotly.graph_objects as go
@@ -242,7 +248,7 @@ def iplot_pressure_vs_current(ev: Evaluation, experiment: str | None = None) -> 
             )
         )
     fig.update_xaxes(title_text="nominal VFS current (mA)")
-    fig.update_yaxes(title_text="clutch pressure, dither-period mean (bar)")
+    fig.update_yaxes(title_text=f"clutch pressure, {signal_of(ev)} (bar)")
     return _layout(fig, f"Pressure vs current on the unseen test ramp — {name}", 520)
 
 
@@ -411,7 +417,7 @@ def iplot_residuals(ev: Evaluation) -> go.Figure | None:
     fig.update_xaxes(title_text="nominal VFS current (mA)", row=len(variants), col=2)
     return _layout(
         fig,
-        "Residuals on the test experiments (predicted − measured, dither-period mean)",
+        f"Residuals on the test experiments (predicted − measured, {signal_of(ev)})",
         190 * len(variants) + 140,
     )
 

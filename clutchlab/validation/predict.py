@@ -25,6 +25,7 @@ from ..data import (
     read_json_object,
 )
 from ..errors import ClutchlabError, ModelError
+from .averaging import averaging_window, largest_dither_amp
 from .variants import supports_std
 
 __all__ = [
@@ -200,7 +201,11 @@ class ExperimentPrediction:
         ``rmse_bar``, ``mae_bar``, ``max_abs_bar`` (bar) and ``fit_pct`` (%) of the
         dither-period means, as ``clutchlab evaluate`` scores.
     period_samples : float
-        Samples per dither period, the window of those means.
+        Samples per dither period, the window of those means (1.0 without a dither: the
+        scores are then those of the raw signal).
+    averaging : dict or None
+        That window in words and units (:func:`~.averaging.averaging_window`: samples, ms,
+        the dither frequency it is the period of, and whether the log has a dither).
     """
 
     name: str
@@ -213,6 +218,7 @@ class ExperimentPrediction:
     std_bar: np.ndarray | None
     metrics: dict[str, float]
     period_samples: float
+    averaging: dict | None = None
 
     def columns(self) -> dict[str, np.ndarray]:
         """The per-sample table: time (s), nominal current (mA), measured, predicted,
@@ -289,6 +295,7 @@ def predict_traces(
                 std_bar=None if std is None else np.asarray(std, dtype=float),
                 metrics=metrics,
                 period_samples=n,
+                averaging=averaging_window(n, tr.sample_rate_Hz, largest_dither_amp(tr)),
             )
         )
     return out, wall

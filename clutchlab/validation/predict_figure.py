@@ -8,6 +8,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ..data import dither_period_mean
+from .averaging import scored_signal
 from .figures import VARIANT_COLORS
 
 if TYPE_CHECKING:
@@ -49,10 +50,11 @@ def prediction_figure(p: ExperimentPrediction) -> Figure:
     ax_t.set_ylabel("clutch pressure (bar)")
     ax_t.legend(loc="upper left", fontsize=8)
     residual = p.predicted_bar - p.measured_bar
+    signal = scored_signal({p.name: p.averaging} if p.averaging else None)
     ax_r.plot(t, residual[k], color="0.75", lw=0.5, label="samples")
-    if np.isfinite(residual).all():
+    if np.isfinite(residual).all() and p.period_samples > 1:
         mean = dither_period_mean(residual, p.period_samples)[k]
-        ax_r.plot(t, mean, color="tab:red", lw=0.8, label="dither-period mean")
+        ax_r.plot(t, mean, color="tab:red", lw=0.8, label=signal)
         ax_r.legend(loc="upper left", fontsize=7)
     ax_r.axhline(0.0, color="grey", lw=0.5)
     ax_r.set_xlabel("time (s)")
@@ -66,7 +68,7 @@ def prediction_figure(p: ExperimentPrediction) -> Figure:
     m = p.metrics
     title = (
         f"{p.name}" + (f" ({p.ramp})" if p.ramp else "") + f": RMSE {m['rmse_bar']:.4f} bar, "
-        f"fit {m['fit_pct']:.1f} %, dither-period means"
+        f"fit {m['fit_pct']:.1f} %, {signal}"
     )
     if p.trained:
         title += " — a training experiment: in-sample"

@@ -35,6 +35,7 @@ from ..data import (
     ramps_fastest_first,
 )
 from ..errors import ClutchlabError, DataError
+from .averaging import averaging_window, largest_dither_amp
 from .hysteresis import branch_direction
 from .metrics import (
     ACCURACY_KEYS,
@@ -104,6 +105,10 @@ class ExperimentReference:
         Samples per dither period.
     measured_bar : numpy.ndarray
         Measured clutch pressure, raw, bar.
+    sample_rate_Hz : float
+        Sample rate of the log, Hz (NaN when not given).
+    dither_amp_max_mA : float or None
+        Largest logged dither amplitude, mA (None when the log has no ``dither_amp_mA``).
     """
 
     name: str
@@ -114,6 +119,14 @@ class ExperimentReference:
     line_bar: np.ndarray
     period_samples: float
     measured_bar: np.ndarray
+    sample_rate_Hz: float = float("nan")
+    dither_amp_max_mA: float | None = None
+
+    @property
+    def averaging(self) -> dict[str, Any]:
+        """The window of :meth:`period_mean` (:func:`~.averaging.averaging_window`): samples,
+        ms, the dither frequency it is the period of, and whether there is a dither."""
+        return averaging_window(self.period_samples, self.sample_rate_Hz, self.dither_amp_max_mA)
 
     @cached_property
     def measured_mean_bar(self) -> np.ndarray:
@@ -140,6 +153,8 @@ class ExperimentReference:
             line_bar=np.asarray(trace.get("line_pressure_bar"), dtype=float),
             period_samples=dither_period_samples(trace),
             measured_bar=np.asarray(trace.get("clutch_pressure_bar"), dtype=float),
+            sample_rate_Hz=float(trace.sample_rate_Hz),
+            dither_amp_max_mA=largest_dither_amp(trace),
         )
 
 

@@ -29,6 +29,7 @@ import numpy as np
 
 from .._plotly import MARKER_SCRIPT as _MARKER
 from ..data.output import write_file_atomic, write_folder_atomic
+from .averaging import averaging_note, scored_signal
 from .figures import FigureSpec, report_figures
 from .interactive import interactive_figures
 from .metrics import ACCURACY_KEYS, COVERAGE_REGIONS, METRIC_KEYS
@@ -80,6 +81,18 @@ _DEFINITIONS = (
     "over experiments of |predicted − measured| (mA); a missing snap counts at the peak "
     "current. Fit time includes the fit of a variant it builds on (hybrid: physics_fitted)."
 )
+
+
+def _definitions(doc: dict[str, Any], escape: Callable[[str], str] = str) -> str:
+    """The metric definitions, with the averaging window the primary scores really used
+    (its experiment names passed through ``escape``)."""
+    note = averaging_note(doc.get("averaging"))
+    return _DEFINITIONS + (" " + escape(note) if note else "")
+
+
+def _signal(doc: dict[str, Any]) -> str:
+    """What the primary scores average (:func:`~.averaging.scored_signal`)."""
+    return scored_signal(doc.get("averaging"))
 
 
 def jsonable(obj: Any) -> Any:
@@ -228,7 +241,7 @@ def _region_table(doc: dict[str, Any]) -> tuple[str, list[str], list[list[str]]]
         return None
     window = (doc.get("analysis") or {}).get("latch_window_s")
     caption = (
-        "Dither-period-mean error on the test ramp per region of the measured pressure: "
+        f"Error of the {_signal(doc)} on the test ramp per region of the measured pressure: "
         + ", ".join(
             f"{_REGION_NAMES[r]} {100 * v:.0f} % of the samples"
             for r, v in samples.items()
@@ -269,8 +282,10 @@ def summary_lines(doc: dict[str, Any]) -> list[str]:
     Returns
     -------
     list of str
-        A heading line and one line per scored variant; then, when the physics fit stopped
-        before converging, a line saying so (the report says it too).
+        A heading line and one line per scored variant; then, when a test log has no
+        dither (its "dither-period mean" is its raw signal), a line saying what the scores
+        average; when the physics fit stopped before converging, a line saying so (the
+        report says both too).
     """
     rows = doc.get("variants") or {}
     if not rows:
@@ -283,6 +298,8 @@ def summary_lines(doc: dict[str, Any]) -> list[str]:
         rmse_txt, reg_txt = (f"{v:.4f}" if _is_number(v) else "–" for v in (rmse, reg))
         share_txt = _pct(pm.get("sq_error_share_latch_window"))
         out.append(f"{name:{width}s}  {rmse_txt:>10s}  {share_txt:>18s}  {reg_txt:>20s}")
+    if _signal(doc) != scored_signal(None):
+        out.append(averaging_note(doc.get("averaging")))
     fit = doc.get("physics_fit") or {}
     if fit and not fit.get("converged", True) and "physics_fitted" in rows:
         out.append(
@@ -428,8 +445,9 @@ def render_markdown(doc: dict[str, Any], figure_files: list[tuple[str, str, str]
         out += [f"- `{n}` not available: {_md_text(why)}" for n, why in doc["unavailable"].items()]
         out.append("")
     out += [
-        "## Variants on the test ramp (dither-period mean)",
+        f"## Variants on the test ramp ({_signal(doc)})",
         "",
+        *([_md_text(note), ""] if (note := averaging_note(doc.get("averaging"))) else []),
         _md_metrics(doc["variants"], METRIC_KEYS),
         "",
         *_md_regions(doc),
@@ -491,7 +509,7 @@ def render_markdown(doc: dict[str, Any], figure_files: list[tuple[str, str, str]
         "",
         "## Metric definitions",
         "",
-        _DEFINITIONS,
+        _definitions(doc, _md_text),
         "",
     ]
     return "\n".join(out)
@@ -677,7 +695,12 @@ def render_html(
         ]
         s.append(f"<div class='warn'><b>Not in this report</b><ul>{''.join(items)}</ul></div>")
     s += [
-        "<h2>Variants on the test ramp — dither-period mean (primary)</h2>",
+        f"<h2>Variants on the test ramp — {_e(_signal(doc))} (primary)</h2>",
+        *(
+            [f"<p class='note'>{_e(note)}</p>"]
+            if (note := averaging_note(doc.get("averaging")))
+            else []
+        ),
         _html_metrics(doc["variants"], METRIC_KEYS, "variants"),
         _html_regions(doc),
         "<h3>Raw signal (secondary)</h3>",
@@ -741,7 +764,7 @@ def render_html(
     for key, why in doc.get("figures", {}).get("missing", {}).items():
         s.append(f"<p>Figure <code>{_e(key)}</code> not drawn: {_e(why)}.</p>")
     s += [
-        "<h2>Per test experiment (dither-period mean)</h2>",
+        f"<h2>Per test experiment ({_e(_signal(doc))})</h2>",
         "<details><summary>show</summary>",
         _per_experiment_html(doc),
         "</details>",
@@ -772,7 +795,7 @@ def render_html(
         "<h2>Versions</h2>",
         _html_rows(["component", "version"], [[k, v] for k, v in doc["versions"].items()]),
         "<h2>Metric definitions</h2>",
-        f"<p>{_e(_DEFINITIONS)}</p>",
+        f"<p>{_e(_definitions(doc))}</p>",
         _MARKER,
         "</body></html>",
     ]

@@ -1,0 +1,135 @@
+"""What the report calls its primary scores is what they are: a log without a dither has a
+one-sample "dither-period mean" (its raw signal), and the report, its figures and
+``clutchlab predict`` say so instead of calling it a dither-period mean.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from clutchlab.data import load_dataset, save_dataset
+from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
+from clutchlab.validation import evaluate, report_figures, write_report
+from clutchlab.validation.report import summary_lines
+
+RAMPS = (RampProfile("fast", 1.0, 0.2), RampProfile("medium", 2.0, 0.2))
+
+
+@pytest.fixture(scope="module")
+def folders(tmp_path_factory):
+    """The same short stand runs twice: as logged (50 Hz dither), and as a user's log without
+    a dither (commanded current only, no dither columns, nothing in the manifest)."""
+    root = tmp_path_factory.mktemp("avg")
+    run = run_stand(StandConfig(settings=(DitherSetting(50.0, "A"),), ramps=RAMPS), progress=False)
+    dithered = save_dataset(run.dataset, root / "dithered")
+    plain = root / "plain"
+    plain.mkdir()
+    experiments = []
+    for entry in json.loads((dithered / "manifest.json").read_text())["experiments"]:
+        frame = pd.read_csv(dithered / entry["file"])
+        frame = frame.drop(columns=["current_mA", "dither_amp_mA", "dither_freq_Hz"])
+        frame.to_csv(plain / entry["file"], index=False)
+        experiments.append({"file": entry["file"], "ramp": entry["ramp"]})
+    (plain / "manifest.json").write_text(json.dumps({"experiments": experiments}))
+    return dithered, plain
+
+
+def _report(folder: Path, out: Path):
+    ev = evaluate(
+        load_dataset(folder), ["physics_default"], train=["fast"], test=["medium"], progress=False
+    )
+    return ev, write_report(ev, out, interactive=False)
+
+
+def test_a_log_without_dither_is_not_called_a_dither_period_mean(folders, tmp_path):
+    ev, files = _report(folders[1], tmp_path / "plain")
+    (name,) = ev.protocol.test_names
+    window = files.doc["averaging"][name]
+    assert window["samples"] == 1.0 and window["kind"] == "none"
+    assert window["dither_freq_Hz"] is None
+    # the primary and raw scores are then the same numbers
+    assert files.doc["variants"]["physics_default"]["rmse_bar"] == pytest.approx(
+        files.doc["raw"]["physics_default"]["rmse_bar"]
+    )
+    md = files.markdown.read_text(encoding="utf-8")
+    html = files.html.read_text(encoding="utf-8")
+    for text in (md, html):
+        assert "dither-period mean (primary)" not in text
+        assert "Variants on the test ramp (dither-period mean)" not in text
+        assert "raw signal — no dither to average over" in text
+        assert "averaging window is 1 sample" in text
+    assert "Per test experiment (dither-period mean)" not in html
+    figures, _ = report_figures(ev)
+    for spec in figures:
+        assert "dither-period mean" not in spec.caption, spec.key
+        assert "dither-period mean" not in spec.figure.get_suptitle(), spec.key
+    labels = {spec.key: spec.figure.axes[0].get_ylabel() for spec in figures}
+    assert (
+        labels["pressure_vs_current"]
+        == "clutch pressure, raw signal — no dither to average over (bar)"
+    )
+    assert any("averaging window is 1 sample" in line for line in summary_lines(files.doc))
+
+
+def test_a_dithered_log_states_its_averaging_window(folders, tmp_path):
+    ev, files = _report(folders[0], tmp_path / "dithered")
+    (name,) = ev.protocol.test_names
+    window = files.doc["averaging"][name]
+    assert window["kind"] == "dither_period"
+    assert window["samples"] == pytest.approx(20.0)  # 1 kHz log, 50 Hz dither
+    assert window["window_ms"] == pytest.approx(20.0)
+    assert window["dither_freq_Hz"] == pytest.approx(50.0)
+    md = files.markdown.read_text(encoding="utf-8")
+    assert "## Variants on the test ramp (dither-period mean)" in md
+    assert "20 ms = 1/50 Hz" in md
+    # nothing extra in the terminal summary when the scores are what they are called
+    assert not any("Primary signal" in line for line in summary_lines(files.doc))
+
+
+def test_the_wording_of_each_kind_of_window():
+    from clutchlab.validation.averaging import averaging_note, averaging_window, scored_signal
+
+    dithered = averaging_window(33.3333, 1000.0, 100.0)
+    silent = averaging_window(20.0, 1000.0, 0.0)  # frequency logged, amplitude 0
+    none = averaging_window(1.0, 1000.0, None)
+    assert scored_signal(None) == scored_signal({"a": dithered}) == "dither-period mean"
+    assert scored_signal({"a": none}) == "raw signal — no dither to average over"
+    assert (
+        scored_signal({"a": dithered, "b": none}) == "dither-period mean where dithered, else raw"
+    )
+    assert silent["kind"] == "no_dither_amplitude"
+    note = averaging_note({"a": dithered, "b": silent, "c": none})
+    assert "33.3 ms = 1/30 Hz (a)" in note
+    assert "b: logged dither amplitude 0 mA" in note and "moving average" in note
+    assert "c: no dither" in note and "1 sample" in note
+    assert averaging_note(None) == ""
+
+
+class _Flat:
+    """A model that predicts the prime pressure everywhere (bar)."""
+
+    def predict(self, trace):
+        return trace.get("clutch_pressure_bar") * 0.0 + 0.5
+
+
+def test_predict_says_over_what_its_scores_are_averaged(folders):
+    from clutchlab.cli_predict import _metrics_csv
+    from clutchlab.validation import LoadedModel, predict_traces, prediction_figure
+
+    loaded = LoadedModel(_Flat(), "test double", ())
+    for folder, samples, titled in ((folders[0], 20, "dither-period mean"),
+                                    (folders[1], 1, "raw signal")):  # fmt: skip
+        predictions, _ = predict_traces(loaded, list(load_dataset(folder)))
+        rows = list(csv.DictReader(io.StringIO(_metrics_csv(predictions).decode())))
+        assert [float(r["window_samples"]) for r in rows] == pytest.approx([samples] * len(rows))
+        assert [float(r["window_ms"]) for r in rows] == pytest.approx([samples] * len(rows))
+        title = prediction_figure(predictions[0]).get_suptitle()
+        assert titled in title
+        if samples == 1:
+            assert "dither-period" not in title
