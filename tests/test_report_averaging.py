@@ -133,3 +133,18 @@ def test_predict_says_over_what_its_scores_are_averaged(folders):
         assert titled in title
         if samples == 1:
             assert "dither-period" not in title
+
+
+def test_the_svc_gp_description_does_not_contradict_its_latch_decision(folders, tmp_path):
+    """On one training experiment the local latch-event law cannot be fitted and the RBF-SVC
+    decides; the report said "latch state from the local latch-event law" beside "latch
+    decision: classifier rbf_svc"."""
+    ev = evaluate(
+        load_dataset(folders[0]), ["paper_svc_gp"], train=["fast"], test=["medium"],
+        progress=False, classifiers=False,
+    )  # fmt: skip
+    details = write_report(ev, tmp_path / "svc", interactive=False).doc["details"]
+    d = details["paper_svc_gp"]
+    assert d["latch_decision"].startswith("classifier rbf_svc")
+    assert not d["description"].startswith("latch state from the local latch-event law")
+    assert "RBF-SVC when the training data hold fewer than two latch events" in d["description"]

@@ -463,9 +463,10 @@ _ML_CLASSES: dict[str, str] = {
 _ML_DESCRIPTIONS: dict[str, str] = {
     "gp_base": "GP on nominal current, dither amplitude and frequency (paper stage 1)",
     "gp_didt": "GP on lagged current, dither amplitude and frequency, dI/dt (paper stage 2)",
-    "paper_svc_gp": "latch state from the local latch-event law + one GP per latch state on "
-    "the lagged current, the latched one below line pressure (paper stage 3, clutchlab's "
-    "defaults)",
+    "paper_svc_gp": "one GP per latch state on the lagged current, the latched one below line "
+    "pressure; latch state from the local latch-event law, or from the RBF-SVC when the "
+    "training data hold fewer than two latch events of a direction, e.g. one training "
+    "experiment (its latch decision says which; paper stage 3, clutchlab's defaults)",
     "hybrid": "fitted physics + SVC-partitioned GP on its residual",
     "paper_faithful": "paper stage 3 as published: RBF-SVC on nominal current, dI/dt and "
     "dither, one rational-quadratic GP per latch state, no lag, no line-pressure reference",
