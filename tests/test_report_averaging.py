@@ -64,6 +64,7 @@ def test_a_log_without_dither_is_not_called_a_dither_period_mean(folders, tmp_pa
         assert "Variants on the test ramp (dither-period mean)" not in text
         assert "raw signal — no dither to average over" in text
         assert "averaging window is 1 sample" in text
+        assert "no test experiment has dither" in text
     assert "Per test experiment (dither-period mean)" not in html
     figures, _ = report_figures(ev)
     for spec in figures:

@@ -124,18 +124,24 @@ def _ms(w: Mapping[str, Any]) -> str:
     return f"{ms:.3g} ms" + (f" = 1/{hz:.3g} Hz" if hz else "")
 
 
-def averaging_note(windows: Mapping[str, Mapping[str, Any]] | None) -> str:
+def averaging_note(
+    windows: Mapping[str, Mapping[str, Any]] | None, noun: str = "experiment"
+) -> str:
     """A sentence saying over what the primary scores are averaged, per experiment.
 
     Parameters
     ----------
     windows : mapping of str to dict, or None
         Experiment → :func:`averaging_window`; None or empty: ``""``.
+    noun : str
+        What the experiments are called (``"test experiment"`` in an evaluation report,
+        whose training experiments may have a dither where its test ones have none).
 
     Returns
     -------
     str
-        E.g. ``"Averaging window: 20 ms = 1/50 Hz (medium_50Hz_A)."``; for experiments
+        E.g. ``"Primary signal: averaged over one dither period: 20 ms = 1/50 Hz
+        (medium_50Hz_A)."``; for experiments
         without a dither it says that their primary scores are the raw ones (a window of 1
         sample), and for a logged frequency with a zero amplitude that the window is a
         moving average of an undithered signal.
@@ -162,7 +168,7 @@ def averaging_note(windows: Mapping[str, Mapping[str, Any]] | None) -> str:
         )
     if kinds.get("none"):
         names = kinds["none"]
-        who = "no experiment has" if len(names) == len(windows) else f"{', '.join(names)}: no"
+        who = f"no {noun} has" if len(names) == len(windows) else f"{', '.join(names)}: no"
         parts.append(
             f"{who} dither (no dither frequency logged, in the manifest or found in the "
             "measured current), so the averaging window is 1 sample and the primary scores "

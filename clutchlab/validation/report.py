@@ -86,7 +86,7 @@ _DEFINITIONS = (
 def _definitions(doc: dict[str, Any], escape: Callable[[str], str] = str) -> str:
     """The metric definitions, with the averaging window the primary scores really used
     (its experiment names passed through ``escape``)."""
-    note = averaging_note(doc.get("averaging"))
+    note = averaging_note(doc.get("averaging"), "test experiment")
     return _DEFINITIONS + (" " + escape(note) if note else "")
 
 
@@ -299,7 +299,7 @@ def summary_lines(doc: dict[str, Any]) -> list[str]:
         share_txt = _pct(pm.get("sq_error_share_latch_window"))
         out.append(f"{name:{width}s}  {rmse_txt:>10s}  {share_txt:>18s}  {reg_txt:>20s}")
     if _signal(doc) != scored_signal(None):
-        out.append(averaging_note(doc.get("averaging")))
+        out.append(averaging_note(doc.get("averaging"), "test experiment"))
     fit = doc.get("physics_fit") or {}
     if fit and not fit.get("converged", True) and "physics_fitted" in rows:
         out.append(
@@ -447,7 +447,11 @@ def render_markdown(doc: dict[str, Any], figure_files: list[tuple[str, str, str]
     out += [
         f"## Variants on the test ramp ({_signal(doc)})",
         "",
-        *([_md_text(note), ""] if (note := averaging_note(doc.get("averaging"))) else []),
+        *(
+            [_md_text(note), ""]
+            if (note := averaging_note(doc.get("averaging"), "test experiment"))
+            else []
+        ),
         _md_metrics(doc["variants"], METRIC_KEYS),
         "",
         *_md_regions(doc),
@@ -698,7 +702,7 @@ def render_html(
         f"<h2>Variants on the test ramp — {_e(_signal(doc))} (primary)</h2>",
         *(
             [f"<p class='note'>{_e(note)}</p>"]
-            if (note := averaging_note(doc.get("averaging")))
+            if (note := averaging_note(doc.get("averaging"), "test experiment"))
             else []
         ),
         _html_metrics(doc["variants"], METRIC_KEYS, "variants"),
