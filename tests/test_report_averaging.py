@@ -66,6 +66,11 @@ def test_a_log_without_dither_is_not_called_a_dither_period_mean(folders, tmp_pa
         assert "averaging window is 1 sample" in text
         assert "no test experiment has dither" in text
     assert "Per test experiment (dither-period mean)" not in html
+    # what reading the log noticed (printed to the terminal only, before) is in the report
+    notes = files.doc["dataset"]["notes"][name]
+    assert any(n.startswith("no dither amplitude") for n in notes)
+    assert "Notes on the data" in md and "Notes on the data" in html
+    assert "the physics model is driven without dither" in html
     figures, _ = report_figures(ev)
     for spec in figures:
         assert "dither-period mean" not in spec.caption, spec.key

@@ -574,6 +574,12 @@ def _summary(dataset: Dataset) -> dict[str, Any]:
         "duration_s": float(sum(t.duration_s for t in dataset)),
         "sample_rate_Hz": sorted({round(t.sample_rate_Hz, 6) for t in dataset}),
         "signals": signals,
+        # what reading each log noticed (e.g. no dither amplitude: the physics is driven
+        # without dither), as `clutchlab data check` and the terminal say it: in the report
+        # too, for its reader, who did not see the terminal
+        "notes": {
+            name: list(report.notes) for name, report in dataset.reports.items() if report.notes
+        },
         "table": [
             {
                 "name": t.name,

@@ -269,6 +269,11 @@ def _maps_text(data: dict[str, Any]) -> str:
     return f", read through channel map{'s' if len(maps) > 1 else ''} {', '.join(maps)}"
 
 
+def _data_notes(data: dict[str, Any]) -> list[tuple[str, str]]:
+    """(experiment, note) of every note reading the logs gave (absent in older reports)."""
+    return [(name, note) for name, notes in (data.get("notes") or {}).items() for note in notes]
+
+
 def summary_lines(doc: dict[str, Any]) -> list[str]:
     """A terminal summary of a report document: per variant its test RMSE (bar, dither-period
     mean), the share of its squared error within the latch window, and its RMSE in the
@@ -439,6 +444,10 @@ def render_markdown(doc: dict[str, Any], figure_files: list[tuple[str, str, str]
         "used for fitting or model selection).",
         "",
     ]
+    if notes := _data_notes(data):
+        out.append("**Notes on the data** (as `clutchlab data check` gives them):")
+        out += [f"- {_md_text(name)}: {_md_text(note)}" for name, note in notes]
+        out.append("")
     if doc["failed"] or doc["unavailable"]:
         out.append("**Not in this report:**")
         out += [f"- `{n}` failed: {_md_text(why)}" for n, why in doc["failed"].items()]
@@ -691,6 +700,12 @@ def render_html(
         f"<b>{_e(', '.join(split['test_ramps']))}</b> ({len(split['test'])} experiments) — "
         "never used for fitting or model selection; models see only their inputs.</p>",
     ]
+    if notes := _data_notes(data):
+        items = "".join(f"<li>{_e(name)}: {_e(note)}</li>" for name, note in notes)
+        s.append(
+            "<div class='warn'><b>Notes on the data</b> (as <code>clutchlab data check</code> "
+            f"gives them)<ul>{items}</ul></div>"
+        )
     if doc["failed"] or doc["unavailable"]:
         items = [f"<li><code>{_e(n)}</code> failed: {_e(w)}</li>" for n, w in doc["failed"].items()]
         items += [
