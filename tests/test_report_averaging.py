@@ -154,3 +154,31 @@ def test_the_svc_gp_description_does_not_contradict_its_latch_decision(folders, 
     assert d["latch_decision"].startswith("classifier rbf_svc")
     assert not d["description"].startswith("latch state from the local latch-event law")
     assert "RBF-SVC when the training data hold fewer than two latch events" in d["description"]
+
+
+def test_the_classifier_table_names_its_worst_experiment(folders, tmp_path):
+    """The column "worst experiment" held a number (the lowest held-out accuracy), not an
+    experiment; the reader could not tell which experiment the classifier got wrong."""
+    from clutchlab.validation.report import render_html, render_markdown
+
+    _, files = _report(folders[0], tmp_path / "clf")
+    doc = dict(files.doc)
+    doc["classifier_comparison"] = {
+        "classifiers": {
+            "rbf_svc": {
+                "label": "Nonlinear (RBF) SVC",
+                "accuracy": 0.9987,
+                "min_accuracy": 0.9902,
+                "fit_s": 0.35,
+            },
+        },
+        "per_experiment": {"rbf_svc": {"fast_30Hz_A": 0.9991, "slow_50Hz_B": 0.9902}},
+        "features": ["current_mA", "didt_mA_s"],
+        "experiments": ["fast_30Hz_A", "slow_50Hz_B"],
+    }
+    md, html = render_markdown(doc, []), render_html(doc, [])
+    for text in (md, html):
+        assert "worst held-out experiment: accuracy (experiment)" in text
+        assert "accuracy (fraction)" in text
+    assert "| Nonlinear (RBF) SVC | 0.9987 | 0.9902 (slow_50Hz_B) | 0.35 |" in md
+    assert "<td>0.9902 (slow_50Hz_B)</td>" in html

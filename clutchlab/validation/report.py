@@ -322,6 +322,29 @@ def summary_lines(doc: dict[str, Any]) -> list[str]:
     return out
 
 
+#: Columns of the latch-classifier table: accuracies are fractions of the held-out samples.
+_CLASSIFIER_HEAD = [
+    "classifier",
+    "accuracy (fraction)",
+    "worst held-out experiment: accuracy (experiment)",
+    "fit (s, median per fold)",
+]
+
+
+def _classifier_table(clf: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
+    """Header and rows of the latch-classifier comparison: pooled leave-one-experiment-out
+    accuracy, and the lowest accuracy of one held-out experiment with that experiment's name
+    (the column said "worst experiment" above a number)."""
+    rows = []
+    for key, c in clf["classifiers"].items():
+        held = (clf.get("per_experiment") or {}).get(key, {})  # absent: older reports
+        per = {e: a for e, a in held.items() if _is_number(a)}
+        worst = min(per, key=per.get) if per else None
+        cell = fmt(c["min_accuracy"]) + (f" ({worst})" if worst is not None else "")
+        rows.append([c["label"], fmt(c["accuracy"]), cell, fmt(c["fit_s"])])
+    return _CLASSIFIER_HEAD, rows
+
+
 #: Columns of the closing-the-loop evidence table.
 _DISCOVERY_HEAD = [
     "effect",
@@ -488,13 +511,7 @@ def render_markdown(doc: dict[str, Any], figure_files: list[tuple[str, str, str]
         out += [
             "## Latch classifiers (leave-one-experiment-out on the training experiments)",
             "",
-            _md_table(
-                ["classifier", "accuracy", "worst experiment", "fit (s)"],
-                [
-                    [c["label"], fmt(c["accuracy"]), fmt(c["min_accuracy"]), fmt(c["fit_s"])]
-                    for c in clf["classifiers"].values()
-                ],
-            ),
+            _md_table(*_classifier_table(clf)),
             "",
         ]
     disc = doc.get("discovery")
@@ -742,13 +759,7 @@ def render_html(
             "<h2>Latch classifiers</h2>",
             "<p>Leave-one-experiment-out accuracy on the training experiments (latch-event "
             f"samples excluded); inputs: {_e(', '.join(clf['features']))}.</p>",
-            _html_rows(
-                ["classifier", "accuracy", "worst experiment", "fit (s)"],
-                [
-                    [c["label"], fmt(c["accuracy"]), fmt(c["min_accuracy"]), fmt(c["fit_s"])]
-                    for c in clf["classifiers"].values()
-                ],
-            ),
+            _html_rows(*_classifier_table(clf)),
         ]
     disc = doc.get("discovery")
     if disc:
