@@ -182,3 +182,34 @@ def test_the_classifier_table_names_its_worst_experiment(folders, tmp_path):
         assert "accuracy (fraction)" in text
     assert "| Nonlinear (RBF) SVC | 0.9987 | 0.9902 (slow_50Hz_B) | 0.35 |" in md
     assert "<td>0.9902 (slow_50Hz_B)</td>" in html
+
+
+@pytest.mark.parametrize("converged", [False, True])
+def test_a_fit_stopped_at_a_limit_says_which_limits_and_what_to_do(folders, tmp_path, converged):
+    """The report gave "Status: Maximum_WallTime_Exceeded (pre-fit) (NOT converged — best
+    iterate used)" and nothing on the limit it hit or how to get a converged fit."""
+    from types import SimpleNamespace
+
+    from clutchlab.physics import CircuitModel
+    from clutchlab.physics.fit import FitSettings
+    from clutchlab.validation.evaluate import Evaluation
+    from clutchlab.validation.report import jsonable, render_html, render_markdown
+
+    res = SimpleNamespace(
+        model=CircuitModel, free=["reg_F0"], values={"reg_F0": -1.6},
+        std_errors={"reg_F0": 0.01}, units={"reg_F0": "N"}, unidentifiable=(),
+        status="Maximum_WallTime_Exceeded", success=converged, iterations=4, wall_s=29.0,
+        effects=(), per_experiment={},
+    )  # fmt: skip
+    settings = FitSettings(time_limit_s=30.0, max_iter=7)
+    model = SimpleNamespace(result_=res, settings=settings, converged_=converged, fitted=None)
+    fit = Evaluation.physics_fit(SimpleNamespace(models={"physics_fitted": model}))
+    assert (fit["time_limit_s"], fit["max_iter"]) == (30.0, 7)
+    _, files = _report(folders[0], tmp_path / "fit")
+    doc = files.doc | {"physics_fit": jsonable(fit)}
+    for text in (render_markdown(doc, []), render_html(doc, [])):
+        said = "wall-time limit of 30 s (--fit-time-limit)" in text
+        assert said is not converged
+        assert ("an iteration limit of 7 (--fit-max-iter)" in text) is not converged
+        assert ("--physics-model" in text) is not converged
+        assert "effects: none" in text

@@ -230,7 +230,9 @@ class Evaluation:
         }
 
     def physics_fit(self) -> dict[str, Any] | None:
-        """Summary of the ``physics_fitted`` fit: status, parameters ± standard errors."""
+        """Summary of the ``physics_fitted`` fit: status, the wall-time (s) and iteration
+        limits it ran under (None for a fit given, not made here), parameters ± standard
+        errors."""
         model = self.models.get("physics_fitted")
         res = getattr(model, "result_", None)
         if res is None:
@@ -251,9 +253,15 @@ class Evaluation:
                 "identifiable": n not in res.unidentifiable,
                 "description": spec.description if spec is not None else "",
             }
+        # the limits it ran under, for the report to say which one to raise (None for a fit
+        # made before and given, e.g. --physics-model)
+        given = getattr(model, "fitted", None) is not None
+        limits = None if given else (getattr(model, "settings", None) or _default_fit_settings())
         return {
             "status": res.status,
             "converged": bool(getattr(model, "converged_", res.success)),
+            "time_limit_s": getattr(limits, "time_limit_s", None),
+            "max_iter": getattr(limits, "max_iter", None),
             "iterations": res.iterations,
             "wall_s": res.wall_s,
             "effects": list(res.effects),
@@ -317,6 +325,13 @@ class Evaluation:
             "created_utc": self.created_utc,
             **self.extra,
         }
+
+
+def _default_fit_settings() -> Any:
+    """The fit settings a ``physics_fitted`` built without settings runs under."""
+    from ..physics.fit import FitSettings
+
+    return FitSettings()
 
 
 def _period_curve(ref: ExperimentReference, pressure: np.ndarray, s: AnalysisSettings):

@@ -192,6 +192,32 @@ def _parameter_table(fit: dict, name: Callable[[str], str]) -> tuple[list[str], 
     return header, rows
 
 
+def _fit_status(fit: dict[str, Any]) -> str:
+    """The physics fit's status line; for a fit stopped at a limit, which limits it ran under
+    and how to get a converged one (the status alone, e.g. ``Maximum_WallTime_Exceeded``,
+    told the reader neither)."""
+    state = "converged" if fit["converged"] else "NOT converged — best iterate used"
+    text = (
+        f"Status: {fit['status']} ({state}); {fit['iterations']} iterations; "
+        f"{fmt(fit['wall_s'])} s; effects: {', '.join(fit.get('effects') or []) or 'none'}."
+    )
+    if fit["converged"]:
+        return text
+    limits = []
+    if fit.get("time_limit_s") is not None:  # absent in older reports, None for a given fit
+        limits.append(f"a wall-time limit of {fmt(fit['time_limit_s'])} s (--fit-time-limit)")
+    if fit.get("max_iter") is not None:
+        limits.append(f"an iteration limit of {fit['max_iter']} (--fit-max-iter)")
+    ran = f" It ran under {' and '.join(limits)}." if limits else ""
+    return (
+        text
+        + ran
+        + " Its scores are those of the best iterate and may change with a longer fit: raise "
+        "the limit it stopped at, or fit once with clutchlab fit-physics and pass the "
+        "result with --physics-model."
+    )
+
+
 def _md_table(header: list[str], rows: list[list[str]]) -> str:
     lines = ["| " + " | ".join(map(_md_cell, header)) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(map(_md_cell, r)) + " |" for r in rows]
@@ -499,9 +525,7 @@ def render_markdown(doc: dict[str, Any], figure_files: list[tuple[str, str, str]
         out += [
             "## Fitted physics parameters",
             "",
-            f"Status: {fit['status']} ("
-            + ("converged" if fit["converged"] else "NOT converged — best iterate used")
-            + f"), {fit['iterations']} iterations, {fmt(fit['wall_s'])} s.",
+            _fit_status(fit),
             "",
             _md_table(*_parameter_table(fit, lambda n: f"`{n}`")),
             "",
@@ -745,12 +769,9 @@ def render_html(
     ]
     fit = doc.get("physics_fit")
     if fit:
-        state = "converged" if fit["converged"] else "NOT converged — best iterate used"
         s += [
             "<h2>Fitted physics parameters</h2>",
-            f"<p>Status: {_e(fit['status'])} ({state}); {fit['iterations']} iterations; "
-            f"{_e(fmt(fit['wall_s']))} s; effects: {_e(', '.join(fit['effects']) or 'none')}."
-            "</p>",
+            f"<p>{_e(_fit_status(fit))}</p>",
             _html_rows(*_parameter_table(fit, str)),
         ]
     clf = doc.get("classifier_comparison")
