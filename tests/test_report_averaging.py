@@ -110,6 +110,8 @@ def test_the_wording_of_each_kind_of_window():
         scored_signal({"a": dithered, "b": none}) == "dither-period mean where dithered, else raw"
     )
     assert silent["kind"] == "no_dither_amplitude"
+    assert "amplitude 0" in scored_signal({"b": silent})  # no log has a dither
+    assert "dither-period" not in scored_signal({"a": dithered, "b": silent})
     note = averaging_note({"a": dithered, "b": silent, "c": none})
     assert "33.3 ms = 1/30 Hz (a)" in note
     assert "b: logged dither amplitude 0 mA" in note and "moving average" in note

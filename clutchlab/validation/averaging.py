@@ -113,6 +113,8 @@ def scored_signal(windows: Mapping[str, Mapping[str, Any]] | None) -> str:
         return PERIOD_MEAN
     if set(kinds) == {"none"}:
         return "raw signal — no dither to average over"
+    if set(kinds) == {"no_dither_amplitude"}:
+        return "moving average over one period of the logged dither frequency (amplitude 0)"
     if "no_dither_amplitude" in kinds and "none" not in kinds:
         return "mean over one period of the dither frequency; some logs have no dither"
     return f"{PERIOD_MEAN} where dithered, else raw"
