@@ -215,3 +215,29 @@ def test_a_fit_stopped_at_a_limit_says_which_limits_and_what_to_do(folders, tmp_
         assert ("an iteration limit of 7 (--fit-max-iter)" in text) is not converged
         assert ("--physics-model" in text) is not converged
         assert "effects: none" in text
+
+
+def test_every_hysteresis_panel_above_a_hidden_one_has_its_current_axis(folders):
+    """With three sources (measured + two models) the top-right panel sat above a hidden
+    one: shared x axis, no tick labels, no "nominal VFS current (mA)" under it."""
+    from clutchlab.physics.fit import FitSettings
+    from clutchlab.validation import plot_hysteresis_bands
+
+    quick = FitSettings(max_iter=1, workers=1, prefit_samples=None, progress=False)
+    ev = evaluate(
+        load_dataset(folders[0]), ["physics_default", "physics_fitted"], train=["fast"],
+        test=["medium"], progress=False, physics_settings=quick,
+    )  # fmt: skip
+    fig = plot_hysteresis_bands(ev)
+    fig.savefig(io.BytesIO(), format="png")  # tick labels get their text when drawn
+    shown = [ax for ax in fig.axes if ax.get_visible()]
+    assert len(shown) == 3
+    for ax in shown:
+        below = [
+            other for other in shown
+            if other is not ax and abs(other.get_position().x0 - ax.get_position().x0) < 1e-6
+            and other.get_position().y0 < ax.get_position().y0
+        ]  # fmt: skip
+        if not below:  # the lowest drawn panel of its column
+            assert ax.get_xlabel() == "nominal VFS current (mA)"
+            assert any(t.get_visible() and t.get_text() for t in ax.get_xticklabels())

@@ -207,8 +207,11 @@ def plot_hysteresis_bands(ev: Evaluation) -> Figure | None:
         ax.grid(alpha=0.3)
     for ax in axes.flat[len(sources) :]:
         ax.set_visible(False)
-    for ax in axes[-1, :]:
-        ax.set_xlabel("nominal VFS current (mA)")
+    for col in range(ncol):  # the lowest drawn panel of each column carries the current axis
+        drawn = [ax for ax in axes[:, col] if ax.get_visible()]
+        if drawn:
+            drawn[-1].xaxis.set_tick_params(labelbottom=True)
+            drawn[-1].set_xlabel("nominal VFS current (mA)")
     for ax in axes[:, 0]:
         ax.set_ylabel("rising − falling (bar)")
     axes.flat[0].legend(loc="lower left", fontsize=8)
