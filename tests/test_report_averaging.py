@@ -241,3 +241,21 @@ def test_every_hysteresis_panel_above_a_hidden_one_has_its_current_axis(folders)
         if not below:  # the lowest drawn panel of its column
             assert ax.get_xlabel() == "nominal VFS current (mA)"
             assert any(t.get_visible() and t.get_text() for t in ax.get_xticklabels())
+
+
+def test_the_report_states_the_current_bins_the_scores_used(folders, tmp_path):
+    """The definitions and the hysteresis-band caption said "25 mA" whatever bins
+    (``AnalysisSettings.bin_mA``) the hysteresis widths were computed in."""
+    from clutchlab.validation import AnalysisSettings
+
+    ev = evaluate(
+        load_dataset(folders[0]), ["physics_default"], train=["fast"], test=["medium"],
+        progress=False, analysis=AnalysisSettings(bin_mA=50.0),
+    )  # fmt: skip
+    files = write_report(ev, tmp_path / "bins", interactive=False)
+    for path in (files.markdown, files.html):
+        text = path.read_text(encoding="utf-8")
+        assert "centre of each 50 mA nominal-current bin" in text
+        assert "25 mA" not in text
+    (caption,) = [s.caption for s in report_figures(ev)[0] if s.key == "hysteresis_bands"]
+    assert "in 50 mA bins" in caption

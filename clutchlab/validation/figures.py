@@ -174,8 +174,9 @@ def plot_hysteresis_bands(ev: Evaluation) -> Figure | None:
     One panel per source (measured, then ``physics_default``, ``physics_fitted`` and
     ``paper_svc_gp`` where scored); in each, one band per ramp label: the mean
     over that ramp's experiments (line) and their range (shaded). Width = rising minus
-    falling dither-period-mean pressure in 25 mA bins (bar); bins at the latch snap are left
-    out (the latch currents score it). Training ramps of a model are in sample.
+    falling dither-period-mean pressure in the current bins of the analysis settings (bar;
+    25 mA by default); bins at the latch snap are left out (the latch currents score it).
+    Training ramps of a model are in sample.
     """
     if not ev.curves:
         return None
@@ -370,6 +371,7 @@ def report_figures(ev: Evaluation) -> tuple[list[FigureSpec], dict[str, str]]:
         Figure key → reason it is not drawn.
     """
     sig = signal_of(ev) if ev.scores else "dither-period mean"
+    bin_mA = f"{ev.protocol.settings.bin_mA:g}"  # the bins the curves were computed in
     entries = [
         (
             "classifier_comparison",
@@ -398,7 +400,7 @@ def report_figures(ev: Evaluation) -> tuple[list[FigureSpec], dict[str, str]]:
         (
             "hysteresis_bands",
             "Hysteresis bands for the ramp rates (paper Fig. 5)",
-            f"Rising minus falling pressure ({sig}, bar) in 25 mA bins vs nominal "
+            f"Rising minus falling pressure ({sig}, bar) in {bin_mA} mA bins vs nominal "
             "current (mA); line: mean over a ramp's experiments, band: their range. Training "
             "ramps are in sample for the models; bins at the latch snap are left out.",
             plot_hysteresis_bands,

@@ -72,7 +72,7 @@ _DEFINITIONS = (
     "Errors e = predicted − measured clutch pressure on every test sample, pooled over the "
     "test experiments. Primary: both signals averaged over one dither period; secondary "
     "('raw'): unaveraged. RMSE, MAE, max |e| in bar; fit = 100·(1 − ‖e‖/‖y − ȳ‖) %. "
-    "Hysteresis width = rising minus falling pressure at the centre of each 25 mA "
+    "Hysteresis width = rising minus falling pressure at the centre of each {bin_mA} mA "
     "nominal-current bin (least-squares line per branch and bin); its error is the RMS over "
     "experiments × bins of predicted minus measured width, in the regulated bins (both "
     "branches covered; no latched sample in the bin or its neighbours). Latch-on / latch-off "
@@ -87,7 +87,8 @@ def _definitions(doc: dict[str, Any], escape: Callable[[str], str] = str) -> str
     """The metric definitions, with the averaging window the primary scores really used
     (its experiment names passed through ``escape``)."""
     note = averaging_note(doc.get("averaging"), "test experiment")
-    return _DEFINITIONS + (" " + escape(note) if note else "")
+    bin_mA = (doc.get("analysis") or {}).get("bin_mA", 25.0)  # the bins the scores used
+    return _DEFINITIONS.format(bin_mA=fmt(bin_mA)) + (" " + escape(note) if note else "")
 
 
 def _signal(doc: dict[str, Any]) -> str:
