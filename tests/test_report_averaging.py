@@ -259,3 +259,15 @@ def test_the_report_states_the_current_bins_the_scores_used(folders, tmp_path):
         assert "25 mA" not in text
     (caption,) = [s.caption for s in report_figures(ev)[0] if s.key == "hysteresis_bands"]
     assert "in 50 mA bins" in caption
+
+
+def test_the_split_at_the_top_names_the_experiments(folders, tmp_path):
+    """The top line said "test = medium (1 experiments, ...)": a count (in the wrong
+    number), not which logs were held out."""
+    ev, files = _report(folders[0], tmp_path / "split")
+    (train,), (test,) = ev.protocol.train_names, ev.protocol.test_names
+    md = files.markdown.read_text(encoding="utf-8").replace("\\_", "_")
+    html = files.html.read_text(encoding="utf-8")
+    assert f"(1 experiment: {train})" in md and f"(1 experiment: {test}; never" in md
+    assert f"(1 experiment: {train})" in html and f"(1 experiment: {test})" in html
+    assert "1 experiments" not in md + html

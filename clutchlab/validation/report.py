@@ -288,6 +288,19 @@ def _region_table(doc: dict[str, Any]) -> tuple[str, list[str], list[list[str]]]
     return caption, head, rows
 
 
+#: Most experiment names listed in the split line at the top of a report.
+_MAX_NAMED = 12
+
+
+def _experiments(names: list[str]) -> str:
+    """``"3 experiments: a, b, c"`` (``"1 experiment: a"``); the count alone past
+    :data:`_MAX_NAMED` (metrics.json's ``split`` lists them all)."""
+    count = f"{len(names)} experiment{'' if len(names) == 1 else 's'}"
+    if not names or len(names) > _MAX_NAMED:
+        return count
+    return f"{count}: {', '.join(names)}"
+
+
 def _maps_text(data: dict[str, Any]) -> str:
     """``", read through channel map X"`` for the dataset line ("" without one)."""
     maps = data.get("channel_maps") or []  # absent in reports before session 41
@@ -488,10 +501,11 @@ def render_markdown(doc: dict[str, Any], figure_files: list[tuple[str, str, str]
         "",
         f"Dataset: {data['experiments']} experiments ({_md_text(data['root'] or 'in memory')}"
         f"{_md_text(_maps_text(data))}); "
-        f"train = {_md_text(', '.join(split['train_ramps']))} ({len(split['train'])} "
-        f"experiments), test = {_md_text(', '.join(split['test_ramps']))} "
-        f"({len(split['test'])} experiments, never "
-        "used for fitting or model selection).",
+        f"train = {_md_text(', '.join(split['train_ramps']))} "
+        f"({_md_text(_experiments(split['train']))}), "
+        f"test = {_md_text(', '.join(split['test_ramps']))} "
+        f"({_md_text(_experiments(split['test']))}; never used for fitting or model "
+        "selection).",
         "",
     ]
     if notes := _data_notes(data):
@@ -738,8 +752,8 @@ def render_html(
         f"(<code>{_e(data['root'] or 'in memory')}</code>{_e(_maps_text(data))}), "
         f"{data['samples']} samples, "
         f"{_e(fmt(data['duration_s']))} s. Train ramps: <b>{_e(', '.join(split['train_ramps']))}"
-        f"</b> ({len(split['train'])} experiments); test ramps: "
-        f"<b>{_e(', '.join(split['test_ramps']))}</b> ({len(split['test'])} experiments) — "
+        f"</b> ({_e(_experiments(split['train']))}); test ramps: "
+        f"<b>{_e(', '.join(split['test_ramps']))}</b> ({_e(_experiments(split['test']))}) — "
         "never used for fitting or model selection; models see only their inputs.</p>",
     ]
     if notes := _data_notes(data):
