@@ -271,3 +271,24 @@ def test_the_split_at_the_top_names_the_experiments(folders, tmp_path):
     assert f"(1 experiment: {train})" in md and f"(1 experiment: {test}; never" in md
     assert f"(1 experiment: {train})" in html and f"(1 experiment: {test})" in html
     assert "1 experiments" not in md + html
+
+
+def test_newton_per_ampere_is_not_written_as_not_applicable(folders, tmp_path):
+    """vfs_K_m's unit "N/A" (newton per ampere) stood in the unit column, where "N/A"
+    reads "not applicable"."""
+    from clutchlab.validation.report import render_html, render_markdown
+
+    _, files = _report(folders[0], tmp_path / "unit")
+    parameter = {"value": 14.4, "std_error": 0.005, "default": 14.0, "identifiable": True,
+                 "description": "magnetic force gain at saturation"}  # fmt: skip
+    fit = {
+        "status": "Solve_Succeeded", "converged": True, "iterations": 9, "wall_s": 50.0,
+        "effects": [], "unidentifiable": [], "train_rmse_bar": {},
+        "parameters": {"vfs_K_m": parameter | {"unit": "N/A"},
+                       "vfs_gain": parameter | {"unit": "bar/A"}},
+    }  # fmt: skip
+    doc = files.doc | {"physics_fit": fit}
+    md, html = render_markdown(doc, []), render_html(doc, [])
+    assert "| `vfs_K_m` | 14 | 14.4 | 0.005 | N·A⁻¹ | yes |" in md
+    assert "| `vfs_gain` | 14 | 14.4 | 0.005 | bar/A | yes |" in md
+    assert "<td>N/A</td>" not in html and "<td>N·A⁻¹</td>" in html

@@ -174,6 +174,11 @@ def _md_cell(text: str) -> str:
     return str(text).replace("|", "\\|")
 
 
+#: Units written otherwise in the parameter table: "N/A" (newton per ampere) reads as
+#: "not applicable" in an engineering table.
+_UNIT_SHOWN = {"N/A": "N·A⁻¹"}
+
+
 def _parameter_table(fit: dict, name: Callable[[str], str]) -> tuple[list[str], list[list[str]]]:
     """Header and rows of the fitted-parameter table (``name`` formats a parameter's name);
     the meaning column is empty for a metrics file written before it was recorded."""
@@ -184,7 +189,7 @@ def _parameter_table(fit: dict, name: Callable[[str], str]) -> tuple[list[str], 
             fmt(p["default"]),
             fmt(p["value"]),
             fmt(p["std_error"]),
-            p["unit"],
+            _UNIT_SHOWN.get(p["unit"], p["unit"]),
             fmt(p["identifiable"]),
             p.get("description", ""),
         ]
