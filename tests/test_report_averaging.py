@@ -15,7 +15,7 @@ import pytest
 
 from clutchlab.data import load_dataset, save_dataset
 from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
-from clutchlab.validation import evaluate, report_figures, write_report
+from clutchlab.validation import evaluate, fmt, report_figures, write_report
 from clutchlab.validation.report import summary_lines
 
 RAMPS = (RampProfile("fast", 1.0, 0.2), RampProfile("medium", 2.0, 0.2))
@@ -292,3 +292,19 @@ def test_newton_per_ampere_is_not_written_as_not_applicable(folders, tmp_path):
     assert "| `vfs_K_m` | 14 | 14.4 | 0.005 | N·A⁻¹ | yes |" in md
     assert "| `vfs_gain` | 14 | 14.4 | 0.005 | bar/A | yes |" in md
     assert "<td>N/A</td>" not in html and "<td>N·A⁻¹</td>" in html
+
+
+def test_the_markdown_has_the_per_experiment_latch_currents_and_the_dataset(folders, tmp_path):
+    """Only report.html had the per-test-experiment table (latch-on / latch-off current,
+    measured and predicted, mA) and the signals and sample rates; report.md had neither."""
+    ev, files = _report(folders[0], tmp_path / "per")
+    (test,) = ev.protocol.test_names
+    md = files.markdown.read_text(encoding="utf-8")
+    per = files.doc["per_experiment"]["physics_default"][test]["period_mean"]
+    assert "## Per test experiment (dither-period mean)" in md
+    row = next(ln for ln in md.splitlines() if ln.startswith(f"| {test} |"))
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    assert cells[3] == fmt(per["latch_on_measured_mA"])
+    assert cells[4] == fmt(per["latch_on_predicted_mA"])
+    assert "latch-on measured (mA)" in md
+    assert "## Dataset" in md and "sample rate(s) 1000 Hz" in md

@@ -571,8 +571,8 @@ def render_markdown(doc: dict[str, Any], figure_files: list[tuple[str, str, str]
         out += [f"### {title}", "", f"![{title}]({rel})", "", caption, ""]
     for key, why in doc.get("figures", {}).get("missing", {}).items():
         out += [f"- figure `{key}` not drawn: {why}"]
+    out += ["", *_md_per_experiment(doc)]
     out += [
-        "",
         "## Timings (s)",
         "",
         _md_table(["stage", "wall (s)"], [[k, fmt(v)] for k, v in doc["timings"].items()]),
@@ -684,34 +684,60 @@ def _html_regions(doc: dict[str, Any]) -> str:
     return f"<h3>Where the error lies</h3><p>{_e(caption)}</p>" + _html_rows(head, rows)
 
 
-def _per_experiment_html(doc: dict[str, Any]) -> str:
-    keys = (
-        "rmse_bar",
-        "hysteresis_width_err_bar",
-        "latch_on_measured_mA",
-        "latch_on_predicted_mA",
-        "latch_off_measured_mA",
-        "latch_off_predicted_mA",
-    )
-    parts = []
-    for name, per in doc["per_experiment"].items():
-        rows = [[exp, *(fmt(v["period_mean"].get(k)) for k in keys)] for exp, v in per.items()]
-        parts.append(
-            f"<h4><code>{_e(name)}</code></h4>"
-            + _html_rows(
-                [
-                    "experiment",
-                    "RMSE (bar)",
-                    "hysteresis width err (bar)",
-                    "latch-on measured (mA)",
-                    "latch-on predicted (mA)",
-                    "latch-off measured (mA)",
-                    "latch-off predicted (mA)",
-                ],
-                rows,
-            )
+#: Columns of the per-test-experiment tables: key of ``per_experiment`` and heading.
+_PER_EXPERIMENT = (
+    ("rmse_bar", "RMSE (bar)"),
+    ("hysteresis_width_err_bar", "hysteresis width err (bar)"),
+    ("latch_on_measured_mA", "latch-on measured (mA)"),
+    ("latch_on_predicted_mA", "latch-on predicted (mA)"),
+    ("latch_off_measured_mA", "latch-off measured (mA)"),
+    ("latch_off_predicted_mA", "latch-off predicted (mA)"),
+)
+
+
+def _per_experiment_tables(doc: dict[str, Any]) -> list[tuple[str, list[str], list[list[str]]]]:
+    """Per variant: its name, the header and one row per test experiment (primary signal)."""
+    head = ["experiment", *(h for _, h in _PER_EXPERIMENT)]
+    return [
+        (
+            name,
+            head,
+            [
+                [exp, *(fmt(v["period_mean"].get(k)) for k, _ in _PER_EXPERIMENT)]
+                for exp, v in per.items()
+            ],
         )
-    return "".join(parts)
+        for name, per in doc["per_experiment"].items()
+    ]
+
+
+def _per_experiment_html(doc: dict[str, Any]) -> str:
+    return "".join(
+        f"<h4><code>{_e(name)}</code></h4>" + _html_rows(head, rows)
+        for name, head, rows in _per_experiment_tables(doc)
+    )
+
+
+def _md_per_experiment(doc: dict[str, Any]) -> list[str]:
+    """The per-test-experiment tables (latch currents measured and predicted, mA) and the
+    dataset's signals and sample rates, which only the HTML report had."""
+    out = [f"## Per test experiment ({_signal(doc)})", ""]
+    for name, head, rows in _per_experiment_tables(doc):
+        out += [
+            f"**`{name}`**",
+            "",
+            _md_table(head, [[html.escape(c, quote=False) for c in r] for r in rows]),
+            "",
+        ]
+    data = doc["dataset"]
+    out += [
+        "## Dataset",
+        "",
+        f"Signals: {_md_text(', '.join(data['signals']))}; sample rate(s) "
+        f"{', '.join(fmt(r) for r in data['sample_rate_Hz'])} Hz.",
+        "",
+    ]
+    return out
 
 
 def render_html(
