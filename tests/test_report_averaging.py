@@ -308,3 +308,18 @@ def test_the_markdown_has_the_per_experiment_latch_currents_and_the_dataset(fold
     assert cells[4] == fmt(per["latch_on_predicted_mA"])
     assert "latch-on measured (mA)" in md
     assert "## Dataset" in md and "sample rate(s) 1000 Hz" in md
+
+
+def test_two_test_ramps_are_called_test_ramps(tmp_path):
+    """With --test medium,slow the report said "Variants on the test ramp"."""
+    ramps = (RampProfile("fast", 1.0, 0.2), RampProfile("medium", 2.0, 0.2),
+             RampProfile("slow", 3.0, 0.2))  # fmt: skip
+    run = run_stand(StandConfig(settings=(DitherSetting(50.0, "A"),), ramps=ramps), progress=False)
+    ev = evaluate(
+        run.dataset, ["physics_default"], train=["fast"], test=["medium", "slow"], progress=False
+    )
+    files = write_report(ev, tmp_path / "two", interactive=False)
+    md, html = files.markdown.read_text(), files.html.read_text()
+    assert "## Variants on the test ramps (dither-period mean)" in md
+    assert "<h2>Variants on the test ramps — dither-period mean (primary)</h2>" in html
+    assert "on the test ramps per region" in md

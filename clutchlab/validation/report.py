@@ -91,6 +91,11 @@ def _definitions(doc: dict[str, Any], escape: Callable[[str], str] = str) -> str
     return _DEFINITIONS.format(bin_mA=fmt(bin_mA)) + (" " + escape(note) if note else "")
 
 
+def _test_ramps(doc: dict[str, Any]) -> str:
+    """``"test ramp"``, or ``"test ramps"`` when the split has several test ramp labels."""
+    return "test ramps" if len((doc.get("split") or {}).get("test_ramps", ())) > 1 else "test ramp"
+
+
 def _signal(doc: dict[str, Any]) -> str:
     """What the primary scores average (:func:`~.averaging.scored_signal`)."""
     return scored_signal(doc.get("averaging"))
@@ -273,7 +278,8 @@ def _region_table(doc: dict[str, Any]) -> tuple[str, list[str], list[list[str]]]
         return None
     window = (doc.get("analysis") or {}).get("latch_window_s")
     caption = (
-        f"Error of the {_signal(doc)} on the test ramp per region of the measured pressure: "
+        f"Error of the {_signal(doc)} on the {_test_ramps(doc)} per region of the measured "
+        "pressure: "
         + ", ".join(
             f"{_REGION_NAMES[r]} {100 * v:.0f} % of the samples"
             for r, v in samples.items()
@@ -523,7 +529,7 @@ def render_markdown(doc: dict[str, Any], figure_files: list[tuple[str, str, str]
         out += [f"- `{n}` not available: {_md_text(why)}" for n, why in doc["unavailable"].items()]
         out.append("")
     out += [
-        f"## Variants on the test ramp ({_signal(doc)})",
+        f"## Variants on the {_test_ramps(doc)} ({_signal(doc)})",
         "",
         *(
             [_md_text(note), ""]
@@ -635,7 +641,10 @@ def _html_metrics(rows: dict[str, dict[str, Any]], keys: tuple[str, ...], table:
 def _describe(name: str, d: dict[str, Any], html_: bool) -> str:
     text = d["description"]
     if d.get("classifier_accuracy") is not None:
-        text += f"; latch-classifier accuracy on the test ramp {fmt(d['classifier_accuracy'])}"
+        text += (
+            "; latch-classifier accuracy on the test experiments "
+            f"{fmt(d['classifier_accuracy'])} (fraction of samples)"
+        )
     if d.get("latch_decision"):
         text += f"; latch decision: {d['latch_decision']}"
     if d.get("residual_form"):
@@ -801,7 +810,7 @@ def render_html(
         ]
         s.append(f"<div class='warn'><b>Not in this report</b><ul>{''.join(items)}</ul></div>")
     s += [
-        f"<h2>Variants on the test ramp — {_e(_signal(doc))} (primary)</h2>",
+        f"<h2>Variants on the {_e(_test_ramps(doc))} — {_e(_signal(doc))} (primary)</h2>",
         *(
             [f"<p class='note'>{_e(note)}</p>"]
             if (note := averaging_note(doc.get("averaging"), "test experiment"))
