@@ -126,7 +126,13 @@ def _cmd_predict(args: argparse.Namespace) -> int:
                     zip(("metrics", "experiments"), overall_metrics(predictions), strict=True)
                 ),
                 "experiments": {
-                    p.name: {"ramp": p.ramp, "trained": p.trained, **p.metrics} for p in predictions
+                    p.name: {
+                        "ramp": p.ramp,
+                        "trained": p.trained,
+                        **p.metrics,
+                        "averaging": p.averaging,
+                    }
+                    for p in predictions
                 },
             },
         )

@@ -323,3 +323,23 @@ def test_two_test_ramps_are_called_test_ramps(tmp_path):
     assert "## Variants on the test ramps (dither-period mean)" in md
     assert "<h2>Variants on the test ramps — dither-period mean (primary)</h2>" in html
     assert "on the test ramps per region" in md
+
+
+def test_predict_cli_prints_and_records_the_window_of_a_log_without_dither(
+    folders, tmp_path, capsys
+):
+    """`clutchlab predict` printed "scores on dither-period means" on a log without dither;
+    its metrics.csv and --json did not say over what the scores were averaged."""
+    from clutchlab.cli import main
+
+    design, out, js = tmp_path / "design.json", tmp_path / "out", tmp_path / "p.json"
+    assert main(["params", "--out", str(design)]) == 0
+    argv = [str(design), str(folders[1]), "--ramps", "medium", "--no-figures", "--quiet"]
+    assert main(["predict", *argv, "--out", str(out), "--json", str(js)]) == 0
+    printed = capsys.readouterr().out
+    assert "dither-period" not in printed
+    assert "scores on the raw signal — no dither to average over" in printed
+    rows = list(csv.DictReader((out / "metrics.csv").open()))
+    assert [r["window_samples"] for r in rows] == ["1"]
+    (exp,) = json.loads(js.read_text())["experiments"].values()
+    assert exp["averaging"]["kind"] == "none" and exp["averaging"]["samples"] == 1.0
