@@ -343,3 +343,30 @@ def test_predict_cli_prints_and_records_the_window_of_a_log_without_dither(
     assert [r["window_samples"] for r in rows] == ["1"]
     (exp,) = json.loads(js.read_text())["experiments"].values()
     assert exp["averaging"]["kind"] == "none" and exp["averaging"]["samples"] == 1.0
+
+
+def test_a_physics_fit_that_did_not_converge_is_flagged_beside_its_scores(folders, tmp_path):
+    """The variant lines under the score tables said "physics_fitted: circuit model,
+    parameters fitted to the training experiments" for a fit stopped at its limit with a
+    worse test RMSE than the datasheet; only a section further down said NOT converged."""
+    from clutchlab.physics.fit import FitSettings
+
+    stopped = FitSettings(max_iter=1, workers=1, prefit_samples=None, progress=False)
+    ev = evaluate(
+        load_dataset(folders[0]), ["physics_fitted"], train=["fast"], test=["medium"],
+        progress=False, physics_settings=stopped,
+    )  # fmt: skip
+    files = write_report(ev, tmp_path / "nc", interactive=False)
+    assert files.doc["physics_fit"]["converged"] is False
+    md = files.markdown.read_text(encoding="utf-8")
+    line = next(ln for ln in md.splitlines() if ln.startswith("- `physics_fitted`:"))
+    assert "its fit did NOT converge" in line
+    assert "its fit did NOT converge" in files.html.read_text(encoding="utf-8")
+    from clutchlab.validation.report import _describe
+
+    fit = files.doc["physics_fit"]
+    hybrid = {"description": "fitted physics + GP", "requires": ["physics_fitted"]}
+    assert "built on physics_fitted, whose fit did NOT converge" in _describe(
+        "hybrid", hybrid, html_=False, fit=fit
+    )
+    assert "NOT converge" not in _describe("hybrid", hybrid, False, fit | {"converged": True})

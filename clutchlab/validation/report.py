@@ -543,7 +543,10 @@ def render_markdown(doc: dict[str, Any], figure_files: list[tuple[str, str, str]
         "",
         _md_metrics(doc["raw"], ACCURACY_KEYS),
         "",
-        *(_describe(n, d, html_=False) for n, d in doc["details"].items()),
+        *(
+            _describe(n, d, html_=False, fit=doc.get("physics_fit"))
+            for n, d in doc["details"].items()
+        ),
         "",
     ]
     fit = doc.get("physics_fit")
@@ -638,8 +641,20 @@ def _html_metrics(rows: dict[str, dict[str, Any]], keys: tuple[str, ...], table:
     )
 
 
-def _describe(name: str, d: dict[str, Any], html_: bool) -> str:
+def _describe(name: str, d: dict[str, Any], html_: bool, fit: dict[str, Any] | None = None) -> str:
+    """One variant's line under the tables: what it is and what its fit decided. ``fit``
+    is the physics fit (``physics_fit``): a physics_fitted that stopped at a limit is
+    flagged here, beside its scores, not only under "Fitted physics parameters"."""
     text = d["description"]
+    if fit and not fit.get("converged", True):
+        stopped = f"({fit.get('status')}, {fit.get('iterations')} iterations)"
+        if name == "physics_fitted":
+            text += (
+                f"; its fit did NOT converge {stopped}: the scores above are its best "
+                "iterate's (see Fitted physics parameters)"
+            )
+        elif "physics_fitted" in d.get("requires", ()):
+            text += f"; built on physics_fitted, whose fit did NOT converge {stopped}"
     if d.get("classifier_accuracy") is not None:
         text += (
             "; latch-classifier accuracy on the test experiments "
@@ -820,7 +835,12 @@ def render_html(
         _html_regions(doc),
         "<h3>Raw signal (secondary)</h3>",
         _html_metrics(doc["raw"], ACCURACY_KEYS, "raw"),
-        "<p>" + "".join(_describe(n, d, html_=True) for n, d in doc["details"].items()) + "</p>",
+        "<p>"
+        + "".join(
+            _describe(n, d, html_=True, fit=doc.get("physics_fit"))
+            for n, d in doc["details"].items()
+        )
+        + "</p>",
     ]
     fit = doc.get("physics_fit")
     if fit:
