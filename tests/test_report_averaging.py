@@ -120,6 +120,8 @@ def test_the_wording_of_each_kind_of_window():
     assert "b: logged dither amplitude 0 mA" in note and "moving average" in note
     assert "c: no dither" in note and "1 sample" in note
     assert averaging_note(None) == ""
+    unknown_rate = averaging_window(20.0, float("nan"), 100.0)  # a reference built by hand
+    assert "20 samples" in averaging_note({"a": unknown_rate})
 
 
 class _Flat:

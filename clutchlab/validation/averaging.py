@@ -121,8 +121,11 @@ def scored_signal(windows: Mapping[str, Mapping[str, Any]] | None) -> str:
 
 
 def _ms(w: Mapping[str, Any]) -> str:
+    """The window as ``"20 ms = 1/50 Hz"`` (in samples when the sample rate is unknown)."""
     ms = w.get("window_ms")
     hz = w.get("dither_freq_Hz")
+    if ms is None:
+        return f"{w.get('samples', float('nan')):.3g} samples"
     return f"{ms:.3g} ms" + (f" = 1/{hz:.3g} Hz" if hz else "")
 
 
