@@ -81,6 +81,9 @@ def test_a_log_without_dither_is_not_called_a_dither_period_mean(folders, tmp_pa
         == "clutch pressure, raw signal — no dither to average over (bar)"
     )
     assert any("averaging window is 1 sample" in line for line in summary_lines(files.doc))
+    rows = list(csv.DictReader(io.StringIO((files.folder / "metrics.csv").read_text())))
+    said = {r["signal"]: r["averaged_over"] for r in rows}
+    assert said == {"period_mean": "raw signal — no dither to average over", "raw": "nothing (raw)"}
     # the interactive (Plotly) figures' axis titles and titles too
     interactive = write_report(ev, tmp_path / "plain_interactive", interactive=True)
     assert "dither-period mean" not in interactive.html.read_text(encoding="utf-8")

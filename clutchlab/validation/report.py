@@ -932,14 +932,18 @@ def render_html(
 
 
 def metrics_csv(doc: dict[str, Any]) -> str:
-    """One row per variant and signal kind; columns the metric keys (units in the names)."""
+    """One row per variant and signal kind; columns the metric keys (units in the names) and,
+    last, ``averaged_over``: what the row's signal is averaged over (the ``period_mean`` rows
+    of a log without dither are its raw signal, and this column says so)."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["variant", "signal", *METRIC_KEYS])
+    w.writerow(["variant", "signal", *METRIC_KEYS, "averaged_over"])
+    primary = _signal(doc)
     for name, row in doc["variants"].items():
-        w.writerow([name, "period_mean", *(_csv_value(row.get(k)) for k in METRIC_KEYS)])
+        values = (_csv_value(row.get(k)) for k in METRIC_KEYS)
+        w.writerow([name, "period_mean", *values, primary])
         raw = doc["raw"].get(name, {})
-        w.writerow([name, "raw", *(_csv_value(raw.get(k)) for k in METRIC_KEYS)])
+        w.writerow([name, "raw", *(_csv_value(raw.get(k)) for k in METRIC_KEYS), "nothing (raw)"])
     return buf.getvalue()
 
 
