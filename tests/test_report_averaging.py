@@ -225,6 +225,35 @@ def test_a_fit_stopped_at_a_limit_says_which_limits_and_what_to_do(folders, tmp_
         assert "effects: none" in text
 
 
+def test_a_fit_whose_staged_start_is_the_model_says_so(folders, tmp_path):
+    """A fit whose solver never got below its staged start keeps the staged start
+    (FitResult.note): the report and the terminal summary say the staged start is scored,
+    not "best iterate"."""
+    from types import SimpleNamespace
+
+    from clutchlab.physics import CircuitModel
+    from clutchlab.validation.evaluate import Evaluation
+    from clutchlab.validation.report import jsonable, render_html, render_markdown, summary_lines
+
+    note = "the solver did not get below the staged start, …: the staged start is the model"
+    res = SimpleNamespace(
+        model=CircuitModel, free=["reg_F0"], values={"reg_F0": -1.6},
+        std_errors={"reg_F0": 0.01}, units={"reg_F0": "N"}, unidentifiable=(),
+        status="Maximum_WallTime_Exceeded (pre-fit)", success=False, iterations=12,
+        wall_s=112.7, effects=(), per_experiment={}, note=note,
+    )  # fmt: skip
+    model = SimpleNamespace(result_=res, settings=None, converged_=False, fitted=None)
+    fit = Evaluation.physics_fit(SimpleNamespace(models={"physics_fitted": model}))
+    assert fit["note"] == note
+    _, files = _report(folders[0], tmp_path / "fit")
+    doc = files.doc | {"physics_fit": jsonable(fit)}
+    for text in (render_markdown(doc, []), render_html(doc, [])):
+        assert "NOT converged — staged start used" in text
+        assert "The solver did not get below the staged start" in text
+    lines = summary_lines(doc | {"variants": {"physics_fitted": {"rmse_bar": 0.3}}})
+    assert any("its staged start is scored" in line for line in lines), lines
+
+
 def test_every_hysteresis_panel_above_a_hidden_one_has_its_current_axis(folders):
     """With three sources (measured + two models) the top-right panel sat above a hidden
     one: shared x axis, no tick labels, no "nominal VFS current (mA)" under it."""

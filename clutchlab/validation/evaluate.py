@@ -268,6 +268,8 @@ class Evaluation:
             "parameters": params,
             "unidentifiable": list(res.unidentifiable),
             "train_rmse_bar": {k: v["rmse_bar"] for k, v in res.per_experiment.items()},
+            # what the model is when not the solver's best iterate (the staged start)
+            "note": getattr(res, "note", ""),
         }
 
     def to_dict(self) -> dict[str, Any]:

@@ -207,11 +207,14 @@ def _fit_status(fit: dict[str, Any]) -> str:
     """The physics fit's status line; for a fit stopped at a limit, which limits it ran under
     and how to get a converged one (the status alone, e.g. ``Maximum_WallTime_Exceeded``,
     told the reader neither)."""
-    state = "converged" if fit["converged"] else "NOT converged — best iterate used"
+    kept = "staged start" if fit.get("note") else "best iterate"
+    state = "converged" if fit["converged"] else f"NOT converged — {kept} used"
     text = (
         f"Status: {fit['status']} ({state}); {fit['iterations']} iterations; "
         f"{fmt(fit['wall_s'])} s; effects: {', '.join(fit.get('effects') or []) or 'none'}."
     )
+    if fit.get("note"):  # e.g. the solver never got below the staged start
+        text += f" {fit['note'][0].upper()}{fit['note'][1:]}."
     if fit["converged"]:
         return text
     limits = []
@@ -360,8 +363,9 @@ def summary_lines(doc: dict[str, Any]) -> list[str]:
     if fit and not fit.get("converged", True) and "physics_fitted" in rows:
         out.append(
             f"physics_fitted: its fit did NOT converge ({fit.get('status')}, "
-            f"{fit.get('iterations')} iterations): its best iterate is scored; a longer fit "
-            "time or iteration limit may change it"
+            f"{fit.get('iterations')} iterations): its "
+            + ("staged start" if fit.get("note") else "best iterate")
+            + " is scored; a longer fit time or iteration limit may change it"
         )
     disc = doc.get("discovery") or {}
     if disc.get("time_limited") and "augmented_hybrid" in rows:
