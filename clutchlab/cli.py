@@ -163,6 +163,7 @@ def _cmd_effects(args: argparse.Namespace) -> int:
 
 def _cmd_params(args: argparse.Namespace) -> int:
     from .physics import CircuitModel
+    from .physics.units import unit_shown
 
     model = CircuitModel().with_effects(*_csv_list(args.effects))
     rows = [p.to_dict() for p in model.parameters]
@@ -175,9 +176,9 @@ def _cmd_params(args: argparse.Namespace) -> int:
         "description"
     )
     for p in model.parameters:
-        fit = f"{p.transform} {p.scale:g}"
+        fit, bounds = f"{p.transform} {p.scale:g}", f"[{p.lower:g}, {p.upper:g}]"
         print(
-            f"{p.name:18s} {p.default:10.4g} {p.unit:14s} {f'[{p.lower:g}, {p.upper:g}]':16s} "
+            f"{p.name:18s} {p.default:10.4g} {unit_shown(p.unit):14s} {bounds:16s} "
             f"{fit:12s} {p.description}"
         )
     return 0

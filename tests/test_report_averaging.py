@@ -329,6 +329,12 @@ def test_newton_per_ampere_is_not_written_as_not_applicable(folders, tmp_path):
     assert "| `vfs_K_m` | 14 | 14.4 | 0.005 | N·A⁻¹ | yes |" in md
     assert "| `vfs_gain` | 14 | 14.4 | 0.005 | bar/A | yes |" in md
     assert "<td>N/A</td>" not in html and "<td>N·A⁻¹</td>" in html
+    # the fit's own table (fit-physics) and the parameter listing (clutchlab params) alike
+    from fit_support import synthetic_fit
+
+    table = synthetic_fit({"vfs_K_m": 15.0}).table()
+    assert "N·A⁻¹" in table and "N/A" not in table
+    assert synthetic_fit({"vfs_K_m": 15.0}).units["vfs_K_m"] == "N/A"  # files keep it
 
 
 def test_the_markdown_has_the_per_experiment_latch_currents_and_the_dataset(folders, tmp_path):

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from ..errors import ModelError
 
-__all__ = ["SI_FACTOR", "to_si"]
+__all__ = ["SI_FACTOR", "to_si", "unit_shown"]
 
 #: Multiply a value in the key's unit by this factor to get SI.
 SI_FACTOR: dict[str, float] = {
@@ -61,3 +61,24 @@ def to_si(value, unit: str):
         return value * SI_FACTOR[unit]
     except KeyError:
         raise ModelError(f"unknown unit {unit!r}; known: {', '.join(SI_FACTOR)}") from None
+
+
+#: Units written otherwise where a person reads them (tables, listings): "N/A" (newton per
+#: ampere) reads as "not applicable" in an engineering table. Files keep the unit as is.
+_UNIT_SHOWN = {"N/A": "N·A⁻¹"}
+
+
+def unit_shown(unit: str) -> str:
+    """A parameter's unit as tables and listings write it (``"N/A"`` → ``"N·A⁻¹"``).
+
+    Parameters
+    ----------
+    unit : str
+        The unit as the model declares it (a key of :data:`SI_FACTOR`).
+
+    Returns
+    -------
+    str
+        The unit for a reader; files (fit JSON, metrics.json) keep ``unit``.
+    """
+    return _UNIT_SHOWN.get(unit, unit)

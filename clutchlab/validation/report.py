@@ -29,6 +29,7 @@ import numpy as np
 
 from .._plotly import MARKER_SCRIPT as _MARKER
 from ..data.output import write_file_atomic, write_folder_atomic
+from ..physics.units import unit_shown
 from .averaging import averaging_note, scored_signal
 from .figures import FigureSpec, report_figures
 from .interactive import interactive_figures
@@ -179,11 +180,6 @@ def _md_cell(text: str) -> str:
     return str(text).replace("|", "\\|")
 
 
-#: Units written otherwise in the parameter table: "N/A" (newton per ampere) reads as
-#: "not applicable" in an engineering table.
-_UNIT_SHOWN = {"N/A": "N·A⁻¹"}
-
-
 def _parameter_table(fit: dict, name: Callable[[str], str]) -> tuple[list[str], list[list[str]]]:
     """Header and rows of the fitted-parameter table (``name`` formats a parameter's name);
     the meaning column is empty for a metrics file written before it was recorded."""
@@ -194,7 +190,7 @@ def _parameter_table(fit: dict, name: Callable[[str], str]) -> tuple[list[str], 
             fmt(p["default"]),
             fmt(p["value"]),
             fmt(p["std_error"]),
-            _UNIT_SHOWN.get(p["unit"], p["unit"]),
+            unit_shown(p["unit"]),
             fmt(p["identifiable"]),
             p.get("description", ""),
         ]

@@ -14,6 +14,7 @@ from ...errors import ClutchlabError, FitError, FitResultError
 from ..effects import EFFECTS, FLEXIBLE_LAWS, make_effect
 from ..model import CircuitModel
 from ..parameters import ParameterSet
+from ..units import unit_shown
 
 __all__ = ["FitResult", "check_fit_document", "identifiability"]
 
@@ -139,7 +140,7 @@ class FitResult:
             flag = "  (not identifiable)" if n in self.unidentifiable else ""
             lines.append(
                 f"{n:18s} {self.values[n]:12.5g} {self.std_errors.get(n, math.nan):12.3g}  "
-                f"{self.units[n]}{flag}"
+                f"{unit_shown(self.units[n])}{flag}"
             )
         return "\n".join(lines)
 
