@@ -413,3 +413,26 @@ def test_a_physics_fit_that_did_not_converge_is_flagged_beside_its_scores(folder
         "hybrid", hybrid, html_=False, fit=fit
     )
     assert "NOT converge" not in _describe("hybrid", hybrid, False, fit | {"converged": True})
+
+
+def test_test_ramps_outside_the_training_rates_are_called_an_extrapolation(folders, tmp_path):
+    """Trained on one ramp rate and scored on another, every variant extrapolates in rate
+    (a one-ramp training set gave a ±2σ coverage of 1 % on the test ramp) and the report
+    did not say so. It names the test experiments, their rates and the trained range."""
+    from clutchlab.validation.report import _rate_note, render_html, render_markdown
+
+    ev, files = _report(folders[0], tmp_path / "rates")
+    rates = files.doc["split"]["ramp_rates_mA_s"]
+    (name,) = ev.protocol.test_names
+    lo, _ = rates["train"]
+    assert rates["extrapolated"] == [name]
+    assert rates["test"][name] < lo / 1.1  # 2 s ramps against 1 s ones: half the rate
+    md, html = render_markdown(files.doc, []), render_html(files.doc, [])
+    for text in (md, html):
+        assert "Extrapolation in ramp rate:" in text
+        assert f"{fmt(rates['test'][name])} mA/s; trained {fmt(lo)} mA/s" in text
+    assert any("outside the training ramp rates" in line for line in summary_lines(files.doc))
+    # a test rate inside the trained range (or within 10 % of it) is no extrapolation
+    inside = {"train": [100.0, 400.0], "test": {"m": 105.0}, "extrapolated": []}
+    assert _rate_note({"ramp_rates_mA_s": inside}) is None
+    assert ev.protocol.ramp_rates is ev.protocol.ramp_rates  # read once

@@ -308,6 +308,8 @@ class Evaluation:
                 "test_ramps": list(p.test_ramps),
                 "train": p.train_names,
                 "test": p.test_names,
+                # ramp rates (mA/s) and the test experiments outside the training ones
+                "ramp_rates_mA_s": p.ramp_rates,
             },
             "dataset": p.dataset_summary,
             "physics_fit": self.physics_fit(),

@@ -32,6 +32,7 @@ from ..data import (
     dither_period_samples,
     nominal_current,
     nominal_didt,
+    ramp_rate_mA_s,
     ramps_fastest_first,
 )
 from ..errors import ClutchlabError, DataError
@@ -224,6 +225,11 @@ def is_fitted(model: Any) -> bool:
     return any(k.endswith("_") and not k.startswith("__") for k in vars(model))
 
 
+#: Factor by which a test experiment's ramp rate may lie outside the training experiments'
+#: before the report calls it an extrapolation (10 %: a rate "between" the trained ones
+#: that only rounding puts outside is not one).
+RATE_EXTRAPOLATION = 1.1
+
 #: How deep :func:`_declared_training` looks into models held by a model.
 _PART_DEPTH = 4
 
@@ -331,6 +337,34 @@ class Protocol:
     def train_traces(self) -> tuple[Trace, ...]:
         """The training experiments (the only experiments a model may be fitted on)."""
         return self._train
+
+    @cached_property
+    def ramp_rates(self) -> dict[str, Any]:
+        """Ramp rates of the split (mA/s) and the test experiments outside the training ones.
+
+        A test experiment is *extrapolated* when its ramp rate lies outside the training
+        experiments' by more than :data:`RATE_EXTRAPOLATION` (a factor): the rate-dependent
+        part of every model (the band's widening, the latch delays) is then an extrapolation,
+        and the ML variants' predictive std was never calibrated there. Reading the rates
+        does not fit anything on the test experiments.
+
+        Returns
+        -------
+        dict
+            ``train`` [lowest, highest] mA/s (None without a rate), ``test`` name → mA/s,
+            ``extrapolated`` the test names outside ``train`` widened by the factor.
+        """
+        train = [r for r in (ramp_rate_mA_s(t) for t in self._train) if r]
+        test = {t.name: ramp_rate_mA_s(t) for t in self._test}
+        if not train:
+            return {"train": None, "test": test, "extrapolated": []}
+        lo, hi = min(train), max(train)
+        out = [
+            n
+            for n, r in test.items()
+            if r and not lo / RATE_EXTRAPOLATION <= r <= hi * RATE_EXTRAPOLATION
+        ]
+        return {"train": [lo, hi], "test": test, "extrapolated": out}
 
     def selection_folds(self) -> Iterator[tuple[tuple[Trace, ...], Trace]]:
         """Leave-one-experiment-out folds inside the training set, for model selection.

@@ -319,6 +319,26 @@ def _maps_text(data: dict[str, Any]) -> str:
     return f", read through channel map{'s' if len(maps) > 1 else ''} {', '.join(maps)}"
 
 
+def _rate_note(split: dict[str, Any]) -> str | None:
+    """What the reader must know when test experiments lie outside the training ramp rates
+    (None otherwise, and in reports written before the rates were recorded)."""
+    rates = split.get("ramp_rates_mA_s") or {}
+    names = rates.get("extrapolated") or []
+    if not names or not rates.get("train"):
+        return None
+    lo, hi = rates["train"]
+    shown = ", ".join(f"{n} {fmt(rates['test'][n])}" for n in names[:6])
+    more = f" and {len(names) - 6} more" if len(names) > 6 else ""
+    return (
+        f"{len(names)} test experiment(s) lie outside the training ramp rates ({shown}{more} "
+        f"mA/s; trained {fmt(lo) if lo == hi else f'{fmt(lo)}–{fmt(hi)}'} mA/s): there every "
+        "variant extrapolates in ramp "
+        "rate (the widening of the hysteresis band and the latch delays), and the ML "
+        "variants' ±2σ band was never calibrated at such a rate. Train on ramps that bracket "
+        "the test ramps to score an interpolation."
+    )
+
+
 def _data_notes(data: dict[str, Any]) -> list[tuple[str, str]]:
     """(experiment, note) of every note reading the logs gave (absent in older reports)."""
     return [(name, note) for name, notes in (data.get("notes") or {}).items() for note in notes]
@@ -355,6 +375,8 @@ def summary_lines(doc: dict[str, Any]) -> list[str]:
         out.append(f"{name:{width}s}  {rmse_txt:>10s}  {share_txt:>18s}  {reg_txt:>20s}")
     if _signal(doc) != scored_signal(None):
         out.append(averaging_note(doc.get("averaging"), "test experiment"))
+    if rate := _rate_note(doc.get("split") or {}):
+        out.append(rate)
     fit = doc.get("physics_fit") or {}
     if fit and not fit.get("converged", True) and "physics_fitted" in rows:
         out.append(
@@ -519,6 +541,8 @@ def render_markdown(doc: dict[str, Any], figure_files: list[tuple[str, str, str]
         "selection).",
         "",
     ]
+    if rate := _rate_note(split):
+        out += [f"**Extrapolation in ramp rate:** {_md_text(rate)}", ""]
     if notes := _data_notes(data):
         out.append("**Notes on the data** (as `clutchlab data check` gives them):")
         out += [f"- {_md_text(name)}: {_md_text(note)}" for name, note in notes]
@@ -811,6 +835,8 @@ def render_html(
         f"<b>{_e(', '.join(split['test_ramps']))}</b> ({_e(_experiments(split['test']))}) — "
         "never used for fitting or model selection; models see only their inputs.</p>",
     ]
+    if rate := _rate_note(split):
+        s.append(f"<div class='warn'><b>Extrapolation in ramp rate:</b> {_e(rate)}</div>")
     if notes := _data_notes(data):
         items = "".join(f"<li>{_e(name)}: {_e(note)}</li>" for name, note in notes)
         s.append(
