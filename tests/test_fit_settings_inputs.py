@@ -38,3 +38,18 @@ def test_bounds_must_be_a_mapping():
     with pytest.raises(FitError, match="bounds must be a dict"):
         FitSettings(bounds=[("reg_F_c", 0.1, 1.0)])
     assert FitSettings(bounds={"reg_F_c": (0.1, 1.0)}).bounds == {"reg_F_c": (0.1, 1.0)}
+
+
+OWNED = [("max_iter", "max_iter"), ("max_wall_time", "time_limit_s"), ("tol", "tol")]
+
+
+@pytest.mark.parametrize(("option", "field"), OWNED)
+def test_an_ipopt_option_a_setting_owns_is_refused_naming_the_setting(option, field):
+    """ipopt_options={"max_wall_time": 3} silently overrode time_limit_s in every stage (and
+    max_iter the refinement's own few iterations)."""
+    said = rf"ipopt_options\['{option}'\] is set by FitSettings\.{field}"
+    with pytest.raises(FitError, match=said):
+        FitSettings(ipopt_options={option: 3})
+    assert FitSettings(ipopt_options={"acceptable_iter": 0}).ipopt_options == {"acceptable_iter": 0}
+    with pytest.raises(FitError, match="ipopt_options must be a dict"):
+        FitSettings(ipopt_options=[("acceptable_iter", 0)])

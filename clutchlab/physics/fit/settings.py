@@ -28,6 +28,10 @@ DEFAULT_FREE: tuple[str, ...] = (
 )
 
 
+#: IPOPT options a FitSettings field sets (each stage derives its own value from the field).
+_OWNED_IPOPT_OPTIONS = {"max_iter": "max_iter", "max_wall_time": "time_limit_s", "tol": "tol"}
+
+
 @dataclass(frozen=True)
 class FitSettings:
     """How :class:`PhysicsFitter` fits.
@@ -129,7 +133,8 @@ class FitSettings:
     workers : int
         Processes that simulate experiments in parallel (1: in this process).
     ipopt_options : dict
-        Extra IPOPT options.
+        Extra IPOPT options. Not ``max_iter``, ``max_wall_time`` nor ``tol``: those are
+        ``max_iter``, ``time_limit_s`` and ``tol`` here (refused, naming the field).
     staged_start : bool
         Start from the data before the full fit (:mod:`~clutchlab.physics.fit.staged`):
         the static characteristic on the quasi-static rising branch, then the latch
@@ -242,6 +247,16 @@ class FitSettings:
                 problems.append(f"{name}: {', '.join(map(repr, bad))} not a name (a string)")
             object.__setattr__(self, name, value)
         problems += _bounds_problems(self.bounds)
+        if not isinstance(self.ipopt_options, dict):
+            problems.append(f"ipopt_options must be a dict, not {self.ipopt_options!r}")
+        else:
+            owned = [k for k in self.ipopt_options if k in _OWNED_IPOPT_OPTIONS]
+            problems += [
+                f"ipopt_options[{k!r}] is set by FitSettings.{_OWNED_IPOPT_OPTIONS[k]} (each "
+                "stage of the fit derives its own from it; the IPOPT option would silently "
+                f"override that): set {_OWNED_IPOPT_OPTIONS[k]} instead"
+                for k in owned
+            ]
         if self.method not in ("multiple_shooting", "single_shooting"):
             problems.append(f"method {self.method!r} is not multiple_shooting or single_shooting")
         if self.objective not in ("period_mean", "raw"):
