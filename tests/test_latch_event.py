@@ -78,6 +78,15 @@ def test_event_law_falls_back_to_the_classifier_on_arrays(event_model, data):
     y = data["fast_30Hz_A"].get("clutch_pressure_bar")
     m = SVCPartitionedGP(latch_model="event", **SMALL).fit(X[::20], y[::20])
     assert m.latch_model_ == "classifier"
+    # the report and `train` say why the classifier decides (they said only "classifier")
+    from clutchlab.residual_ml import latch_decision_text
+
+    said = latch_decision_text(m)
+    assert "in place of the latch-event law" in said and "a feature array" in said, said
+    one = SVCPartitionedGP(**SMALL).fit([data["fast_30Hz_A"]])  # one up and one down event
+    said = latch_decision_text(one)
+    assert "in place of the local latch-event law" in said and "fewer than two" in said, said
+    assert "in place of" not in latch_decision_text(event_model)
     with pytest.raises(ModelError, match="latch_model"):
         SVCPartitionedGP(latch_model="tree", **SMALL).fit(data.select(ramps=["fast", "slow"]))
 

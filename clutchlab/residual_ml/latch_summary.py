@@ -10,6 +10,9 @@ training latch-state accuracy.
 from __future__ import annotations
 
 import math
+import re
+
+from .latch_event import event_features
 
 __all__ = ["LATCH_NAMES", "latch_decision_text"]
 
@@ -58,5 +61,15 @@ def latch_decision_text(model) -> str | None:
             )
     elif kind == "classifier" and getattr(est, "classifier", None):
         text += f" {est.classifier}"
+        asked = getattr(est, "latch_model", "classifier")
+        if asked in ("event", "local_event"):  # the law asked for could not be fitted
+            names = [est.feature_names_[j] for j in getattr(est, "classifier_columns_", [])]
+            if names and all(re.fullmatch(r"x\d+", n) for n in names):
+                why = "fitted on a feature array, whose columns have no names"
+            elif not event_features(names):
+                why = "the features lack the current, its rate or the direction the law needs"
+            else:
+                why = "fewer than two latch-on and two latch-off events in the training data"
+            text += f" (in place of the {LATCH_NAMES.get(asked, asked)}: {why})"
     acc = getattr(est, "classifier_train_accuracy_", None)
     return text + (f"; training latch-state accuracy {100 * acc:.2f} %" if acc is not None else "")
