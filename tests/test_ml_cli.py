@@ -72,11 +72,14 @@ def test_classifiers_and_train_cli(tmp_path):
     parts = doc["gp_hyperparameters"]
     assert set(parts) == {"gp", "variance_floor"}  # the mean's GP and its variance floor
     names = ["current_mA", "dither_amp_mA", "dither_freq_Hz"]  # a length scale names its input
-    assert doc["hyperparameters_at_bounds"] == [
-        f"{part}: " + re.sub(r"^length_scale\[(\d)\]", lambda m: f"{m[0]} = {names[int(m[1])]}", e)
-        for part in parts
-        for e in parts[part]["at_bounds"]
-    ]
+    said = doc["hyperparameters_at_bounds"]
+    raw = [(part, e) for part in parts for e in parts[part]["at_bounds"]]
+    assert len(said) == len(raw)
+    for text, (part, e) in zip(said, raw, strict=True):
+        head = re.sub(r"^length_scale\[(\d)\]", lambda m: f"{m[0]} = {names[int(m[1])]}", e)
+        assert text.startswith(f"{part}: " + head.split(" (")[0]), text
+        # in the feature's unit and in bar², not "input units" / "target units²"
+        assert "input units" not in text and "target units" not in text, text
     assert doc["variant"] == "gp_base" and set(doc["training"]["per_experiment"]) == {
         "fast_50Hz_A",
         "fast_70Hz_C",
@@ -104,3 +107,28 @@ def test_classifiers_and_train_cli(tmp_path):
         check=False,
     )
     assert bad.returncode == 2 and "unknown ramp label" in bad.stderr
+
+
+def test_hyperparameters_at_bounds_speak_the_features_units():
+    """The notes said "… standardized = 4.71e+04 in input units" and "target units²", and a
+    length scale on its upper bound (a feature that does not vary, e.g. one dither
+    amplitude) read like a fault."""
+    from types import SimpleNamespace
+
+    from clutchlab.residual_ml.base import TraceEstimator
+
+    fake = SimpleNamespace(
+        feature_names_=["current_mA", "dither_amp_mA"],
+        gp_hyperparameters=lambda: {
+            "gp": {
+                "at_bounds": [
+                    "length_scale[1] (upper bound 1e+03 standardized = 4.71e+04 in input units)",
+                    "noise_var (lower bound 1e-06 standardized = 2.5e-05 in target units²)",
+                ]
+            }
+        },
+    )
+    said = TraceEstimator.hyperparameters_at_bounds(fake)
+    assert said[0].startswith("gp: length_scale[1] = dither_amp_mA (upper bound 1e+03 ")
+    assert "= 4.71e+04 mA)" in said[0] and "hardly changes along this feature" in said[0]
+    assert said[1] == "gp: noise_var (lower bound 1e-06 standardized = 2.5e-05 in bar²)"

@@ -28,7 +28,7 @@ from sklearn.utils.validation import validate_data
 from ..data import Dataset, Trace, dither_period_samples
 from ..errors import DataError
 from ._threads import single_thread
-from .features import FeatureBuilder, target_pressure
+from .features import FEATURES, FeatureBuilder, target_pressure
 from .labels import LatchLabelRule, latch_labels
 
 #: A GP length scale in a hyperparameter-at-bound entry, by input index.
@@ -407,10 +407,21 @@ class TraceEstimator(RegressorMixin, BaseEstimator):
         names = list(getattr(self, "feature_names_", None) or [])
 
         def named(entry: str) -> str:
+            entry = entry.replace("target units²", "bar²")  # the GPs here model pressures
             match = _LENGTH_SCALE.match(entry)
             if match is None or int(match[1]) >= len(names):
                 return entry
-            return f"{match[0]} = {names[int(match[1])]}{entry[match.end() :]}"
+            name = names[int(match[1])]
+            unit = FEATURES.get(name, ("", ""))[0]
+            rest = entry[match.end() :]
+            if unit:
+                rest = rest.replace("in input units", unit if unit != "1" else "(unitless)")
+            if "(upper bound" in rest:  # the likelihood wanted the feature to matter less
+                rest += (
+                    ": the prediction hardly changes along this feature (expected when it "
+                    "varies little in the training data, e.g. one dither amplitude)"
+                )
+            return f"{match[0]} = {name}{rest}"
 
         return [
             f"{part}: {named(entry)}"
