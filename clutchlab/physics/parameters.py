@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import contextvars
 import difflib
+import functools
 import json
 import math
 from collections.abc import Iterable, Iterator, Mapping
@@ -18,7 +20,7 @@ from ..data.output import write_file_atomic
 from ..errors import ModelError, ParameterWarning, warn_at_caller
 from .units import SI_FACTOR
 
-__all__ = ["Parameter", "ParameterSet"]
+__all__ = ["Parameter", "ParameterSet", "quiet_design_checks", "without_design_checks"]
 
 
 @dataclass(frozen=True)
@@ -221,11 +223,8 @@ class ParameterSet(Mapping[str, float]):
         vec = np.asarray(vector, dtype=float).ravel()
         if vec.size != len(parameters):
             raise ModelError(f"expected {len(parameters)} values, got {vec.size}")
-        token = _DESIGN_CHECKS.set(False)
-        try:
+        with without_design_checks():
             return cls(parameters, {p.name: float(v) for p, v in zip(parameters, vec, strict=True)})
-        finally:
-            _DESIGN_CHECKS.reset(token)
 
     def changed(self) -> dict[str, float]:
         """Values that differ from the defaults."""
@@ -347,6 +346,32 @@ _DESIGN_CHECKS: contextvars.ContextVar[bool] = contextvars.ContextVar(
 
 #: Kinds of :class:`ParameterWarning` given so far in this process (each is given once).
 _WARNED: set[str] = set()
+
+
+@contextlib.contextmanager
+def without_design_checks() -> Iterator[None]:
+    """Parameter sets built inside give no :class:`~clutchlab.errors.ParameterWarning`.
+
+    For the sets a fit or a discovery makes on its way (iterates, staged-start probes,
+    candidate starts): the user did not write those values, and a probe that leaves the
+    latch valve without snap action on the way is no mistake of theirs.
+    """
+    token = _DESIGN_CHECKS.set(False)
+    try:
+        yield
+    finally:
+        _DESIGN_CHECKS.reset(token)
+
+
+def quiet_design_checks(fn):
+    """Decorator: ``fn`` runs :func:`without_design_checks` (a fit's own parameter sets)."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with without_design_checks():
+            return fn(*args, **kwargs)
+
+    return wrapper
 
 
 def _warn_design(values: Mapping[str, float]) -> None:

@@ -17,7 +17,7 @@ from ...errors import FitError, FitWarning, ModelError
 from ...forkmap import fork_map
 from ..effects import EFFECTS, missing_effect
 from ..model import CircuitModel
-from ..parameters import ParameterSet
+from ..parameters import ParameterSet, quiet_design_checks
 from ..settings import SimulationSettings
 from ..simulate import simulate
 from .nlp import COST_PLATEAU, ITERATION_LIMIT, WALL_TIME_LIMIT, solve_ipopt
@@ -274,6 +274,7 @@ class PhysicsFitter:
             raise FitError("infeasible bounds:\n  - " + "\n  - ".join(problems))
 
     # ---- fit ----------------------------------------------------------------------------
+    @quiet_design_checks  # its iterates and staged-start probes are not the user's values
     def fit(self, data: Dataset | Trace | list[Trace]) -> PhysicsFitter:
         """Estimate the free parameters on the training experiments of ``data``.
 

@@ -48,7 +48,7 @@ import numpy as np
 from ...data import Trace, dither_period_mean, dither_period_samples, ramp_rate_mA_s
 from ...errors import FitError, FitWarning
 from ..model import CircuitModel
-from ..parameters import ParameterSet
+from ..parameters import ParameterSet, quiet_design_checks
 from ..settings import SimulationSettings
 from ..simulate import simulate
 from .sensitivity import compile_fit_code
@@ -474,6 +474,7 @@ def _snap_offsets(model, params, traces, latch, substeps) -> np.ndarray | None:
     return np.median(np.asarray(rows), axis=0)
 
 
+@quiet_design_checks  # its probes are not the user's values
 def match_latch_snaps(
     model: CircuitModel,
     params: ParameterSet,
@@ -681,6 +682,7 @@ def _lag_stage(model, params, traces, settings, info) -> None:
     )
 
 
+@quiet_design_checks  # its probes are not the user's values
 def staged_start(
     model: CircuitModel,
     traces: list[Trace],
