@@ -23,14 +23,11 @@ def _export(args: argparse.Namespace) -> Path:
 
     check_export_options(args.substeps, args.step, args.stop_time)  # before any work
     if _is_ml_model(args.model):
-        if args.substeps is not None:
-            raise FmuError(
-                f"{args.model}: --substeps sets the ROS2 steps of a fitted physics model; "
-                "an ML model has none to set (a hybrid's physics keeps the substeps it was "
-                "trained with)"
-            )
         from .physics.fmu.adapters import ml_program_from, std_terms_not_exported
-        from .residual_ml import check_model, load_model
+        from .residual_ml import check_model, load_model, no_substeps_message
+
+        if args.substeps is not None:
+            raise FmuError(no_substeps_message(args.model))
 
         model = load_model(args.model)  # checked as it is read
         check_model(model, args.model)  # the in-memory model the FMU is built from

@@ -60,7 +60,7 @@ from .latch_summary import LATCH_NAMES, latch_decision_text
 from .latch_timing import LatchTiming
 from .local_gp import LocalGPRegressor, log_marginal_likelihood
 from .model_check import check_model, check_model_document
-from .persist import load_model, save_model
+from .persist import load_model, no_substeps_message, save_model
 from .physics import DefaultPhysics, PhysicsPredictor
 from .residual_variance import fit_variance_floor, loeo_residuals, variance_floor
 from .step import StepPredictor, step_predictor
@@ -127,6 +127,7 @@ __all__ = [
     "make_classifier",
     "make_variant",
     "mean_only",
+    "no_substeps_message",
     "save_model",
     "score_traces",
     "select_lag",

@@ -43,9 +43,36 @@ from .model_check import (
 )
 from .physics import PhysicsPredictor
 
-__all__ = ["FORMAT", "check_model_destination", "load_model", "model_document", "save_model"]
+__all__ = [
+    "FORMAT",
+    "check_model_destination",
+    "load_model",
+    "model_document",
+    "no_substeps_message",
+    "save_model",
+]
 
 _VERSION = FORMAT_VERSIONS[-1]
+
+
+def no_substeps_message(path) -> str:
+    """Why ``--substeps`` is refused for the saved ML model at ``path`` (predict, export-fmu).
+
+    Parameters
+    ----------
+    path : path-like
+        The model file, named in the message.
+
+    Returns
+    -------
+    str
+    """
+    return (
+        f"{path}: --substeps sets the ROS2 steps of a fitted physics model; an ML model has "
+        "none to set (a hybrid's physics keeps the substeps it was trained with)"
+    )
+
+
 _CLASSES = MODEL_CLASSES
 #: Errors numpy and zipfile raise on a damaged or hostile NPZ: truncated, not a zip, an
 #: object array that would need pickle, a bad header or compressed stream, a zip member

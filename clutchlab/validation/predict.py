@@ -100,7 +100,7 @@ def load_predictor(path: str | Path, substeps: int | None = None) -> LoadedModel
     """
     from ..physics.fmu.export import physics_source
     from ..physics.settings import MAX_SUBSTEPS, is_integer
-    from ..residual_ml import PhysicsPredictor, check_model, load_model
+    from ..residual_ml import PhysicsPredictor, check_model, load_model, no_substeps_message
 
     path = Path(path)
     if path.is_file() and zipfile.is_zipfile(path):
@@ -113,10 +113,7 @@ def load_predictor(path: str | Path, substeps: int | None = None) -> LoadedModel
     kind = model_doc_kind(doc)
     if kind == "ml":  # a residual_ml model; the loader checks the rest
         if substeps is not None:
-            raise ModelError(
-                f"{path}: --substeps sets the ROS2 steps of a physics model; an ML model has "
-                "none to set (a hybrid's physics keeps the substeps it was trained with)"
-            )
+            raise ModelError(no_substeps_message(path))
         model = load_model(path)
         check_model(model, str(path))
         name = _variant_name(model)
