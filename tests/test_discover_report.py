@@ -209,3 +209,16 @@ def test_the_console_table_shows_a_dash_without_test_experiments():
     result = DiscoveryResult([it], it.before, it.after, True, [], "", [], [], 1.0)
     row = result.table().splitlines()[1]
     assert "nan" not in row and "0.4221 →  0.4221         – →       –" in row
+
+
+def test_the_parameter_table_writes_newton_per_ampere_not_n_slash_a():
+    """'N/A' in a table of parameters reads as 'not applicable' (vfs_K_m's unit)."""
+    from clutchlab.validation.discover.report import _parameter_rows
+
+    rows = _parameter_rows(
+        [
+            {"name": "vfs_K_m", "value": 14.42, "std_error": 0.0033, "unit": "N/A"},
+            {"name": "vfs_i_knee", "value": 201.1, "std_error": 0.34, "unit": "mA"},
+        ]
+    )
+    assert [r[-1] for r in rows] == ["N·A⁻¹", "mA"]

@@ -15,6 +15,7 @@ from matplotlib.patches import Patch
 
 from ..._plotly import MARKER_SCRIPT, figure_div, plotlyjs_script
 from ...data.output import write_folder_atomic
+from ...physics.units import unit_shown
 from ..report import REPORT_FOLDER
 from .alternatives import alternative_note
 from .interactive import iplot_diagnostics, iplot_evidence, iplot_residuals
@@ -183,6 +184,15 @@ _CAND_HEAD = [
 ]
 
 
+def _parameter_rows(parameters: list[dict]) -> list[list[str]]:
+    """Rows of the "parameters after" table: name, value, ± SE, unit as a reader writes it
+    (``N/A`` → ``N·A⁻¹``, which would read as "not applicable"; the JSON keeps ``N/A``)."""
+    return [
+        [p["name"], _fmt(p["value"], ".5g"), _fmt(p["std_error"], ".3g"), unit_shown(p["unit"])]
+        for p in parameters
+    ]
+
+
 def _md_table(head: list[str], rows: list[list[str]]) -> str:
     out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     out += ["| " + " | ".join(r) + " |" for r in rows]
@@ -266,10 +276,7 @@ def write_report(
         ]
         err_head = ["data", "RMSE before (bar)", "RMSE after (bar)", "fit % before", "fit % after"]
         record = it.to_dict()
-        params = [
-            [p["name"], _fmt(p["value"], ".5g"), _fmt(p["std_error"], ".3g"), p["unit"]]
-            for p in record["parameters_after"]
-        ]
+        params = _parameter_rows(record["parameters_after"])
         fit_state = f"fit after: {record['fit_status_after']}, " + (
             "converged"
             if record["fit_converged_after"]
