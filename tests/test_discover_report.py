@@ -222,3 +222,36 @@ def test_the_parameter_table_writes_newton_per_ampere_not_n_slash_a():
         ]
     )
     assert [r[-1] for r in rows] == ["N·A⁻¹", "mA"]
+
+
+def test_a_p_value_below_the_level_beside_not_significant_says_which_test_failed():
+    """flow_force on the stand with sensor_lag: p 5.8e-07 under a stated level 0.00077 and
+    'significant: no', because its share 0.073 is below min_share 0.10; the report said
+    only 'Significance level per candidate: p < 0.00077'."""
+    from clutchlab.validation.discover.report import (
+        _CAND_HEAD,
+        _candidate_rows,
+        _significance_text,
+    )
+
+    it = _figure_iteration()
+    it.threshold_p = 7.7e-4
+    flow = SimpleNamespace(
+        effect="flow_force", k=1, statistic=25.0, p_value=5.8e-7, share=0.073, novelty=0.12,
+        probe="zero", n_tests=1, significant=False, status="scored", refit={}, diverged=[],
+    )  # fmt: skip
+    lag = SimpleNamespace(
+        effect="sensor_lag", k=1, statistic=235.5, p_value=3.7e-53, share=0.32, novelty=0.36,
+        probe="zero", n_tests=6, significant=True, status="scored", refit={}, diverged=[],
+    )  # fmt: skip
+    weak = SimpleNamespace(
+        effect="air_entrainment", k=1, statistic=5.4, p_value=0.021, share=0.025, novelty=0.67,
+        probe="zero", n_tests=1, significant=False, status="scored", refit={}, diverged=[],
+    )  # fmt: skip
+    it.candidates = [lag, flow, weak]
+    column = _CAND_HEAD.index("significant")
+    cells = [row[column] for row in _candidate_rows(it, 0.1)]
+    assert cells == ["yes", "no (share < 0.10)", "no"]
+    rule = _significance_text(7.7e-4, 0.1)
+    assert "p < 0.00077" in rule and "share is at least 0.10" in rule
+    assert "number of tests" in rule

@@ -147,7 +147,29 @@ def _fmt(x, spec=".4f") -> str:
     return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, spec)
 
 
-def _candidate_rows(it: IterationRecord) -> list[list[str]]:
+def _significant_cell(c, threshold_p: float, min_share: float | None) -> str:
+    """The "significant" cell: yes, or no with the test it failed when its p-value alone
+    would pass (a share below ``min_share``), so that a p below the stated level beside
+    "no" is explained."""
+    if c.significant:
+        return "yes"
+    p_ok = c.status == "scored" and c.p_value < threshold_p / max(c.n_tests, 1)
+    if p_ok and min_share is not None and c.share < min_share:
+        return f"no (share < {min_share:.2f})"
+    return "no"
+
+
+def _significance_text(threshold_p: float, min_share: float | None) -> str:
+    """The rule a candidate's "significant" column applies, in words."""
+    share = "" if min_share is None else f" and its share is at least {min_share:.2f}"
+    return (
+        f"A candidate is significant when p < {threshold_p:.2g} (the level α/m per "
+        "candidate) divided by its number of tests (in brackets under 'linearized at')"
+        f"{share}."
+    )
+
+
+def _candidate_rows(it: IterationRecord, min_share: float | None = None) -> list[list[str]]:
     rows = []
     for c in it.candidates:
         refit = c.refit
@@ -159,7 +181,7 @@ def _candidate_rows(it: IterationRecord) -> list[list[str]]:
                 _fmt(c.share, ".3f"),
                 _fmt(c.novelty, ".2f"),
                 f"{c.probe} ({c.n_tests})",
-                "yes" if c.significant else "no",
+                _significant_cell(c, it.threshold_p, min_share),
                 _fmt(refit.get("delta_bic"), ".1f") if refit else "",
                 alternative_note(refit),
                 c.status,
@@ -256,6 +278,7 @@ def write_report(
         f"<p>{html.escape(split)}</p>",
         f"<p><b>Result:</b> {html.escape(result.summary)}</p>",
     ]
+    min_share = result.settings.get("min_share")
     for it in result.iterations:
         title = f"Iteration {it.index}: " + (it.effect or f"no effect added ({it.decision})")
         errs = [
@@ -288,14 +311,11 @@ def write_report(
         figs["diagnostics"] = plot_diagnostics(it)
         pngs = {k: _png(f, files, f"iteration{it.index}_{k}.png") for k, f in figs.items()}
         if it.candidates:
-            evidence_md = [
-                f"Significance level per candidate: p < {it.threshold_p:.2g}.",
-                "",
-                _md_table(_CAND_HEAD, _candidate_rows(it)),
-            ]
+            rule = _significance_text(it.threshold_p, min_share)
+            evidence_md = [rule, "", _md_table(_CAND_HEAD, _candidate_rows(it, min_share))]
             evidence_html = [
-                f"<p>Significance level per candidate: p &lt; {it.threshold_p:.2g}.</p>",
-                _html_table(_CAND_HEAD, _candidate_rows(it)),
+                f"<p>{html.escape(rule)}</p>",
+                _html_table(_CAND_HEAD, _candidate_rows(it, min_share)),
             ]
         else:
             evidence_md = [f"No candidate was scored ({it.decision})."]
