@@ -96,6 +96,8 @@ def _cmd_discover(args: argparse.Namespace) -> int:
     print(result.table())
     print()
     print(result.summary)
+    if result.time_limited:
+        print(result.stop_note())
     print(f"report: {report}")
     if args.json:
         from .cli import write_json_output

@@ -255,3 +255,27 @@ def test_a_p_value_below_the_level_beside_not_significant_says_which_test_failed
     rule = _significance_text(7.7e-4, 0.1)
     assert "p < 0.00077" in rule and "share is at least 0.10" in rule
     assert "number of tests" in rule
+
+
+def test_a_discovery_stopped_at_its_budget_says_what_it_had_done_and_how_to_finish():
+    """Stand + sensor_lag, --budget 240: the summary said only that it stopped during
+    transport_delay's screening refit, not that sensor_lag's refit had lowered the BIC
+    by 137 without being compared with a flexible law, nor what to run next."""
+    from clutchlab.validation.discover.result import DiscoveryResult
+
+    lag = _candidate("sensor_lag", True, 235.5, 0.32)
+    lag.refit = {"subset": "4 of 6 experiments", "delta_bic": -137.4}
+    delay = _candidate("transport_delay", True, 203.4, 0.29)
+    delay.refit = {}
+    flow = _candidate("flow_force", False, 25.0, 0.07)
+    flow.refit = {}
+    it = _iteration("stopped: the discovery's time budget (240 s) was spent", [lag, delay, flow])
+    it.time_limited = True
+    args = ([it], _state(), _state(), False, [], "", [], [], 237.7)
+    result = DiscoveryResult(*args, settings={"time_limit_s": 240.0}, time_limited=True)
+    note = result.stop_note()
+    assert "2 significant candidate(s): sensor_lag (share 0.32), transport_delay" in note
+    assert "sensor_lag's refit on 4 of 6 experiments: ΔBIC -137.4" in note
+    assert "not yet compared with a flexible law" in note and "flow_force" not in note
+    assert "--budget larger than 240 s" in note and "--physics-model" in note
+    assert DiscoveryResult(*args, settings={"time_limit_s": 240.0}).stop_note() == ""

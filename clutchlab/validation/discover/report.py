@@ -271,12 +271,14 @@ def write_report(
         "",
         f"**Result:** {result.summary}",
         "",
+        *([result.stop_note(), ""] if result.time_limited else []),
     ]
     parts_html = [
         "<h1>clutchlab discover — closing the loop</h1>",
         f"<p>Command: <code>{html.escape(command)}</code></p>" if command else "",
         f"<p>{html.escape(split)}</p>",
         f"<p><b>Result:</b> {html.escape(result.summary)}</p>",
+        f"<p>{html.escape(result.stop_note())}</p>" if result.time_limited else "",
     ]
     min_share = result.settings.get("min_share")
     for it in result.iterations:

@@ -275,6 +275,60 @@ class DiscoveryResult:
             write_file_atomic(path, (text + "\n").encode("utf-8"), overwrite=True)
         return text
 
+    def stop_note(self) -> str:
+        """What a discovery stopped at its time budget had done, and how to let it finish.
+
+        The summary says that it stopped; this says which candidates were significant,
+        which refits ran (where, their ΔBIC, whether they were compared with a flexible
+        law) and which options take it further. ``""`` unless :attr:`time_limited`.
+        """
+        if not self.time_limited or not self.iterations:
+            return ""
+        from .alternatives import alternative_note  # alternatives imports this module
+
+        last = self.iterations[-1]
+        added = self.added
+        done = [
+            f"{len(added)} effect(s) added and confirmed ({', '.join(added)})"
+            if added
+            else "no effect added"
+        ]
+        significant = [c for c in last.candidates if c.significant]
+        if significant:
+            done.append(
+                f"in iteration {last.index}, {len(significant)} significant candidate(s): "
+                + ", ".join(f"{c.effect} (share {c.share:.2f})" for c in significant)
+            )
+        elif last.candidates:
+            done.append(f"in iteration {last.index}, no significant candidate so far")
+        else:
+            done.append(f"iteration {last.index} stopped before scoring its candidates")
+        for c in last.candidates:
+            refit = c.refit or {}
+            if "delta_bic" not in refit:
+                continue
+            where = refit.get("subset") or "all training experiments"
+            delta = refit["delta_bic"]
+            text = f"{c.effect}'s refit on {where}: ΔBIC {delta:.1f}"
+            if delta is None or not delta < 0:
+                text += " (no better)"
+            else:
+                compared = alternative_note(refit)
+                text += (
+                    f", {compared}" if compared else ", not yet compared with a flexible law"
+                ) + " (not claimed: its confirmation did not finish)"
+            done.append(text)
+        budget = self.settings.get("time_limit_s")
+        larger = f"a --budget larger than {budget:g} s" if budget else "a larger --budget"
+        return (
+            "What it had done when it stopped: "
+            + "; ".join(done)
+            + f". To let it finish: run again with {larger} (this run took "
+            f"{self.wall_s:.0f} s); a base fit passed with --physics-model FIT.json (from "
+            "`clutchlab fit-physics` on the training ramps) is not fitted again, and "
+            "--candidates limits the effects scored."
+        )
+
     def table(self) -> str:
         """Per iteration: effect, winner and runner-up scores, RMSE before → after.
 
