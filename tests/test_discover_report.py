@@ -108,7 +108,7 @@ def _figure_iteration(effect=None):
     it.before, it.after = _model_state(0.0226, 0.0348), _model_state(0.0226, 0.0348)
     it.threshold_p = 0.005
     for c in it.candidates:
-        c.k, c.p_value, c.novelty, c.status = 1, 0.5, 0.3, "scored"
+        c.k, c.p_value, c.novelty, c.status, c.n_tests = 1, 0.5, 0.3, "scored", 1
     return it
 
 
@@ -279,3 +279,27 @@ def test_a_discovery_stopped_at_its_budget_says_what_it_had_done_and_how_to_fini
     assert "not yet compared with a flexible law" in note and "flow_force" not in note
     assert "--budget larger than 240 s" in note and "--physics-model" in note
     assert DiscoveryResult(*args, settings={"time_limit_s": 240.0}).stop_note() == ""
+
+
+def test_the_evidence_figure_says_why_a_bar_past_the_dashed_line_is_not_significant():
+    """flow_force on the stand with sensor_lag: statistic 25 past the dashed line labelled
+    'significance threshold', drawn grey 'not significant' (its share 0.07 < 0.10), and the
+    line was the level for one test, not the one of a candidate with six."""
+    from clutchlab.validation.discover.interactive import iplot_evidence
+    from clutchlab.validation.discover.report import plot_evidence
+
+    it = _figure_iteration()
+    it.threshold_p = 7.7e-4
+    flow = it.candidates[1]
+    flow.effect, flow.statistic, flow.share, flow.p_value = "flow_force", 25.0, 0.07, 5.8e-7
+    fig = _drawn(plot_evidence(it, 0.1))
+    ax = fig.axes[0]
+    label = ax.get_xlabel()
+    assert "significance threshold" not in label
+    assert "one test" in label and "share ≥ 0.10" in label and "/ tests" in label
+    notes = [t.get_text() for t in ax.texts]
+    assert " 25, share 0.07 < 0.10" in notes
+    assert " 274, share 0.40" in notes  # a significant one is not marked
+    assert " k=1 " in notes
+    title = iplot_evidence(it, 0.1).layout.xaxis.title.text
+    assert "share ≥ 0.10" in title and "one test" in title

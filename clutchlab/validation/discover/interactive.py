@@ -131,13 +131,16 @@ def iplot_residuals(it: IterationRecord) -> go.Figure:
     )
 
 
-def iplot_evidence(it: IterationRecord) -> go.Figure:
+def iplot_evidence(it: IterationRecord, min_share: float | None = None) -> go.Figure:
     """Score statistic of every candidate (log scale) against the significance threshold.
 
     Parameters
     ----------
     it : IterationRecord
         One iteration of the loop.
+    min_share : float, optional
+        Share of the residual (0–1) a significant candidate must explain
+        (``DiscoverySettings.min_share``), stated on the axis.
 
     Returns
     -------
@@ -173,9 +176,10 @@ def iplot_evidence(it: IterationRecord) -> go.Figure:
             x=float(chi2.isf(it.threshold_p, k)),
             line={"dash": "dash", "width": 1, "color": "#000000"},
         )
-    fig.update_xaxes(
-        type="log", title_text="score statistic n_eff·ln(RSS₀/RSS₁) (dashed: threshold)"
-    )
+    from .report import evidence_axis_label  # report imports this module
+
+    label = evidence_axis_label(it.threshold_p, min_share).replace("\n", "<br>")
+    fig.update_xaxes(type="log", title_text=html.escape(label).replace("&lt;br&gt;", "<br>"))
     return _layout(
         fig,
         f"Iteration {it.index}: evidence per candidate effect "

@@ -21,7 +21,13 @@ from .alternatives import alternative_note
 from .interactive import iplot_diagnostics, iplot_evidence, iplot_residuals
 from .result import DiscoveryResult, IterationRecord, ModelState
 
-__all__ = ["plot_diagnostics", "plot_evidence", "plot_residuals", "write_report"]
+__all__ = [
+    "evidence_axis_label",
+    "plot_diagnostics",
+    "plot_evidence",
+    "plot_residuals",
+    "write_report",
+]
 
 
 def _train_curves(state: ModelState):
@@ -66,8 +72,33 @@ def plot_residuals(it: IterationRecord) -> Figure:
     return fig
 
 
-def plot_evidence(it: IterationRecord) -> Figure:
-    """Score statistic of every candidate (log scale) against the significance threshold."""
+def evidence_axis_label(threshold_p: float, min_share: float | None) -> str:
+    """What the evidence figure's x axis and dashed lines are: the statistic, the line
+    each candidate's p-value threshold sits at (one test, per number k of its strength
+    parameters), and the other conditions of "significant" (more tests, the share)."""
+    share = "" if min_share is None else f" and share ≥ {min_share:.2f}"
+    return (
+        "score statistic n_eff·ln(RSS₀/RSS₁); dashed: p = "
+        f"{threshold_p:.2g} for k strength parameters, one test\n(significant also needs "
+        f"p < {threshold_p:.2g} / tests{share})"
+    )
+
+
+def plot_evidence(it: IterationRecord, min_share: float | None = None) -> Figure:
+    """Score statistic of every candidate (log scale) against the significance threshold.
+
+    Parameters
+    ----------
+    it : IterationRecord
+        One iteration of the loop.
+    min_share : float, optional
+        Share of the residual (0–1) a candidate must explain to be significant
+        (``DiscoverySettings.min_share``); a bar past its line that falls short of it says so.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     from scipy.stats import chi2
 
     fig = Figure(figsize=(8, 0.35 * max(len(it.candidates), 4) + 1.5), layout="constrained")
@@ -80,17 +111,21 @@ def plot_evidence(it: IterationRecord) -> Figure:
     ]
     ax.barh([c.effect for c in cands], stats, color=colors)
     for y, c in enumerate(cands):  # the value in words: a bar at 0 is drawn at 0.01
+        short = _significant_cell(c, it.threshold_p, min_share).startswith("no (share")
         ax.text(
             max(c.statistic, 1e-2),
             y,
-            f" {c.statistic:.3g}, share {c.share:.2f}",
+            f" {c.statistic:.3g}, share {c.share:.2f}" + (f" < {min_share:.2f}" if short else ""),
             va="center",
             fontsize=7,
         )
-    for k in sorted({c.k for c in cands}):
-        ax.axvline(chi2.isf(it.threshold_p, k), ls="--", lw=0.8, color="black")
+    for j, k in enumerate(sorted({c.k for c in cands})):
+        x = chi2.isf(it.threshold_p, k)
+        ax.axvline(x, ls="--", lw=0.8, color="black")
+        ax.text(x, 1.0, f" k={k} " , transform=ax.get_xaxis_transform(),
+                ha="right" if j == 0 else "left", va="bottom", fontsize=7)  # fmt: skip
     ax.set_xscale("log")
-    ax.set_xlabel("score statistic n_eff·ln(RSS₀/RSS₁) (dashed: significance threshold)")
+    ax.set_xlabel(evidence_axis_label(it.threshold_p, min_share), fontsize=9)
     ax.set_title(f"Iteration {it.index}: evidence per candidate effect")
     shown = {
         "tab:green": f"added ({it.effect})",
@@ -309,7 +344,7 @@ def write_report(
         )
         figs = {"residuals": plot_residuals(it)}
         if it.candidates:  # none scored (effect limit, no candidate left): no empty axes
-            figs["evidence"] = plot_evidence(it)
+            figs["evidence"] = plot_evidence(it, min_share)
         figs["diagnostics"] = plot_diagnostics(it)
         pngs = {k: _png(f, files, f"iteration{it.index}_{k}.png") for k, f in figs.items()}
         if it.candidates:
@@ -351,7 +386,10 @@ def write_report(
             f"<p>Parameters after (± standard error); {html.escape(fit_state)}:</p>",
             _html_table(["parameter", "value", "± SE", "unit"], params),
             *(
-                figure_div(_IPLOTS[k](it), f"plot-iteration{it.index}_{k}")
+                figure_div(
+                    _IPLOTS[k](it, min_share) if k == "evidence" else _IPLOTS[k](it),
+                    f"plot-iteration{it.index}_{k}",
+                )
                 if interactive
                 else f"<img src='data:image/png;base64,{p}' style='max-width:100%'>"
                 for k, p in pngs.items()
