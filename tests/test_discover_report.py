@@ -303,3 +303,20 @@ def test_the_evidence_figure_says_why_a_bar_past_the_dashed_line_is_not_signific
     assert " k=1 " in notes
     title = iplot_evidence(it, 0.1).layout.xaxis.title.text
     assert "share ≥ 0.10" in title and "one test" in title
+
+
+def test_the_fit_state_explains_a_limit_and_names_the_option_that_raises_it():
+    """Stand + sensor_lag: 'Solved_To_Acceptable_Level (pre-fit) → Maximum_Iterations_Exceeded
+    (refine), converged' read as a contradiction; zoo plant: 'Maximum_Iterations_Exceeded
+    (pre-fit), NOT converged' said nothing of --max-iter."""
+    from clutchlab.validation.discover.report import fit_state_text
+
+    staged = "Solved_To_Acceptable_Level (pre-fit) → Maximum_Iterations_Exceeded (refine)"
+    text = fit_state_text(staged, True)
+    assert text.startswith(f"fit after: {staged}, converged (")
+    assert "refinement stopping at its iteration limit ends a staged fit" in text
+    text = fit_state_text("Maximum_Iterations_Exceeded (pre-fit)", False)
+    assert "NOT converged" in text and "(--max-iter) may improve it" in text
+    assert "--time-limit" not in text
+    assert "--time-limit" in fit_state_text("Maximum_WallTime_Exceeded", False)
+    assert fit_state_text("Solve_Succeeded", True) == "fit after: Solve_Succeeded, converged"

@@ -23,6 +23,7 @@ from .result import DiscoveryResult, IterationRecord, ModelState
 
 __all__ = [
     "evidence_axis_label",
+    "fit_state_text",
     "plot_diagnostics",
     "plot_evidence",
     "plot_residuals",
@@ -241,6 +242,42 @@ _CAND_HEAD = [
 ]
 
 
+def fit_state_text(status: str, converged: bool) -> str:
+    """The "fit after" line of an iteration in words: the solver status, whether the fit
+    converged, what a limit in it means and (when it stopped at one) the option that
+    raises it.
+
+    Parameters
+    ----------
+    status : str
+        The fit's status, ``"<status> (pre-fit) → <status> (refine)"`` when staged.
+    converged : bool
+        ``FitResult.success``.
+
+    Returns
+    -------
+    str
+    """
+    from ...physics.fit.fitter import SHORT_OF_TIME
+    from ...physics.fit.nlp import ITERATION_LIMIT, WALL_TIME_LIMIT
+
+    head = f"fit after: {status}, "
+    if converged:
+        if ITERATION_LIMIT in status and "(refine)" in status:
+            return head + (
+                "converged (the pre-fit converged; the refinement stopping at its iteration "
+                "limit ends a staged fit, it is not a failure)"
+            )
+        return head + "converged"
+    hints = []
+    if ITERATION_LIMIT in status:
+        hints.append("more solver iterations per fit (--max-iter)")
+    if WALL_TIME_LIMIT in status or SHORT_OF_TIME in status:
+        hints.append("more time per fit (--time-limit)")
+    hint = f"; {' or '.join(hints)} may improve it" if hints else ""
+    return head + f"NOT converged (stopped at a limit; its best iterate is the model{hint})"
+
+
 def _parameter_rows(parameters: list[dict]) -> list[list[str]]:
     """Rows of the "parameters after" table: name, value, ± SE, unit as a reader writes it
     (``N/A`` → ``N·A⁻¹``, which would read as "not applicable"; the JSON keeps ``N/A``)."""
@@ -337,11 +374,7 @@ def write_report(
         err_head = ["data", "RMSE before (bar)", "RMSE after (bar)", "fit % before", "fit % after"]
         record = it.to_dict()
         params = _parameter_rows(record["parameters_after"])
-        fit_state = f"fit after: {record['fit_status_after']}, " + (
-            "converged"
-            if record["fit_converged_after"]
-            else "NOT converged (stopped at a limit; its best iterate is the model)"
-        )
+        fit_state = fit_state_text(record["fit_status_after"], record["fit_converged_after"])
         figs = {"residuals": plot_residuals(it)}
         if it.candidates:  # none scored (effect limit, no candidate left): no empty axes
             figs["evidence"] = plot_evidence(it, min_share)
