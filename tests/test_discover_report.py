@@ -320,3 +320,46 @@ def test_the_fit_state_explains_a_limit_and_names_the_option_that_raises_it():
     assert "--time-limit" not in text
     assert "--time-limit" in fit_state_text("Maximum_WallTime_Exceeded", False)
     assert fit_state_text("Solve_Succeeded", True) == "fit after: Solve_Succeeded, converged"
+
+
+def test_the_diagnostics_figure_shows_both_eta2_its_threshold_and_what_a_lag_means():
+    """The η² panel drew only η² on the residual, while the signature also reads η² beyond
+    the current map against a threshold the panel did not show (zoo plant, warming oil:
+    oil_temp_C 0.075 on the residual, 'follows no single signal (η² < 0.10 …)'); the lag
+    axis did not say which sign means the residual comes later; τ had no unit."""
+    from clutchlab.validation.discover.diagnostics import Diagnostics
+    from clutchlab.validation.discover.interactive import iplot_diagnostics
+    from clutchlab.validation.discover.report import plot_diagnostics
+
+    it = _figure_iteration()
+    it.diagnostics = Diagnostics(
+        rms_bar=0.2334,
+        n=1000,
+        n_eff=50.0,
+        tau_samples=51.7,
+        associations=[
+            {"signal": "didt_mA_s", "eta2": 0.088, "corr": 0.3, "eta2_beyond_current": None},
+            {"signal": "oil_temp_C", "eta2": 0.075, "corr": 0.2, "eta2_beyond_current": 0.31},
+        ],
+        cross_correlation={
+            "didt_mA_s": {
+                "lag_s": -0.03,
+                "corr": 0.33,
+                "lags_s": [-0.1, 0.0, 0.1],
+                "values": [0.2, 0.3, 0.2],
+            },
+        },
+        spectrum={"freq_Hz": [0.0, 1.0, 2.0], "psd_bar2_Hz": [1e-4, 1e-5, 1e-6]},
+        whiteness={"white": False, "p_value": 0.0},
+    )
+    assert "autocorrelation time τ 51.7 samples" in it.diagnostics.summary()
+    fig = _drawn(plot_diagnostics(it))
+    eta_ax, lag_ax = fig.axes[0], fig.axes[1]
+    widths = sorted(round(p.get_width(), 3) for p in eta_ax.patches)
+    assert widths == [0.0, 0.075, 0.088, 0.31]  # both η² of oil_temp_C are drawn
+    assert [ln.get_xdata()[0] for ln in eta_ax.lines] == [0.1]
+    assert "> 0: the residual follows the signal later" in lag_ax.get_xlabel()
+    ifig = iplot_diagnostics(it)
+    assert len([t for t in ifig.data if t.type == "bar"]) == 2
+    assert ifig.layout.xaxis.title.text.endswith("signature threshold")
+    assert "follows the signal later" in ifig.layout.xaxis2.title.text

@@ -360,8 +360,9 @@ class Diagnostics:
         ramp = self.ramp_note()
         return (
             f"RMS {self.rms_bar:.4f} bar without the samples near latch snaps (the training "
-            f"RMSE includes them), {white} (Ljung–Box p {p:.2g}, "
-            f"τ {self.tau_samples:.1f}); follows {follows}; {xc}" + (f"; {ramp}" if ramp else "")
+            f"RMSE includes them), {white} (Ljung–Box p {p:.2g}, autocorrelation time "
+            f"τ {self.tau_samples:.1f} samples); follows {follows}; {xc}"
+            + (f"; {ramp}" if ramp else "")
         )
 
     def to_dict(self, curves: bool = False) -> dict:

@@ -199,7 +199,8 @@ def iplot_diagnostics(it: IterationRecord) -> go.Figure:
     Returns
     -------
     plotly.graph_objects.Figure
-        η² per signal (residual variance explained by the signal's binned mean, -), lagged
+        η² per signal (residual variance explained by the signal's binned mean, -; on the
+        residual and beyond the current and its direction; dashed: signature threshold), lagged
         cross-correlations with the residual (lag in ms; one legend entry per signal) and the
         residual power spectral density (bar²/Hz, log scale).
     """
@@ -208,6 +209,9 @@ def iplot_diagnostics(it: IterationRecord) -> go.Figure:
 
     d = it.diagnostics
     fig = make_subplots(rows=1, cols=3, horizontal_spacing=0.12)
+    from .diagnostics import SIGNATURE_ETA2
+    from .report import LAG_LABEL  # report imports this module
+
     assoc = d.associations[::-1]
     fig.add_trace(
         go.Bar(
@@ -215,11 +219,27 @@ def iplot_diagnostics(it: IterationRecord) -> go.Figure:
             y=[a["signal"] for a in assoc],
             orientation="h",
             marker_color="#1f77b4",
-            showlegend=False,
-            hovertemplate="%{y}: η² %{x:.3g}<extra></extra>",
+            name="η², residual",
+            hovertemplate="%{y}: η² %{x:.3g} on the residual<extra></extra>",
         ),
         row=1,
         col=1,
+    )
+    if any(a.get("eta2_beyond_current") is not None for a in assoc):
+        fig.add_trace(
+            go.Bar(
+                x=[a.get("eta2_beyond_current") or 0.0 for a in assoc],
+                y=[a["signal"] for a in assoc],
+                orientation="h",
+                marker_color="#ff7f0e",
+                name="η², beyond the current and its direction",
+                hovertemplate="%{y}: η² %{x:.3g} beyond the current<extra></extra>",
+            ),
+            row=1,
+            col=1,
+        )
+    fig.add_vline(
+        x=SIGNATURE_ETA2, line={"dash": "dash", "width": 1, "color": "#000000"}, row=1, col=1
     )
     for k, (name, xc) in enumerate(d.cross_correlation.items()):
         lags = np.asarray(xc["lags_s"], dtype=float) * 1e3
@@ -254,8 +274,8 @@ def iplot_diagnostics(it: IterationRecord) -> go.Figure:
             col=3,
         )
         fig.update_yaxes(type="log", row=1, col=3)
-    fig.update_xaxes(title_text="η² (-)", row=1, col=1)
-    fig.update_xaxes(title_text="lag (ms)", row=1, col=2)
+    fig.update_xaxes(title_text="η² (-); dashed: signature threshold", row=1, col=1)
+    fig.update_xaxes(title_text=LAG_LABEL, row=1, col=2)
     fig.update_yaxes(title_text="cross-correlation (-)", row=1, col=2)
     fig.update_xaxes(title_text="frequency (Hz)", row=1, col=3)
     fig.update_yaxes(title_text="residual PSD (bar²/Hz)", row=1, col=3)

@@ -18,6 +18,7 @@ from ...data.output import write_folder_atomic
 from ...physics.units import unit_shown
 from ..report import REPORT_FOLDER
 from .alternatives import alternative_note
+from .diagnostics import SIGNATURE_ETA2
 from .interactive import iplot_diagnostics, iplot_evidence, iplot_residuals
 from .result import DiscoveryResult, IterationRecord, ModelState
 
@@ -140,18 +141,36 @@ def plot_evidence(it: IterationRecord, min_share: float | None = None) -> Figure
     return fig
 
 
+#: What a lag of the cross-correlation panel means (``corr(r(t), x(t − lag))``).
+LAG_LABEL = "lag (ms); > 0: the residual follows the signal later"
+
+
 def plot_diagnostics(it: IterationRecord) -> Figure:
-    """Residual diagnostics of the iteration's starting model: η² per signal,
-    lagged cross-correlations, spectrum."""
+    """Residual diagnostics of the iteration's starting model: η² per signal (on the
+    residual, and beyond a map of the current and its direction where measured; dashed: the
+    signature threshold), lagged cross-correlations, spectrum."""
     d = it.diagnostics
     fig = Figure(figsize=(12, 3.8), layout="constrained")
     ax1, ax2, ax3 = fig.subplots(1, 3)
-    names = [a["signal"] for a in d.associations][::-1]
-    ax1.barh(names, [a["eta2"] for a in d.associations][::-1], color="tab:blue")
-    ax1.set_xlabel("η² (residual variance explained by the signal's binned mean)")
+    assoc = d.associations[::-1]
+    y = np.arange(len(assoc))
+    beyond = [a.get("eta2_beyond_current") for a in assoc]
+    ax1.barh(y + 0.2, [a["eta2"] for a in assoc], height=0.4, color="tab:blue", label="residual")
+    if any(b is not None for b in beyond):  # the second η² the signature also reads
+        ax1.barh(
+            y - 0.2,
+            [b or 0.0 for b in beyond],
+            height=0.4,
+            color="tab:orange",
+            label="beyond the current and its direction",
+        )
+    ax1.set_yticks(y, [a["signal"] for a in assoc])
+    ax1.axvline(SIGNATURE_ETA2, ls="--", lw=0.8, color="black", label="signature threshold")
+    ax1.legend(fontsize=6, loc="lower right")
+    ax1.set_xlabel("η² (residual variance explained by the signal's binned mean, -)")
     for name, xc in d.cross_correlation.items():
         ax2.plot(np.array(xc["lags_s"]) * 1e3, xc["values"], label=name)
-    ax2.set(xlabel="lag (ms)", ylabel="cross-correlation with the residual")
+    ax2.set(xlabel=LAG_LABEL, ylabel="cross-correlation with the residual (-)")
     ax2.legend(fontsize=7)
     if d.spectrum.get("freq_Hz"):
         ax3.semilogy(d.spectrum["freq_Hz"][1:], d.spectrum["psd_bar2_Hz"][1:])
