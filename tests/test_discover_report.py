@@ -363,3 +363,15 @@ def test_the_diagnostics_figure_shows_both_eta2_its_threshold_and_what_a_lag_mea
     assert len([t for t in ifig.data if t.type == "bar"]) == 2
     assert ifig.layout.xaxis.title.text.endswith("signature threshold")
     assert "follows the signal later" in ifig.layout.xaxis2.title.text
+
+
+def test_the_console_table_says_what_its_evidence_column_and_star_mean():
+    """'sensor_lag 225.5/0.48*' under 'evidence (statistic, share)': the star was not
+    explained anywhere in the terminal output."""
+    from clutchlab.validation.discover.result import DiscoveryResult
+
+    it = _iteration(MATCHED, [_candidate("sensor_lag", True, 225.5, 0.48)])
+    result = DiscoveryResult([it], _state(), _state(), True, [], "", [], [], 1.0)
+    head, row, *_ = result.table().splitlines()
+    assert "sensor_lag 225.5/0.48*" in row
+    assert "statistic/share (*: significant)" in head

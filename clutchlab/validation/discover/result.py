@@ -330,14 +330,15 @@ class DiscoveryResult:
         )
 
     def table(self) -> str:
-        """Per iteration: effect, winner and runner-up scores, RMSE before → after.
+        """Per iteration: effect, the three best candidates' score statistic / share of the
+        residual (``*``: significant, as the header says), RMSE before → after.
 
         An iteration that added no effect shows "—" in the effect column; why it added none
         (its decision, often a sentence) follows the table, one line per such iteration.
         """
         lines = [
             f"{'it':>2s}  {'effect':30s} {'train RMSE (bar)':>19s} {'test RMSE (bar)':>19s}  "
-            "evidence (statistic, share)"
+            "evidence: top 3 candidates, statistic/share (*: significant)"
         ]
         notes = []
         for it in self.iterations:
