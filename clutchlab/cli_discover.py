@@ -98,6 +98,8 @@ def _cmd_discover(args: argparse.Namespace) -> int:
     print(result.summary)
     if result.time_limited:
         print(result.stop_note())
+    if result.unexplained:
+        print(result.next_steps())
     print(f"report: {report}")
     if args.json:
         from .cli import write_json_output

@@ -375,3 +375,19 @@ def test_the_console_table_says_what_its_evidence_column_and_star_mean():
     head, row, *_ = result.table().splitlines()
     assert "sensor_lag 225.5/0.48*" in row
     assert "statistic/share (*: significant)" in head
+
+
+def test_an_unexplained_verdict_says_what_to_do_next():
+    """'unexplained residual: … it follows didt_mA_s, didt_sign' named no command that goes
+    on from there."""
+    from clutchlab.validation.discover.result import DiscoveryResult
+
+    it = _iteration("no significant candidate", [_candidate("sensor_lag", False)])
+    sig = ["didt_mA_s", "didt_sign"]
+    result = DiscoveryResult([it], _state(), _state(), True, sig, "", [], [], 1.0)
+    text = result.next_steps()
+    assert "follows didt_mA_s, didt_sign" in text
+    assert "clutchlab select-structure" in text and "`hybrid` variant" in text
+    assert "clutchlab effects" in text
+    explained = DiscoveryResult([it], _state(), _state(), False, [], "", [], [], 1.0)
+    assert explained.next_steps() == ""

@@ -363,6 +363,7 @@ def write_report(
         f"**Result:** {result.summary}",
         "",
         *([result.stop_note(), ""] if result.time_limited else []),
+        *([result.next_steps(), ""] if result.unexplained else []),
     ]
     parts_html = [
         "<h1>clutchlab discover — closing the loop</h1>",
@@ -370,6 +371,7 @@ def write_report(
         f"<p>{html.escape(split)}</p>",
         f"<p><b>Result:</b> {html.escape(result.summary)}</p>",
         f"<p>{html.escape(result.stop_note())}</p>" if result.time_limited else "",
+        f"<p>{html.escape(result.next_steps())}</p>" if result.unexplained else "",
     ]
     min_share = result.settings.get("min_share")
     for it in result.iterations:

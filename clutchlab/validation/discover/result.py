@@ -275,6 +275,28 @@ class DiscoveryResult:
             write_file_atomic(path, (text + "\n").encode("utf-8"), overwrite=True)
         return text
 
+    def next_steps(self) -> str:
+        """What a reader can do with an "unexplained" verdict (``""`` otherwise).
+
+        The verdict says that no library effect is claimed and which signals the residual
+        follows; this names the commands that go on from there: flexible component laws
+        chosen by BIC (``clutchlab select-structure``), a residual model on top of the
+        physics (the ``hybrid`` variant of ``clutchlab evaluate``), and the library's
+        residual signatures to compare with (``clutchlab effects``).
+        """
+        if not self.unexplained:
+            return ""
+        follows = ", ".join(self.signature) or "no single signal"
+        return (
+            f"What to do next: the residual no effect is claimed for follows {follows}. "
+            "A flexible component law may describe it: `clutchlab select-structure DATASET "
+            "--candidates plain,force,play,latch,vfs` fits the base circuit with each and "
+            "chooses one by BIC on the training ramps; the `hybrid` variant of `clutchlab "
+            "evaluate` learns what is left as a residual model on the physics; `clutchlab "
+            "effects` lists each library effect's residual signature to compare with; runs "
+            "that vary the signal it follows at the same current separate its cause."
+        )
+
     def stop_note(self) -> str:
         """What a discovery stopped at its time budget had done, and how to let it finish.
 
