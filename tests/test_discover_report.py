@@ -391,3 +391,14 @@ def test_an_unexplained_verdict_says_what_to_do_next():
     assert "clutchlab effects" in text
     explained = DiscoveryResult([it], _state(), _state(), False, [], "", [], [], 1.0)
     assert explained.next_steps() == ""
+
+
+def test_the_sparse_regression_line_says_its_terms_are_standardized():
+    """'r/σ ≈ -0.20 current_mA oil_temp_C +0.18 didt_mA_s …' read as coefficients in bar
+    per mA; the terms are standardized signals and r/σ the residual over its SD."""
+    from clutchlab.validation.discover.report import sparse_text
+
+    text = sparse_text(0.19)
+    assert text.startswith("Sparse regression (pysindy STLSQ, R² 0.19;")
+    assert "standard deviation" in text and "(signal − mean) / SD" in text
+    assert "dimensionless" in text

@@ -28,6 +28,7 @@ __all__ = [
     "plot_diagnostics",
     "plot_evidence",
     "plot_residuals",
+    "sparse_text",
     "write_report",
 ]
 
@@ -297,6 +298,26 @@ def fit_state_text(status: str, converged: bool) -> str:
     return head + f"NOT converged (stopped at a limit; its best iterate is the model{hint})"
 
 
+def sparse_text(r2: float) -> str:
+    """The words before the sparse-regression equation: what ``r/σ``, the signal names and
+    the coefficients in it are (the equation alone reads as if in bar and mA).
+
+    Parameters
+    ----------
+    r2 : float
+        Share of the residual variance the sparse model explains (0–1).
+
+    Returns
+    -------
+    str
+    """
+    return (
+        f"Sparse regression (pysindy STLSQ, R² {r2:.2f}; r/σ is the residual in units of its "
+        "standard deviation, each signal name its standardized value (signal − mean) / SD, "
+        "so the coefficients are dimensionless and comparable)"
+    )
+
+
 def _parameter_rows(parameters: list[dict]) -> list[list[str]]:
     """Rows of the "parameters after" table: name, value, ± SE, unit as a reader writes it
     (``N/A`` → ``N·A⁻¹``, which would read as "not applicable"; the JSON keeps ``N/A``)."""
@@ -416,7 +437,7 @@ def write_report(
             "",
             f"Residual before: {it.diagnostics.summary()}",
             "",
-            f"Sparse regression (pysindy STLSQ, R² {it.sparse.r2:.2f}): `{it.sparse.equation()}`",
+            f"{sparse_text(it.sparse.r2)}: `{it.sparse.equation()}`",
             "",
             *evidence_md,
             "",
@@ -432,7 +453,7 @@ def write_report(
         parts_html += [
             f"<h2>{html.escape(title)}</h2>",
             f"<p>Residual before: {html.escape(it.diagnostics.summary())}</p>",
-            f"<p>Sparse regression (pysindy STLSQ, R² {it.sparse.r2:.2f}): "
+            f"<p>{html.escape(sparse_text(it.sparse.r2))}: "
             f"<code>{html.escape(it.sparse.equation())}</code></p>",
             *evidence_html,
             "<br>",
