@@ -402,3 +402,17 @@ def test_the_sparse_regression_line_says_its_terms_are_standardized():
     assert text.startswith("Sparse regression (pysindy STLSQ, R² 0.19;")
     assert "standard deviation" in text and "(signal − mean) / SD" in text
     assert "dimensionless" in text
+
+
+def test_the_evidence_table_explains_its_columns_and_status_names():
+    """latch_threshold_drift's status 'confounded', and the share / novelty columns, were
+    not explained anywhere in the report."""
+    from clutchlab.validation.discover.report import _CAND_HEAD, candidate_columns_note
+    from clutchlab.validation.discover.scoring import MIN_NOVELTY
+
+    note = candidate_columns_note(MIN_NOVELTY)
+    assert f"confounded (novelty below {MIN_NOVELTY:g}" in note
+    for column in ("statistic", "p", "share", "novelty", "ΔBIC", "status"):
+        assert column in _CAND_HEAD
+        assert f" {column} =" in note or f" {column}:" in note, column
+    assert "linearized at =" in note

@@ -21,8 +21,10 @@ from .alternatives import alternative_note
 from .diagnostics import SIGNATURE_ETA2
 from .interactive import iplot_diagnostics, iplot_evidence, iplot_residuals
 from .result import DiscoveryResult, IterationRecord, ModelState
+from .scoring import MIN_NOVELTY
 
 __all__ = [
+    "candidate_columns_note",
     "evidence_axis_label",
     "fit_state_text",
     "plot_diagnostics",
@@ -327,6 +329,32 @@ def _parameter_rows(parameters: list[dict]) -> list[list[str]]:
     ]
 
 
+def candidate_columns_note(min_novelty: float) -> str:
+    """What the evidence table's columns and its status names mean, with their units.
+
+    Parameters
+    ----------
+    min_novelty : float
+        Novelty (0–1) below which a candidate is "confounded"
+        (:data:`~clutchlab.validation.discover.scoring.MIN_NOVELTY`).
+
+    Returns
+    -------
+    str
+    """
+    return (
+        "Columns: statistic = n_eff·ln(RSS₀/RSS₁) (-), the drop of the residual sum of "
+        "squares when the effect's linearized output is added; p = its χ² p-value; share = "
+        "fraction (0–1) of the residual sum of squares that output explains; novelty = "
+        "fraction (0–1) of that output the fitted parameters cannot mimic; linearized at = "
+        "zero strength, a small probe strength or the profile's best point (tests scored); "
+        "ΔBIC = information-criterion change of its refit (< 0: better; empty: not "
+        "refitted); status: scored, confounded (novelty below "
+        f"{min_novelty:g}: the fitted parameters mimic it, so it is not tested) or failed "
+        "(with the reason)."
+    )
+
+
 def _md_table(head: list[str], rows: list[list[str]]) -> str:
     out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     out += ["| " + " | ".join(r) + " |" for r in rows]
@@ -424,10 +452,18 @@ def write_report(
         pngs = {k: _png(f, files, f"iteration{it.index}_{k}.png") for k, f in figs.items()}
         if it.candidates:
             rule = _significance_text(it.threshold_p, min_share)
-            evidence_md = [rule, "", _md_table(_CAND_HEAD, _candidate_rows(it, min_share))]
+            columns = candidate_columns_note(MIN_NOVELTY)
+            evidence_md = [
+                rule,
+                "",
+                _md_table(_CAND_HEAD, _candidate_rows(it, min_share)),
+                "",
+                columns,
+            ]
             evidence_html = [
                 f"<p>{html.escape(rule)}</p>",
                 _html_table(_CAND_HEAD, _candidate_rows(it, min_share)),
+                f"<p style='font-size:small'>{html.escape(columns)}</p>",
             ]
         else:
             evidence_md = [f"No candidate was scored ({it.decision})."]
