@@ -416,3 +416,12 @@ def test_the_evidence_table_explains_its_columns_and_status_names():
         assert column in _CAND_HEAD
         assert f" {column} =" in note or f" {column}:" in note, column
     assert "linearized at =" in note
+
+
+def test_the_split_line_says_what_its_seconds_are():
+    """'Training: 6 experiments (…); test, only scored: 3 (…); 237.7 s.' left the number
+    unnamed."""
+    from clutchlab.validation.discover.report import _split_text
+
+    result = SimpleNamespace(train=["fast_30Hz_A"], test=["medium_30Hz_A"], wall_s=237.7)
+    assert _split_text(result).endswith("; wall time of the discovery 237.7 s.")

@@ -374,7 +374,7 @@ def _split_text(result: DiscoveryResult) -> str:
         test = f"test, only scored: {len(result.test)} ({', '.join(result.test)})"
     else:
         test = "no test experiments (the test rows of the tables are empty)"
-    return f"{train}; {test}; {result.wall_s:.1f} s."
+    return f"{train}; {test}; wall time of the discovery {result.wall_s:.1f} s."
 
 
 def write_report(
