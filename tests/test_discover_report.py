@@ -319,6 +319,11 @@ def test_the_fit_state_explains_a_limit_and_names_the_option_that_raises_it():
     assert "NOT converged" in text and "(--max-iter) may improve it" in text
     assert "--time-limit" not in text
     assert "--time-limit" in fit_state_text("Maximum_WallTime_Exceeded", False)
+    given = "Cost_Plateau (pre-fit) → Not_Started_Short_Of_Time (refine)"
+    text = fit_state_text(given, False, baseline=True)
+    assert "(--time-limit) may improve it" in text
+    assert "given with --physics-model: the same option of `clutchlab fit-physics`" in text
+    assert "fit-physics" not in fit_state_text(given, False)
     assert fit_state_text("Solve_Succeeded", True) == "fit after: Solve_Succeeded, converged"
 
 

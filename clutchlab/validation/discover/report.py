@@ -264,7 +264,7 @@ _CAND_HEAD = [
 ]
 
 
-def fit_state_text(status: str, converged: bool) -> str:
+def fit_state_text(status: str, converged: bool, baseline: bool = False) -> str:
     """The "fit after" line of an iteration in words: the solver status, whether the fit
     converged, what a limit in it means and (when it stopped at one) the option that
     raises it.
@@ -275,6 +275,9 @@ def fit_state_text(status: str, converged: bool) -> str:
         The fit's status, ``"<status> (pre-fit) → <status> (refine)"`` when staged.
     converged : bool
         ``FitResult.success``.
+    baseline : bool
+        The fit is the discovery's base fit (nothing added yet), which may have been given
+        with ``--physics-model``: the options then belong to ``clutchlab fit-physics``.
 
     Returns
     -------
@@ -297,6 +300,9 @@ def fit_state_text(status: str, converged: bool) -> str:
     if WALL_TIME_LIMIT in status or SHORT_OF_TIME in status:
         hints.append("more time per fit (--time-limit)")
     hint = f"; {' or '.join(hints)} may improve it" if hints else ""
+    if hints and baseline:
+        hint += " (for a base fit given with --physics-model: the same option of `clutchlab "
+        hint += "fit-physics`)"
     return head + f"NOT converged (stopped at a limit; its best iterate is the model{hint})"
 
 
@@ -444,7 +450,11 @@ def write_report(
         err_head = ["data", "RMSE before (bar)", "RMSE after (bar)", "fit % before", "fit % after"]
         record = it.to_dict()
         params = _parameter_rows(record["parameters_after"])
-        fit_state = fit_state_text(record["fit_status_after"], record["fit_converged_after"])
+        fit_state = fit_state_text(
+            record["fit_status_after"],
+            record["fit_converged_after"],
+            baseline=it.after.fit is result.baseline.fit,
+        )
         figs = {"residuals": plot_residuals(it)}
         if it.candidates:  # none scored (effect limit, no candidate left): no empty axes
             figs["evidence"] = plot_evidence(it, min_share)
