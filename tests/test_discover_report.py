@@ -364,6 +364,8 @@ def test_the_diagnostics_figure_shows_both_eta2_its_threshold_and_what_a_lag_mea
     assert widths == [0.0, 0.075, 0.088, 0.31]  # both η² of oil_temp_C are drawn
     assert [ln.get_xdata()[0] for ln in eta_ax.lines] == [0.1]
     assert "> 0: the residual follows the signal later" in lag_ax.get_xlabel()
+    boxes = [ax.xaxis.label.get_window_extent() for ax in (eta_ax, lag_ax)]
+    assert boxes[0].x1 <= boxes[1].x0  # the two axis labels do not run into each other
     ifig = iplot_diagnostics(it)
     assert len([t for t in ifig.data if t.type == "bar"]) == 2
     assert ifig.layout.xaxis.title.text.endswith("signature threshold")

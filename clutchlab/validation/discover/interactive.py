@@ -275,7 +275,7 @@ def iplot_diagnostics(it: IterationRecord) -> go.Figure:
         )
         fig.update_yaxes(type="log", row=1, col=3)
     fig.update_xaxes(title_text="η² (-); dashed: signature threshold", row=1, col=1)
-    fig.update_xaxes(title_text=LAG_LABEL, row=1, col=2)
+    fig.update_xaxes(title_text=LAG_LABEL.replace("\n", "<br>"), row=1, col=2)
     fig.update_yaxes(title_text="cross-correlation (-)", row=1, col=2)
     fig.update_xaxes(title_text="frequency (Hz)", row=1, col=3)
     fig.update_yaxes(title_text="residual PSD (bar²/Hz)", row=1, col=3)

@@ -145,7 +145,7 @@ def plot_evidence(it: IterationRecord, min_share: float | None = None) -> Figure
 
 
 #: What a lag of the cross-correlation panel means (``corr(r(t), x(t − lag))``).
-LAG_LABEL = "lag (ms); > 0: the residual follows the signal later"
+LAG_LABEL = "lag (ms)\n> 0: the residual follows the signal later"
 
 
 def plot_diagnostics(it: IterationRecord) -> Figure:
@@ -170,7 +170,7 @@ def plot_diagnostics(it: IterationRecord) -> Figure:
     ax1.set_yticks(y, [a["signal"] for a in assoc])
     ax1.axvline(SIGNATURE_ETA2, ls="--", lw=0.8, color="black", label="signature threshold")
     ax1.legend(fontsize=6, loc="lower right")
-    ax1.set_xlabel("η² (residual variance explained by the signal's binned mean, -)")
+    ax1.set_xlabel("η² (-)\nresidual variance explained by the signal's binned mean")
     for name, xc in d.cross_correlation.items():
         ax2.plot(np.array(xc["lags_s"]) * 1e3, xc["values"], label=name)
     ax2.set(xlabel=LAG_LABEL, ylabel="cross-correlation with the residual (-)")
