@@ -432,3 +432,21 @@ def test_the_split_line_says_what_its_seconds_are():
 
     result = SimpleNamespace(train=["fast_30Hz_A"], test=["medium_30Hz_A"], wall_s=237.7)
     assert _split_text(result).endswith("; wall time of the discovery 237.7 s.")
+
+
+def test_the_json_result_carries_the_stop_note_and_the_next_steps():
+    """--json / discovery.json had the summary but not what a stopped discovery had done nor
+    what to do after an 'unexplained' verdict."""
+    from clutchlab.validation.discover.result import DiscoveryResult
+
+    base = SimpleNamespace(
+        fit=SimpleNamespace(effects=[], free=[], values={}, std_errors={}, units={}),
+        train={"rmse_bar": 0.02},
+        test={"rmse_bar": 0.03},
+    )
+    result = DiscoveryResult(
+        [], base, base, True, ["didt_mA_s"], "s", [], [], 1.0, settings={}, time_limited=False
+    )
+    doc = result.to_dict()
+    assert doc["next_steps"] == result.next_steps() and "select-structure" in doc["next_steps"]
+    assert doc["stop_note"] == ""

@@ -251,6 +251,10 @@ class DiscoveryResult:
                 "added": self.added,
                 "signature": self.signature,
                 "summary": self.summary,
+                # what a stopped discovery had done / what to do after "unexplained" ("" if
+                # neither applies), as the terminal and the report say it
+                "stop_note": self.stop_note(),
+                "next_steps": self.next_steps(),
                 "effects_initial": list(self.baseline.fit.effects),
                 "effects_final": list(self.final.fit.effects),
                 "train": self.train,
