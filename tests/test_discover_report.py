@@ -224,6 +224,32 @@ def test_the_parameter_table_writes_newton_per_ampere_not_n_slash_a():
     assert [r[-1] for r in rows] == ["N·A⁻¹", "mA"]
 
 
+def test_the_parameter_table_marks_a_parameter_the_fit_could_not_identify():
+    """reg_F_c on the stand with sensor_lag: 'not identifiable' in fit-physics, a plain
+    0.011156 ± 0.0158 N in the discovery's parameter table."""
+    from clutchlab.validation.discover.report import _parameter_rows
+
+    rows = _parameter_rows(
+        [
+            {
+                "name": "reg_F_c",
+                "value": 0.0112,
+                "std_error": 0.0158,
+                "unit": "N",
+                "identifiable": False,
+            },
+            {
+                "name": "latch_k",
+                "value": 2.02,
+                "std_error": 3e-4,
+                "unit": "N/mm",
+                "identifiable": True,
+            },
+        ]
+    )
+    assert [r[0] for r in rows] == ["reg_F_c (not identifiable)", "latch_k"]
+
+
 def test_a_p_value_below_the_level_beside_not_significant_says_which_test_failed():
     """flow_force on the stand with sensor_lag: p 5.8e-07 under a stated level 0.00077 and
     'significant: no', because its share 0.073 is below min_share 0.10; the report said

@@ -327,10 +327,16 @@ def sparse_text(r2: float) -> str:
 
 
 def _parameter_rows(parameters: list[dict]) -> list[list[str]]:
-    """Rows of the "parameters after" table: name, value, ± SE, unit as a reader writes it
-    (``N/A`` → ``N·A⁻¹``, which would read as "not applicable"; the JSON keeps ``N/A``)."""
+    """Rows of the "parameters after" table: name (marked "not identifiable" where the fit
+    says so, as fit-physics does), value, ± SE, unit as a reader writes it (``N/A`` →
+    ``N·A⁻¹``, which would read as "not applicable"; the JSON keeps ``N/A``)."""
     return [
-        [p["name"], _fmt(p["value"], ".5g"), _fmt(p["std_error"], ".3g"), unit_shown(p["unit"])]
+        [
+            p["name"] + ("" if p.get("identifiable", True) else " (not identifiable)"),
+            _fmt(p["value"], ".5g"),
+            _fmt(p["std_error"], ".3g"),
+            unit_shown(p["unit"]),
+        ]
         for p in parameters
     ]
 
