@@ -476,3 +476,20 @@ def test_the_json_result_carries_the_stop_note_and_the_next_steps():
     doc = result.to_dict()
     assert doc["next_steps"] == result.next_steps() and "select-structure" in doc["next_steps"]
     assert doc["stop_note"] == ""
+
+
+def test_an_added_effect_that_worsens_the_test_ramp_says_so():
+    """Stand + sensor_lag, --candidates sensor_lag: 'added sensor_lag (ΔBIC -25.3): training
+    RMSE 0.0294 → 0.0231 bar, test-ramp RMSE 0.0222 → 0.0247 bar' with a refit stopped at its
+    iteration limit, and nothing said that the unseen ramp got worse."""
+    it = _iteration("added", [_candidate("sensor_lag", True, 225.3, 0.31)], effect="sensor_lag")
+    it.delta_bic = -25.3
+    it.before, it.after = _state(0.0294, 0.0222), _state(0.0231, 0.0247)
+    it.after.fit = SimpleNamespace(success=False)
+    last = _iteration("no candidates left", [], index=1)
+    text = _summary([it, last], False, _diag(()), 2)
+    assert "test-ramp RMSE 0.0222 → 0.0247 bar (worse on the unseen test ramp by 11 %" in text
+    assert "stopped at a limit" in text
+    it.after = _state(0.0231, 0.0200)
+    it.after.fit = SimpleNamespace(success=True)
+    assert "worse" not in _summary([it, last], False, _diag(()), 2)

@@ -633,10 +633,20 @@ def _summary(iterations: list[IterationRecord], unexplained: bool, diag, substep
     for it in added:
         test = ""
         if math.isfinite(it.before.test["rmse_bar"]):  # no test experiments: nothing to say
-            test = (
-                f", test-ramp RMSE {it.before.test['rmse_bar']:.4f} → "
-                f"{it.after.test['rmse_bar']:.4f} bar"
-            )
+            before, after = it.before.test["rmse_bar"], it.after.test["rmse_bar"]
+            test = f", test-ramp RMSE {before:.4f} → {after:.4f} bar"
+            if after > before:  # said, not hidden: the test ramp never decides a claim
+                test += (
+                    f" (worse on the unseen test ramp by {100 * (after / before - 1):.0f} %: "
+                    "the claim rests on the training experiments left out one at a time"
+                    + (
+                        ""
+                        if it.after.fit.success
+                        else "; its refit stopped at a limit (see the fit status), more "
+                        "--max-iter / --time-limit may change that"
+                    )
+                    + ")"
+                )
         parts.append(
             f"added {it.effect} (ΔBIC {it.delta_bic:.1f}): training RMSE "
             f"{it.before.train['rmse_bar']:.4f} → {it.after.train['rmse_bar']:.4f} bar{test}"
