@@ -36,7 +36,7 @@ from ...errors import ClutchlabError, FitError, FitWarning
 from ...physics import CircuitModel, simulate
 from ...physics.effects import EFFECTS
 from ...physics.fit import FitResult, at_fit_rate, resolve_free
-from ...physics.parameters import ParameterSet
+from ...physics.parameters import ParameterSet, quiet_design_checks
 from .alternatives import alternatives_for, beats, broke_down, fit_alternative
 from .deadline import DiscoveryTimeLimit, check_budget, discovery_budget
 from .diagnostics import diagnose
@@ -501,6 +501,7 @@ def _iteration(
     return record(chosen.effect, "added", scores, new, chosen.refit["delta_bic"])
 
 
+@quiet_design_checks  # its probes and refits are not the user's values
 def discover(
     dataset: Dataset | list[Trace],
     model: CircuitModel | None = None,
