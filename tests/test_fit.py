@@ -378,6 +378,7 @@ def test_a_solver_that_never_gets_below_the_staged_start_keeps_it(small_data, mo
     with pytest.warns(FitWarning, match="the staged start is the model") as seen:
         fitter = _fit(data, train_ramps=("fast", "slow"))
     text = str(seen[0].message)
+    assert seen[0].filename == __file__  # the user's line, not the quiet-checks wrapper's
     before, after = re.search(
         r"from ([0-9.e+]+) bar² \(datasheet values\) to ([0-9.e+]+)", text
     ).groups()

@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 import os
 import time
-import warnings
 from dataclasses import asdict
 
 import numpy as np
@@ -13,7 +12,7 @@ from sklearn.exceptions import NotFittedError
 from tqdm.auto import tqdm
 
 from ...data import Dataset, Trace, dither_period_mean, dither_period_samples, pressure_metrics
-from ...errors import FitError, FitWarning, ModelError
+from ...errors import FitError, FitWarning, ModelError, warn_at_caller
 from ...forkmap import fork_map
 from ..effects import EFFECTS, missing_effect
 from ..model import CircuitModel
@@ -478,11 +477,10 @@ class PhysicsFitter:
                     f"{staged_gain[0]:.6g} bar² (datasheet values) to {staged_gain[1]:.6g}: "
                     "the staged start is the model"
                 )
-            warnings.warn(
+            warn_at_caller(  # the user's line, not the quiet-checks wrapper's
                 f"the fit stopped at a limit before converging ({status}) after {wall:.1f} s: "
                 f"{what}, marked not converged",
                 FitWarning,
-                stacklevel=2,
             )
         self.result_ = result
         self.model_ = result.model()

@@ -25,14 +25,13 @@ from __future__ import annotations
 
 import math
 import time
-import warnings
 from dataclasses import asdict
 
 import numpy as np
 from tqdm.auto import tqdm
 
 from ...data import Dataset, Trace, dither_period_mean, dither_period_samples, pressure_metrics
-from ...errors import ClutchlabError, FitError, FitWarning
+from ...errors import ClutchlabError, FitError, FitWarning, warn_at_caller
 from ...physics import CircuitModel, simulate
 from ...physics.effects import EFFECTS
 from ...physics.fit import FitResult, at_fit_rate, resolve_free
@@ -590,7 +589,7 @@ def discover(
             + ")"
         )
         message = f"discovery: {last.decision}; {had}"
-        warnings.warn(message, FitWarning, stacklevel=2)
+        warn_at_caller(message, FitWarning)  # the user's line, not the wrapper's
     return DiscoveryResult(
         iterations=iterations,
         baseline=baseline,
