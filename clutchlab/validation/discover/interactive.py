@@ -213,27 +213,25 @@ def iplot_diagnostics(it: IterationRecord) -> go.Figure:
     from .report import LAG_LABEL  # report imports this module
 
     assoc = d.associations[::-1]
-    fig.add_trace(
-        go.Bar(
-            x=[a["eta2"] for a in assoc],
-            y=[a["signal"] for a in assoc],
-            orientation="h",
-            marker_color="#1f77b4",
-            name="η², residual",
-            hovertemplate="%{y}: η² %{x:.3g} on the residual<extra></extra>",
-        ),
-        row=1,
-        col=1,
-    )
+    bars = [("eta2", "#1f77b4", "η², residual", "on the residual")]
     if any(a.get("eta2_beyond_current") is not None for a in assoc):
+        bars.append(
+            (
+                "eta2_beyond_current",
+                "#ff7f0e",
+                "η², beyond the current and its direction",
+                "beyond the current",
+            )
+        )
+    for key, color, name, where in bars:
         fig.add_trace(
             go.Bar(
-                x=[a.get("eta2_beyond_current") or 0.0 for a in assoc],
+                x=[a.get(key) or 0.0 for a in assoc],
                 y=[a["signal"] for a in assoc],
                 orientation="h",
-                marker_color="#ff7f0e",
-                name="η², beyond the current and its direction",
-                hovertemplate="%{y}: η² %{x:.3g} beyond the current<extra></extra>",
+                marker_color=color,
+                name=name,
+                hovertemplate=f"%{{y}}: η² %{{x:.3g}} {where}<extra></extra>",
             ),
             row=1,
             col=1,
