@@ -40,3 +40,7 @@ class ClutchNode(Component):
             return q / node_compliance(a, _C, "p_c", p)
 
         asm.define("der:p_c", der, "Pa/s")
+        # The pressure at the clutch port (the sensor's tapping) and its rate; a flexible
+        # latch law may connect the port to line pressure instead.
+        asm.define("p_clutch_port", lambda a: a.x("p_c"), "Pa")
+        asm.define("dp_clutch_port", lambda a: a["der:p_c"], "Pa/s")

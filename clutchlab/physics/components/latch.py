@@ -9,9 +9,12 @@ from ..smooth import logistic, smooth_max0
 from .base import Component, param
 from .fluid import flow
 
-__all__ = ["LatchValve", "latch_snap_problem", "latch_thresholds"]
+__all__ = ["LATCH_PORT_EPS", "LatchValve", "latch_snap_problem", "latch_thresholds"]
 
 _C = "latch"
+
+#: Rounding (latch opening, -) of the port-opening corner at the overlap.
+LATCH_PORT_EPS = 0.005
 
 
 def latch_thresholds(values) -> tuple[float, float]:
@@ -137,10 +140,19 @@ class LatchValve(Component):
             "m³/s",
         )
 
+        # The latched port's opening (0–1): it opens after the overlap, so the hydraulic
+        # latch follows the mechanical snap (a flexible law may switch another port with it).
+        asm.define(
+            "latch_port_opening",
+            lambda a: (
+                smooth_max0(lam - a.p("latch_overlap"), LATCH_PORT_EPS)
+                / (1.0 - a.p("latch_overlap"))
+            ),
+            "-",
+        )
+
         def q_exh(a):
-            ov = a.p("latch_overlap")
-            opening = smooth_max0(lam - ov, 0.005) / (1.0 - ov)
-            area = math.pi / 4.0 * a.p("latch_d_exh") ** 2 * opening
+            area = math.pi / 4.0 * a.p("latch_d_exh") ** 2 * a["latch_port_opening"]
             return flow(a, area, a.x("p_fb") - a["p_prime"])
 
         asm.define("Q_latch_exh", q_exh, "m³/s")

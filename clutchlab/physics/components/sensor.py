@@ -9,7 +9,8 @@ __all__ = ["PressureSensor"]
 
 
 class PressureSensor(Component):
-    """Ideal sensor at the clutch port: ``p_sensor = p_c``.
+    """Ideal sensor at the clutch port: ``p_sensor = p_clutch_port`` (``p_c`` unless a law
+    switches the port).
 
     Defines ``p_sensor`` (Pa) and its time derivative ``dp_sensor`` (Pa/s); sensor
     effects (lag, transport delay) wrap both so that they compose.
@@ -20,5 +21,5 @@ class PressureSensor(Component):
     PARAMETERS = ()
 
     def build(self, asm: Assembly) -> None:
-        asm.define("p_sensor", lambda a: a.x("p_c"), "Pa")
-        asm.define("dp_sensor", lambda a: a["der:p_c"], "Pa/s")
+        asm.define("p_sensor", lambda a: a["p_clutch_port"], "Pa")
+        asm.define("dp_sensor", lambda a: a["dp_clutch_port"], "Pa/s")

@@ -13,6 +13,7 @@ from ...errors import ModelError
 from .base import Effect
 from .flexible import (
     FreeLatchThresholds,
+    LatchLineSelect,
     MonotoneForceCorrection,
     PlayHysteresis,
     RegulatorPilotLag,
@@ -40,6 +41,7 @@ __all__ = [
     "Effect",
     "FlowForce",
     "FreeLatchThresholds",
+    "LatchLineSelect",
     "LatchThresholdDrift",
     "MagneticHysteresis",
     "MonotoneForceCorrection",
@@ -61,7 +63,13 @@ __all__ = [
 #: The flexible component laws (identity at their defaults; no stand uses them).
 FLEXIBLE_LAWS: dict[str, type[Effect]] = {
     cls.name: cls
-    for cls in (MonotoneForceCorrection, PlayHysteresis, FreeLatchThresholds, RegulatorPilotLag)
+    for cls in (
+        MonotoneForceCorrection,
+        PlayHysteresis,
+        FreeLatchThresholds,
+        LatchLineSelect,
+        RegulatorPilotLag,
+    )
 }
 
 

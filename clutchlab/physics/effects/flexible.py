@@ -17,6 +17,9 @@ as the training data ask. All forms are smooth (``tanh`` / logistic; no ``if_els
 - :class:`FreeLatchThresholds` (``latch_free_thresholds``): the latch-on and
   latch-off pilot pressures as parameters (bar) in place of the spring preload and
   rate, so the latch hysteresis is no longer tied to the valve's area ratio.
+- :class:`LatchLineSelect` (``latch_line_select``): the latch valve as a selector of the
+  clutch feed — latched, the clutch port sees line pressure while the regulator keeps
+  regulating its own output — in place of the datasheet valve's feedback exhaust.
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ import casadi as ca
 
 from ..assembly import Assembly, StateSpec
 from ..components.base import param
-from ..components.latch import LatchValve, latch_thresholds
+from ..components.latch import LATCH_PORT_EPS, LatchValve, latch_thresholds
 from ..smooth import logistic
 from .base import Effect
 
@@ -35,6 +38,7 @@ __all__ = [
     "FORCE_KNOTS_MA",
     "PLAY_WIDTHS_MA",
     "FreeLatchThresholds",
+    "LatchLineSelect",
     "MonotoneForceCorrection",
     "PlayHysteresis",
     "RegulatorPilotLag",
@@ -200,6 +204,63 @@ class FreeLatchThresholds(Effect):
         asm.redefine("latch_F_net", f_net)
         for name in self.REPLACES:
             asm.retire_parameter(name)
+
+
+class LatchLineSelect(Effect):
+    """The latch valve selects the clutch feed: regulator output, or line pressure.
+
+    The datasheet valve latches by exhausting the regulator's feedback chamber: the
+    regulator spool then runs to its stop and fills the clutch from line, and on release
+    the chamber must refill and the spool travel back before the clutch drains to the
+    regulated pressure — a release slower than the snap-on, which moves the release
+    further with the ramp rate than the snap-on. Many valve bodies switch the clutch port
+    instead: latched, the clutch is fed from line through the latch valve and the
+    regulator, cut off, keeps regulating its own output, so on release the port returns
+    to the regulated pressure within the valve's stroke.
+
+    With weight ``w`` the port pressure is ``p_c + w·s(λ)·(p_line − p_c)`` (``s`` the
+    latch's port opening, 0–1, after its overlap) and the feedback exhaust flow is
+    scaled by ``1 − w``. ``w = 0`` (the default) is exactly today's model; a fit that
+    switches the law on holds ``w = 1`` (no parameter of its own: the valve's stroke time
+    ``latch_tau`` and overlap set the switching). The rate of the port pressure neglects
+    the line pressure's own rate (it enters sensor lags only).
+    """
+
+    name = "latch_line_select"
+    description = "latch valve switching the clutch port to line (regulator keeps regulating)"
+    signature = (
+        "latch release later than the snap-on by a delay that grows with the ramp rate "
+        "(the released clutch drains slowly to the regulated pressure)"
+    )
+    PARAMETERS = (
+        param("lsel", "w", "-", 0.0, 0.0, 1.0, "weight of the line-select latch port", "linear"),
+    )
+    STRENGTH = ("lsel_w",)
+    FIT = ()
+
+    def apply(self, asm: Assembly) -> None:
+        def gain(a):
+            return a.p("lsel_w") * a["latch_port_opening"]
+
+        def rate(a):
+            # d(port opening)/dt from the smooth max of the latch opening past its overlap
+            ov, lam = a.p("latch_overlap"), a.x("latch")
+            u = lam - ov
+            slope = 0.5 * (1.0 + u / ca.sqrt(u * u + LATCH_PORT_EPS**2)) / (1.0 - ov)
+            return a.p("lsel_w") * slope * a["der:latch"]
+
+        asm.wrap("Q_latch_exh", lambda a, prev: (1.0 - a.p("lsel_w")) * prev)
+        asm.tap("p_clutch_port", "p_clutch_port_in:lsel")
+        asm.wrap(
+            "p_clutch_port",
+            lambda a, prev: prev + gain(a) * (a["p_line"] - prev),
+        )
+        asm.wrap(
+            "dp_clutch_port",
+            lambda a, prev: (
+                (1.0 - gain(a)) * prev + rate(a) * (a["p_line"] - a["p_clutch_port_in:lsel"])
+            ),
+        )
 
 
 class RegulatorPilotLag(Effect):

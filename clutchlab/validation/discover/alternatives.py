@@ -109,7 +109,9 @@ def alternatives_for(current: CircuitModel, free: tuple[str, ...], k: int) -> li
     """
     out = []
     for name, cls in FLEXIBLE_LAWS.items():
-        if name in current.effect_names:
+        if name in current.effect_names or not cls.fit_parameters():
+            # a switch with nothing to fit (latch_line_select) is at its start the current
+            # model itself: no alternative
             continue
         retired = getattr(cls, "REPLACES", ())
         kept = tuple(n for n in free if n not in retired)
