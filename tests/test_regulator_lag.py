@@ -18,11 +18,14 @@ from clutchlab.physics import CircuitModel, simulate
 from clutchlab.physics.fit import FitSettings
 from clutchlab.physics.fit.fitter import resolve_free
 from clutchlab.physics.fit.staged import (
+    LATCH_PORT_GAIN,
     lag_signature,
+    latch_port_structure,
     regulated_band,
     regulator_lag_structure,
     staged_start,
 )
+from clutchlab.physics.parameters import without_design_checks
 from clutchlab.physics.settings import SimulationSettings
 from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
 from clutchlab.physics.stand.plants import PlantConfig, run_plant
@@ -149,3 +152,26 @@ def test_the_lagged_pilot_leaves_the_spool_stable(zoo_small):
     start = fast.time_s - fast.time_s[0] < 0.5  # the current is still below the VFS's knee
     assert np.all(np.isfinite(p))
     assert np.max(p[start]) < 1.5, np.max(p[start])
+
+
+@pytest.mark.parametrize("which", ["stand", "zoo"])
+def test_latch_port_is_chosen_on_the_fast_ramps(which, request):
+    """With the lag signature fired, the fit tries the line-select latch port and keeps it
+    only when it snaps closer to the data on the fast ramps (matched on the slow ones)."""
+    traces = request.getfixturevalue(f"{which}_small")
+    model, settings = CircuitModel(), FitSettings(progress=False, regulator_lag="auto")
+    free = resolve_free(model, settings)
+    start, info = staged_start(model, traces, settings, model.default_params(), free, 20.0)
+    info.regulator_lag_ms = info.regulator_lag_ms or 50.0  # as if the signature had fired
+    with without_design_checks():  # the staged start's values, not the user's
+        lag_model, start = regulator_lag_structure(model, start, info)
+    chosen, params = latch_port_structure(lag_model, start, traces, free, settings, info)
+    port = info.latch_port
+    assert set(port) == {"exhaust_fast_mA", "line_select_fast_mA"}
+    selected = "latch_line_select" in chosen.effect_names
+    assert selected == (port["line_select_fast_mA"] < LATCH_PORT_GAIN * port["exhaust_fast_mA"])
+    assert ("structure: latch_line_select" in info.summary()) == selected
+    if selected:
+        assert params["lsel_w"] == 1.0 and "lsel_w" not in resolve_free(chosen, settings)
+    # the zoo plant's latch switches the clutch to line; the stand's exhausts the feedback
+    assert selected == (which == "zoo"), info.summary()

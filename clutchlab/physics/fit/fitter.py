@@ -27,6 +27,7 @@ from .sensitivity import compile_sensitivities_for
 from .settings import DEFAULT_FREE, FitSettings
 from .staged import (
     free_latch_structure,
+    latch_port_structure,
     match_latch_snaps,
     regulator_lag_structure,
     staged_start,
@@ -327,18 +328,18 @@ class PhysicsFitter:
             ):
                 model, start = free_latch_structure(model, start, self.staged_)
                 free = resolve_free(model, settings)
+            match_s = LATCH_MATCH_TIME_FRACTION * settings.time_limit_s
             if self.staged_.regulator_lag_ms is not None and settings.free is None:
                 model, start = regulator_lag_structure(model, start, self.staged_)
                 free = resolve_free(model, settings)
-            start = match_latch_snaps(
-                model,
-                start,
-                traces,
-                free,
-                settings,
-                self.staged_,
-                LATCH_MATCH_TIME_FRACTION * settings.time_limit_s,
-            )
+                # a latch that does not see the regulated branch's lag: which port it switches
+                model, start = latch_port_structure(
+                    model, start, traces, free, settings, self.staged_, match_s
+                )
+            else:
+                start = match_latch_snaps(
+                    model, start, traces, free, settings, self.staged_, match_s
+                )
         history: list[float] = []
         bar = tqdm(
             total=settings.max_iter,

@@ -60,6 +60,7 @@ __all__ = [
     "fastest_traces",
     "free_latch_structure",
     "lag_signature",
+    "latch_port_structure",
     "match_latch_snaps",
     "measured_latch_indices",
     "measured_thresholds",
@@ -116,6 +117,11 @@ class StagedStart:
         (keys prefixed ``data_`` / ``model_``), when measurable.
     regulator_lag_ms : float or None
         Start time constant (ms) of ``reg_pilot_lag`` when the signature asks for it.
+    latch_port : dict of str to float
+        When the signature asked for the lag: the fast ramps' worse latch-snap offset (mA)
+        of the feedback-exhaust latch (``exhaust_fast_mA``) and of the line-select latch
+        (``line_select_fast_mA``), each matched on the slow ramps
+        (:func:`latch_port_structure`).
     latch_match_mA : dict of str to float
         Latch-snap matching: the model's latch-on / latch-off current minus the measured
         one (mA, median over the quasi-static experiments) before (``on_before``,
@@ -135,6 +141,7 @@ class StagedStart:
     thresholds_bar: tuple[float, float] | None = None
     lag_signature: dict[str, float] = field(default_factory=dict)
     regulator_lag_ms: float | None = None
+    latch_port: dict[str, float] = field(default_factory=dict)
     static_experiments: list[str] = field(default_factory=list)
     latch_match_mA: dict[str, float] = field(default_factory=dict)
     latch_tie_violated: bool = False
@@ -765,3 +772,81 @@ def regulator_lag_structure(
     """The model with ``reg_pilot_lag`` on (weight 1) at the staged start's time constant."""
     values = {"rlag_w": 1.0, "rlag_tau": info.regulator_lag_ms}
     return _with_law(model, start, "reg_pilot_lag", values)
+
+
+#: The line-select latch is kept when it brings the fast ramps' worse latch-snap offset
+#: below this fraction of the feedback-exhaust latch's (both matched on the slow ramps).
+LATCH_PORT_GAIN = 0.7
+
+
+@quiet_design_checks  # its probes are not the user's values
+def latch_port_structure(
+    model: CircuitModel,
+    start: ParameterSet,
+    traces: list[Trace],
+    free: tuple[str, ...],
+    settings: FitSettings,
+    info: StagedStart,
+    budget_s: float = math.inf,
+) -> tuple[CircuitModel, ParameterSet]:
+    """Which latch port the fit uses, by the fast ramps' latch snaps; returns the matched start.
+
+    Used when the lag signature found the regulated branch lagging through a path the latch
+    does not see. In the datasheet circuit the latch exhausts the regulator's feedback, so
+    the clutch's release runs through the regulator's recovery; a latch decoupled from the
+    regulated branch may switch the clutch port to line instead (``latch_line_select``).
+    Both are matched on the slow ramps (:func:`match_latch_snaps`) and simulated on (at
+    most two of) the fastest training experiments with a measured snap: the line-select
+    port is kept when the worse of its latch-on / latch-off offsets there is below
+    :data:`LATCH_PORT_GAIN` times the exhaust latch's. Training experiments only.
+
+    Parameters
+    ----------
+    model, start : CircuitModel, ParameterSet
+        Structure and start after the staged start's latch and lag choices.
+    traces : list of Trace
+        Training experiments.
+    free : tuple of str
+        The fit's free parameters.
+    settings : FitSettings
+        Bounds and substeps.
+    info : StagedStart
+        Record of the staged start; ``latch_port`` and the matching's fields are filled in.
+    budget_s : float
+        Wall time (s) each of the two matchings may use.
+
+    Returns
+    -------
+    (CircuitModel, ParameterSet)
+        The chosen structure and its matched start.
+    """
+    fast = fastest_traces(traces)
+    latch = _measured_latches(fast)
+    used = [tr for tr in fast if tr.name in latch][:2]
+    exhaust = match_latch_snaps(model, start, traces, free, settings, info, budget_s)
+    if not used or fast[0] is quasi_static_traces(traces)[0]:
+        info.notes.append("latch port: no fast ramp with a latch snap; feedback exhaust kept")
+        return model, exhaust
+    sel_model, sel_start = _with_law(model, start, "latch_line_select", {"lsel_w": 1.0})
+    trial = StagedStart(static_experiments=info.static_experiments)
+    selected = match_latch_snaps(sel_model, sel_start, traces, free, settings, trial, budget_s)
+    worst = []
+    for m, p in ((model, exhaust), (sel_model, selected)):
+        f = _snap_offsets(m, p, used, latch, settings.substeps)
+        worst.append(math.inf if f is None else float(np.max(np.abs(f))))
+    info.latch_port = {"exhaust_fast_mA": worst[0], "line_select_fast_mA": worst[1]}
+    keep = worst[1] < LATCH_PORT_GAIN * worst[0]
+    verdict = (
+        "structure: latch_line_select (the latch switches the clutch port to line)"
+        if keep
+        else "latch port: feedback exhaust kept"
+    )
+    info.notes.append(
+        f"{verdict}; fast-ramp latch-snap offset, worse of on / off: exhaust "
+        f"{worst[0]:.1f} mA, line select {worst[1]:.1f} mA"
+    )
+    if not keep:
+        return model, exhaust
+    info.latch_match_mA = trial.latch_match_mA
+    info.values.update(trial.values)
+    return sel_model, selected
