@@ -197,10 +197,11 @@ def register(sub) -> None:
     p.add_argument(
         "--regulator-lag",
         choices=("auto", "off"),
-        default="off",
-        help="auto: add the reg_pilot_lag law when the training data's regulated band widens "
-        "with ramp rate more than the latch delay allows (lag signature, logged); off: never "
-        "(default)",
+        default="auto",
+        help="auto (default): when the training data's regulated band widens with ramp rate "
+        "more than the latch delay allows (lag signature, logged), add the reg_pilot_lag law "
+        "and choose the latch port (feedback exhaust or latch_line_select) on the fast "
+        "ramps; off: never",
     )
     p.add_argument(
         "--strict",

@@ -146,20 +146,19 @@ class FitSettings:
         ``latch_free_thresholds`` law instead (same parameter count, no tie) and says
         so; ``datasheet``: keep the model's latch as given.
     regulator_lag : {"auto", "off"}
-        ``auto``: when the staged start finds the training data's regulated band
-        widening with ramp rate more, relative to the latch's delay, than the model's
-        one pilot lag can give (:func:`~clutchlab.physics.fit.staged.lag_signature`),
-        the fit adds the ``reg_pilot_lag`` law (one parameter, its time constant) and
-        says so; ``off`` (default): never. Off by default because on held-back 5 s +
-        20 s training-side ramps of the zoo plants ``saturating_lugre`` and
-        ``quadratic_play`` (seed 0) the law, though asked for by the signature, raised
-        the physics RMSE within the 120 s budget (0.277 vs 0.206, 0.406 vs 0.378 bar).
-        With the law made stable (tag ``stable-reg-pilot-lag``, not landed) it lowered
-        the RMSE on 7 of 8 zoo rows (seeds 0 and 1) but raised it on
-        ``preisach_accumulator`` seed 0 (0.199 → 0.325 bar), so it would stay off there
-        too. Session 34, on the best-iterate fitter: the stable law (tag
-        ``reg-pilot-signal-lag``) beat this one on 7 of 8 zoo rows but not on
-        ``quadratic_play`` seed 1 (0.366 against 0.350 bar), so ``auto`` keeps this law.
+        ``auto`` (default): when the staged start finds the training data's regulated band
+        widening with ramp rate more, relative to the latch's delay, than the model's one
+        pilot lag can give (:func:`~clutchlab.physics.fit.staged.lag_signature`), the
+        regulated branch lags through a path the latch does not see: the fit adds the
+        ``reg_pilot_lag`` law (one parameter, its time constant), then chooses the latch
+        port on the fast training ramps (:func:`~clutchlab.physics.fit.staged.
+        latch_port_structure`: the datasheet feedback exhaust, or ``latch_line_select``),
+        and says so; ``off``: never. The default stand's data do not ask for it (its
+        fit is unchanged). Session 45, held-back 5 s + 20 s ramps of the four zoo plants
+        (seeds 0 and 1, trained on fast + slow): the two laws lowered the physics RMSE on
+        all 8 datasets (BENCHMARKS, "a latch that switches the clutch port"); before, with
+        ``reg_pilot_lag`` alone, ``auto`` raised it on some (sessions 20 and 34), and was
+        off by default.
     static_max_iter : int
         Iteration limit of the staged start's static stage.
     static_time_fraction : float
@@ -213,7 +212,7 @@ class FitSettings:
     ipopt_options: dict = field(default_factory=dict)
     staged_start: bool = True
     latch_law: Literal["auto", "datasheet"] = "auto"
-    regulator_lag: Literal["auto", "off"] = "off"
+    regulator_lag: Literal["auto", "off"] = "auto"
     static_max_iter: int = 15
     static_time_fraction: float = 0.2
     strict: bool = False
