@@ -93,3 +93,24 @@ def test_law_holds_its_weight_and_fits_nothing_of_its_own():
     assert cls.STRENGTH == ("lsel_w",) and cls.fit_parameters() == ()
     spec = next(p for p in cls.PARAMETERS if p.name == "lsel_w")
     assert (spec.default, spec.lower, spec.upper) == (0.0, 0.0, 1.0)
+
+
+def test_a_fit_of_a_model_naming_the_law_starts_it_on():
+    """Named on the model to be fitted (``--effects latch_line_select``), the switch is on:
+    at weight 0 it would act on nothing. A start of the user's is used as given."""
+    import warnings
+
+    from synthetic import tiny_zoo
+
+    from clutchlab.errors import FitWarning
+    from clutchlab.physics.fit import FitSettings, PhysicsFitter
+
+    data = [t for t in tiny_zoo("saturating_lugre", 0, ((50.0, "A"),)) if t.ramp != "medium"]
+    model = CircuitModel().with_effects("latch_line_select", "reg_pilot_lag")
+    quick = FitSettings(progress=False, max_iter=1, time_limit_s=30)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FitWarning)
+        named = PhysicsFitter(model, quick).fit(data)
+        own = PhysicsFitter(model, quick, model.default_params()).fit(data)
+    assert named.result_.values["lsel_w"] == 1.0 and named.result_.values["rlag_w"] == 1.0
+    assert own.result_.values["lsel_w"] == 0.0 and own.result_.values["rlag_w"] == 0.0

@@ -42,6 +42,7 @@ __all__ = [
     "MonotoneForceCorrection",
     "PlayHysteresis",
     "RegulatorPilotLag",
+    "switched_on",
 ]
 
 #: Current knots (mA) of the monotone force correction, and the width (mA) of each step.
@@ -237,6 +238,8 @@ class LatchLineSelect(Effect):
     )
     STRENGTH = ("lsel_w",)
     FIT = ()
+    #: A fit holds the weight on (:func:`switched_on`).
+    HELD_SWITCH = True
 
     def apply(self, asm: Assembly) -> None:
         def gain(a):
@@ -298,8 +301,36 @@ class RegulatorPilotLag(Effect):
     )
     STRENGTH = ("rlag_w",)
     FIT = ("rlag_tau",)
+    #: A fit holds the weight on (:func:`switched_on`).
+    HELD_SWITCH = True
 
     def apply(self, asm: Assembly) -> None:
         q = asm.state(StateSpec("p_rlag", "bar", 0.5, "lagged regulator pilot", self.name))
         asm.define("der:p_rlag", lambda a: (a.x("p_a") - q) / a.p("rlag_tau"), "Pa/s")
         asm.wrap("p_reg_pilot", lambda a, prev: prev + a.p("rlag_w") * (q - prev))
+
+
+def switched_on(model) -> dict[str, float]:
+    """Start values that switch on ``model``'s held switches: ``{weight: 1.0}``.
+
+    A held switch is a flexible law whose strength (a weight, default 0: today's model) a
+    fit does not free — ``reg_pilot_lag`` (``rlag_w``), ``latch_line_select``
+    (``lsel_w``). Named on a model to be fitted, such a law is meant on: at weight 0 it
+    would act on nothing and its own fit parameters would be unidentifiable.
+
+    Parameters
+    ----------
+    model : CircuitModel
+        The model to be fitted.
+
+    Returns
+    -------
+    dict of str to float
+        The held weights of ``model``'s flexible laws, each at 1.0; empty when it has none.
+    """
+    out: dict[str, float] = {}
+    for effect in model.effects:
+        strength, fitted = tuple(effect.STRENGTH), set(effect.fit_parameters())
+        if getattr(effect, "HELD_SWITCH", False) and not fitted & set(strength):
+            out.update(dict.fromkeys(strength, 1.0))
+    return out

@@ -15,6 +15,7 @@ from ...data import Dataset, Trace, dither_period_mean, dither_period_samples, p
 from ...errors import FitError, FitWarning, ModelError, warn_at_caller
 from ...forkmap import fork_map
 from ..effects import EFFECTS, missing_effect
+from ..effects.flexible import switched_on
 from ..model import CircuitModel
 from ..parameters import ParameterSet, quiet_design_checks
 from ..settings import SimulationSettings
@@ -142,9 +143,11 @@ class PhysicsFitter:
         Free parameters, method, objective, limits.
     start : ParameterSet, optional
         Starting values (and fixed values), engineering units; the datasheet defaults by
-        default. It must be a set of ``model``'s parameters (``model.params(...)``): one
-        built for another model makes :meth:`fit` raise ``FitError`` naming the missing
-        and extra parameters.
+        default, with the held switches among ``model``'s flexible laws on (``rlag_w``,
+        ``lsel_w`` at 1: :func:`~clutchlab.physics.effects.flexible.switched_on`; at their
+        default 0 they would act on nothing). It must be a set of ``model``'s parameters
+        (``model.params(...)``): one built for another model makes :meth:`fit` raise
+        ``FitError`` naming the missing and extra parameters; it is used as given.
 
     Notes
     -----
@@ -302,7 +305,10 @@ class PhysicsFitter:
         model = self.model or CircuitModel()
         settings = self.settings or FitSettings()
         try:
-            start = model.default_params() if self.start is None else self._own_start(model)
+            if self.start is None:  # the datasheet values, with named switches on
+                start = model.default_params().replace(**switched_on(model))
+            else:
+                start = self._own_start(model)
         except ModelError as exc:
             raise FitError(str(exc)) from exc
         traces = at_fit_rate(self._training(data), settings.fit_rate_Hz)
