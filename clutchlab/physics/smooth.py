@@ -8,7 +8,15 @@ from __future__ import annotations
 
 import casadi as ca
 
-__all__ = ["logistic", "orifice_flow", "smooth_abs", "smooth_max0", "smooth_sign", "smooth_window"]
+__all__ = [
+    "logistic",
+    "orifice_flow",
+    "smooth_abs",
+    "smooth_max0",
+    "smooth_max0_slope",
+    "smooth_sign",
+    "smooth_window",
+]
 
 
 def smooth_abs(x, eps):
@@ -19,6 +27,11 @@ def smooth_abs(x, eps):
 def smooth_max0(x, eps):
     """Smooth ``max(x, 0)``: ``(x + sqrt(x² + eps²)) / 2`` (same unit as ``x``)."""
     return 0.5 * (x + ca.sqrt(x * x + eps * eps))
+
+
+def smooth_max0_slope(x, eps):
+    """Derivative of :func:`smooth_max0` in ``x``: ``(1 + x / sqrt(x² + eps²)) / 2`` (-)."""
+    return 0.5 * (1.0 + x / ca.sqrt(x * x + eps * eps))
 
 
 def smooth_sign(x, scale):

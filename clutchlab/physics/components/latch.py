@@ -5,16 +5,16 @@ from __future__ import annotations
 import math
 
 from ..assembly import Assembly, StateSpec
-from ..smooth import logistic, smooth_max0
+from ..smooth import logistic, smooth_max0, smooth_max0_slope
 from .base import Component, param
 from .fluid import flow
 
-__all__ = ["LATCH_PORT_EPS", "LatchValve", "latch_snap_problem", "latch_thresholds"]
+__all__ = ["LatchValve", "latch_snap_problem", "latch_thresholds"]
 
 _C = "latch"
 
 #: Rounding (latch opening, -) of the port-opening corner at the overlap.
-LATCH_PORT_EPS = 0.005
+_PORT_EPS = 0.005
 
 
 def latch_thresholds(values) -> tuple[float, float]:
@@ -145,10 +145,18 @@ class LatchValve(Component):
         asm.define(
             "latch_port_opening",
             lambda a: (
-                smooth_max0(lam - a.p("latch_overlap"), LATCH_PORT_EPS)
-                / (1.0 - a.p("latch_overlap"))
+                smooth_max0(lam - a.p("latch_overlap"), _PORT_EPS) / (1.0 - a.p("latch_overlap"))
             ),
             "-",
+        )
+        asm.define(
+            "latch_port_opening_rate",
+            lambda a: (
+                smooth_max0_slope(lam - a.p("latch_overlap"), _PORT_EPS)
+                / (1.0 - a.p("latch_overlap"))
+                * a["der:latch"]
+            ),
+            "1/s",
         )
 
         def q_exh(a):

@@ -32,6 +32,9 @@ class Effect(ABC):
     ``REPLACES``
         Base-model parameters the effect retires (a law written in other
         parameters); they leave the model, so no fit frees them.
+    ``HELD_SWITCH``
+        The ``STRENGTH`` weights are a switch a fit holds on at 1 and never frees
+        (``reg_pilot_lag``, ``latch_line_select``; default False).
     """
 
     name: str = ""
@@ -43,6 +46,8 @@ class Effect(ABC):
     FIT: tuple[str, ...] | None = None
     #: Base-model parameters the effect retires from the model.
     REPLACES: tuple[str, ...] = ()
+    #: A switch whose STRENGTH weight a fit holds on at 1, never frees (flexible laws).
+    HELD_SWITCH: bool = False
 
     @classmethod
     def fit_parameters(cls) -> tuple[str, ...]:

@@ -30,7 +30,7 @@ import casadi as ca
 
 from ..assembly import Assembly, StateSpec
 from ..components.base import param
-from ..components.latch import LATCH_PORT_EPS, LatchValve, latch_thresholds
+from ..components.latch import LatchValve, latch_thresholds
 from ..smooth import logistic
 from .base import Effect
 
@@ -246,11 +246,7 @@ class LatchLineSelect(Effect):
             return a.p("lsel_w") * a["latch_port_opening"]
 
         def rate(a):
-            # d(port opening)/dt from the smooth max of the latch opening past its overlap
-            ov, lam = a.p("latch_overlap"), a.x("latch")
-            u = lam - ov
-            slope = 0.5 * (1.0 + u / ca.sqrt(u * u + LATCH_PORT_EPS**2)) / (1.0 - ov)
-            return a.p("lsel_w") * slope * a["der:latch"]
+            return a.p("lsel_w") * a["latch_port_opening_rate"]
 
         asm.wrap("Q_latch_exh", lambda a, prev: (1.0 - a.p("lsel_w")) * prev)
         asm.tap("p_clutch_port", "p_clutch_port_in:lsel")
@@ -330,7 +326,6 @@ def switched_on(model) -> dict[str, float]:
     """
     out: dict[str, float] = {}
     for effect in model.effects:
-        strength, fitted = tuple(effect.STRENGTH), set(effect.fit_parameters())
-        if getattr(effect, "HELD_SWITCH", False) and not fitted & set(strength):
-            out.update(dict.fromkeys(strength, 1.0))
+        if effect.HELD_SWITCH:
+            out.update(dict.fromkeys(effect.STRENGTH, 1.0))
     return out
