@@ -135,6 +135,17 @@ def test_effects_as_one_string_is_one_effect():
     assert spec.model.effects == ("sensor_lag",)
 
 
+def test_with_effects_splits_a_comma_list_as_the_command_line_does():
+    from clutchlab.physics import CircuitModel
+
+    model = CircuitModel().with_effects("sensor_lag, transport_delay")
+    assert model.effect_names == ("sensor_lag", "transport_delay")
+    with pytest.raises(ModelError, match=r"unknown effect 'sensor_lagg'"):
+        CircuitModel().with_effects("transport_delay,sensor_lagg")
+    with pytest.raises(ModelError, match="switched on twice: sensor_lag"):
+        CircuitModel().with_effects("sensor_lag", "sensor_lag , transport_delay")
+
+
 def test_fit_refuses_a_requested_training_ramp_that_is_missing(small):
     fitter = PhysicsFitter(settings=FitSettings(train_ramps=("fast", "slow"), progress=False))
     with pytest.raises(FitError, match=r"training ramp\(s\) \['slow'\] not in the dataset"):

@@ -140,6 +140,9 @@ class CircuitModel:
     def with_effects(self, *effects: str | Effect) -> CircuitModel:
         """A new model with more effects switched on (names from the library or instances).
 
+        A name string may list several effects separated by commas, as on the command
+        line: ``with_effects("sensor_lag, transport_delay")``.
+
         Raises
         ------
         ModelError
@@ -148,7 +151,12 @@ class CircuitModel:
         """
         from .effects import make_effect
 
-        new = tuple(e if isinstance(e, Effect) else make_effect(e) for e in effects)
+        listed = [
+            e if isinstance(e, Effect) else name.strip()
+            for e in effects
+            for name in ([e] if isinstance(e, Effect) else str(e).split(","))
+        ]
+        new = tuple(e if isinstance(e, Effect) else make_effect(e) for e in listed if e)
         return CircuitModel(self.components, self.effects + new, self.name)
 
     def without_effects(self, *names: str) -> CircuitModel:
