@@ -160,11 +160,8 @@ def test_the_standalone_handicap_decides_between_loeo_scores_and_is_checked():
     from clutchlab.residual_ml.hybrid import STANDALONE_HANDICAP
 
     scores = {"residual": 0.20, "standalone": 0.40, "physics": 0.50}
-    assert STANDALONE_HANDICAP == 6.0
-    assert HybridModel()._choose_form(scores) == "standalone"  # 0.40 / 6 < 0.20
-    assert HybridModel(standalone_handicap=3.0)._choose_form({**scores, "physics": 0.12}) == (
-        "physics"  # 0.40 / 3 > 0.12 > 0.40 / 6
-    )
+    assert STANDALONE_HANDICAP == 3.0
+    assert HybridModel()._choose_form(scores) == "standalone"  # 0.40 / 3 < 0.20
     assert HybridModel(standalone_handicap=1.0)._choose_form(scores) == "residual"
     assert HybridModel()._choose_form({"residual": 0.03, "standalone": 0.3}) == "residual"
     for bad in (0.0, -1.0, float("nan"), "abc", None):
