@@ -149,14 +149,15 @@ class CircuitModel:
             For an unknown effect name (the message lists the known ones) or an
             effect already on.
         """
-        from .effects import make_effect
+        from .effects import effect_names, make_effect
 
-        listed = [
-            e if isinstance(e, Effect) else name.strip()
+        new = tuple(
+            item
             for e in effects
-            for name in ([e] if isinstance(e, Effect) else str(e).split(","))
-        ]
-        new = tuple(e if isinstance(e, Effect) else make_effect(e) for e in listed if e)
+            for item in (
+                [e] if isinstance(e, Effect) else map(make_effect, effect_names(e, "with_effects"))
+            )
+        )
         return CircuitModel(self.components, self.effects + new, self.name)
 
     def without_effects(self, *names: str) -> CircuitModel:
