@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from pathlib import Path
@@ -211,6 +212,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
         if form:
             doc["hybrid_form"] = model.form_
             doc["hybrid_form_loeo_rmse_bar"] = dict(model.form_scores_)
+            kappa = float(getattr(model, "standalone_handicap_", math.nan))
+            doc["hybrid_standalone_handicap"] = kappa if math.isfinite(kappa) else None
         from .cli import write_json_summary
 
         write_json_summary(args.json, doc)
@@ -281,9 +284,9 @@ def _hybrid_form(model) -> str | None:
         return None
     scores = getattr(model, "form_scores_", {}) or {}
     why = ", ".join(f"{k} {v:.4g} bar" for k, v in scores.items())
-    handicap = getattr(model, "standalone_handicap", None)
-    if "standalone" in scores and handicap:
-        why += f"; standalone compared after ÷ {handicap:g}"
+    handicap = float(getattr(model, "standalone_handicap_", math.nan))
+    if "standalone" in scores and math.isfinite(handicap):
+        why += f"; standalone compared after ÷ {handicap:.3g}"
     text = form + (f" (leave-one-experiment-out RMSE on the training ramps: {why})" if why else "")
     if form == "physics":
         text += "; predicts with the physics model alone, the residual model below is not used"

@@ -17,7 +17,9 @@ local latch-event law that the standalone form uses): each residual form is scor
 Prints its rules first. Usage:
 ``python studies/hybrid_form_rates.py --data DIR --out forms.json [--plants ...] [--seeds 0]
 [--residual-latch classifier,local_event]``; ``--calibrate F.json[,G.json]`` reads stored
-runs and calibrates the standalone form's handicap (``HANDICAP_RULE``).
+runs and calibrates the standalone form's handicap (``HANDICAP_RULE``); ``--probe
+F.json[,G.json] --data DIR[,DIR]`` checks the handicap the hybrid measures per dataset
+(``PROBE_RULE``) on stored runs and the fits beside their datasets.
 """
 
 from __future__ import annotations
@@ -54,6 +56,15 @@ datasets; adopted only if that is more datasets than kappa = 1 (today) and no da
 1.02x at kappa = 1 falls outside."""
 HANDICAP_GRID = (1.0, 1.5, 2.0, 3.0, 4.0, 6.0)
 
+PROBE_RULE = """\
+Decision rule for the measured handicap (session 47, fixed before it was computed; stored
+runs of this study and their fits, no medium ramp): the standalone form's handicap measured
+per dataset on data the fitted physics makes (HybridModel standalone_handicap="auto": the
+same folds on the physics' prediction of the training experiments, over the error on the
+slower training ramps played at the geometric-mean rate, at least 1) replaces the constant
+STANDALONE_HANDICAP only if its pick is within 1.02x of the best form (5 s + 20 s RMSE) on
+more datasets than the constant's and no dataset within 1.02x with the constant falls out."""
+
 PLANTS = ("stand", "saturating_lugre", "quadratic_play", "stribeck_supply", "preisach_accumulator")
 CRITERIA = ("pooled", "median", "mean")
 
@@ -73,7 +84,7 @@ def study(path: Path, fit: Path, residual_latch: str | None = None) -> dict:
     from clutchlab.data import load_dataset
     from clutchlab.physics.fit import PhysicsFitter
     from clutchlab.residual_ml import HybridModel, PhysicsPredictor
-    from clutchlab.residual_ml.hybrid import default_residual
+    from clutchlab.residual_ml.hybrid import RESIDUAL_FORMS, default_residual
 
     if not fit.exists():
         cmd = [sys.executable, "-m", "clutchlab.cli", "fit-physics", str(path)]
@@ -87,10 +98,10 @@ def study(path: Path, fit: Path, residual_latch: str | None = None) -> dict:
         def _residual(self):
             return default_residual(residual_latch)  # the standalone form is unchanged
 
-        def _loeo_errors(self, traces, outputs):
-            errors = super()._loeo_errors(traces, outputs)
-            for form, per in errors.items():
-                per_exp[form] = [float(np.sqrt(np.mean(e**2))) for e in per]
+        def _loeo_errors(self, traces, outputs, probe=None):
+            errors = super()._loeo_errors(traces, outputs, probe)
+            for form in RESIDUAL_FORMS:
+                per_exp[form] = [float(np.sqrt(np.mean(e**2))) for e in errors[form]]
             return errors
 
     auto = Recording(physics=phys, form="auto").fit(train)
@@ -102,7 +113,12 @@ def study(path: Path, fit: Path, residual_latch: str | None = None) -> dict:
     truth = {}
     for form in ("residual", "standalone", "physics"):
         truth[form] = _rmse(Recording(physics=phys, form=form).fit(train), test)
-    return {"criteria": crit, "held_back_rmse": truth, "chosen_now": auto.form_}
+    return {
+        "criteria": crit,
+        "held_back_rmse": truth,
+        "chosen_now": auto.form_,
+        "handicap": auto.standalone_handicap_,
+    }
 
 
 def calibrate(paths: list[Path]) -> float | None:
@@ -147,10 +163,63 @@ def calibrate(paths: list[Path]) -> float | None:
     return kappa if met else None
 
 
+#: Plant names of stored rows whose datasets carry another name (session 46's small stand).
+DATASET_NAMES = {"small_stand": "small"}
+
+
+def probe(paths: list[Path], data: list[Path]) -> bool:
+    """Print :data:`PROBE_RULE`, each stored row's measured handicap and pick against the
+    constant's, and the verdict (True when met). The physics of a row is the fit stored
+    beside its dataset (``<plant>_rates_s<seed>.fit.json`` in one of ``data``)."""
+    from clutchlab.data import load_dataset
+    from clutchlab.physics.fit import PhysicsFitter
+    from clutchlab.residual_ml import HybridModel, PhysicsPredictor
+    from clutchlab.residual_ml.hybrid import STANDALONE_HANDICAP
+
+    print(PROBE_RULE, flush=True)
+    rows = [
+        r
+        for path in paths
+        for r in json.loads(path.read_text())
+        if r.get("residual_latch") in (None, "classifier")
+    ]
+    n_const = n_auto = 0
+    lost = []
+    for r in rows:
+        name = f"{DATASET_NAMES.get(r['plant'], r['plant'])}_rates_s{r['seed']}"
+        path = next((d / name for d in data if (d / name).is_dir()), None)
+        if path is None:
+            raise SystemExit(f"no dataset {name} in {', '.join(map(str, data))}")
+        phys = PhysicsPredictor.from_fitter(PhysicsFitter.load(path.parent / f"{name}.fit.json"))
+        train = list(load_dataset(path).select(ramps=["fast", "slow"]))
+        model = HybridModel(physics=phys).fit(train)
+        scores, truth = r["criteria"]["pooled"], r["held_back_rmse"]
+        if any(abs(model.form_scores_[f] - v) > 1e-6 * max(v, 1e-9) for f, v in scores.items()):
+            raise SystemExit(f"{name}: LOEO scores differ from the stored row; another code?")
+        const = HybridModel(standalone_handicap=STANDALONE_HANDICAP)._choose_form(scores)
+        best = min(truth.values())
+        ok_c, ok_a = truth[const] <= 1.02 * best, truth[model.form_] <= 1.02 * best
+        n_const, n_auto = n_const + ok_c, n_auto + ok_a
+        if ok_c and not ok_a:
+            lost.append(name)
+        print(
+            f"  {name:32s} handicap {model.standalone_handicap_:5.2f} (held-back "
+            f"{scores['standalone'] / truth['standalone']:5.2f}): {model.form_:10s} "
+            f"{truth[model.form_] / best:4.2f}x; constant {const:10s} {truth[const] / best:4.2f}x",
+            flush=True,
+        )
+    met = n_auto > n_const and not lost
+    print(
+        f"within 1.02x of the best form: measured {n_auto}, constant {n_const} of {len(rows)}; "
+        f"lost: {lost or 'none'}; rule {'met' if met else 'not met'}"
+    )
+    return met
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", type=Path, required=True, help="folder of the rates datasets")
-    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--data", required=True, help="folder of the rates datasets")
+    ap.add_argument("--out", type=Path, help="where the study writes its rows")
     ap.add_argument("--plants", default=",".join(PLANTS))
     ap.add_argument("--seeds", default="0")
     ap.add_argument(
@@ -162,10 +231,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--calibrate", default="", help="stored outputs of this study (comma separated)"
     )
+    ap.add_argument(
+        "--probe",
+        default="",
+        help="stored outputs of this study (comma separated): check the measured handicap "
+        "(--data: folders of their datasets and fits, comma separated)",
+    )
     args = ap.parse_args(argv)
+    if args.probe:
+        data = [Path(v) for v in str(args.data).split(",")]
+        return 0 if probe([Path(v) for v in args.probe.split(",")], data) else 1
     if args.calibrate:
         calibrate([Path(v) for v in args.calibrate.split(",")])
         return 0
+    if args.out is None:
+        ap.error("--out is required to run the study")
     latches = [v for v in args.residual_latch.split(",") if v] or [None]
     print(RULE, flush=True)
     if len(latches) > 1:
@@ -176,9 +256,9 @@ def main(argv: list[str] | None = None) -> int:
             sys.path.insert(0, str(Path(__file__).parent))
             from latch_event import rates_dataset
 
-            path = rates_dataset(args.data, plant, seed)
+            path = rates_dataset(Path(args.data), plant, seed)
             for latch in latches:
-                r = study(path, args.data / f"{plant}_rates_s{seed}.fit.json", latch)
+                r = study(path, Path(args.data) / f"{plant}_rates_s{seed}.fit.json", latch)
                 truth = r["held_back_rmse"]
                 best = min(truth, key=truth.get)
                 picks = {c: min(r["criteria"][c], key=r["criteria"][c].get) for c in CRITERIA}

@@ -66,7 +66,12 @@ def test_wrong_physics_gives_the_standalone_form_and_never_sees_the_test_ramp(sp
     assert model.form_ == "standalone"
     assert set(model.form_scores_) == {"residual", "standalone", "physics"}
     assert model.form_scores_["standalone"] < model.form_scores_["residual"]
-    assert set(phys.seen) <= {t.name for t in train}  # the choice saw training traces only
+    # The choice saw training traces only, and training inputs played faster (the handicap's
+    # probe: "slow_50Hz_B_x4" from "slow_50Hz_B"), never a test trace.
+    names = {t.name for t in train}
+    assert all(n in names or n.rsplit("_x", 1)[0] in names for n in phys.seen)
+    assert any(n not in names for n in phys.seen)  # the probe ran
+    assert not set(phys.seen) & {t.name for t in test}
     # Standalone = the paper pipeline on the same training traces.
     paper = SVCPartitionedGP().fit(train)
     assert _rmse(model, test) == pytest.approx(_rmse(paper, test), rel=1e-6)
@@ -88,8 +93,9 @@ def test_the_form_scores_are_the_same_on_worker_processes(
     train, _ = split
     forked = auto_truth.form_scores_
     monkeypatch.setattr(hybrid_module, "default_workers", lambda: 1)
-    here = HybridModel(physics=truth_physics).fit(train).form_scores_
-    assert forked == here
+    here = HybridModel(physics=truth_physics).fit(train)
+    assert forked == here.form_scores_
+    assert auto_truth.standalone_handicap_ == here.standalone_handicap_
 
 
 def test_datasheet_physics_gives_the_residual_form(split):
@@ -116,6 +122,7 @@ def test_form_round_trips_and_a_bad_form_is_refused(split, tmp_path):
     save_model(fitted.fit(train), path)
     loaded = load_model(path)
     assert loaded.form_ == "standalone" and loaded.standalone_handicap == 2.0
+    assert np.isnan(loaded.standalone_handicap_)  # the form was given: no handicap used
     np.testing.assert_allclose(loaded.predict(test[0]), model.predict(test[0]), atol=1e-9)
 
 
@@ -167,3 +174,41 @@ def test_the_standalone_handicap_decides_between_loeo_scores_and_is_checked():
     for bad in (0.0, -1.0, float("nan"), "abc", None):
         with pytest.raises(ModelError, match="standalone_handicap"):
             HybridModel(standalone_handicap=bad)._choose_form(scores)
+    # "auto" (the default) takes the handicap measured on the physics' data; a number wins
+    assert HybridModel()._choose_form(scores, 1.0) == "residual"
+    assert HybridModel(standalone_handicap=3.0)._choose_form(scores, 1.0) == "standalone"
+
+
+def test_the_measured_handicap_is_the_probe_folds_over_the_between_rate_error():
+    measured = HybridModel._measured_handicap
+    assert measured({"probe_folds": [np.full(9, 0.6)], "probe_between": [np.full(4, 0.1)]}) == (
+        pytest.approx(6.0)
+    )
+    assert measured({"probe_folds": [np.full(9, 0.1)], "probe_between": [np.full(4, 0.2)]}) == 1.0
+    assert measured({"probe_folds": [np.ones(9)], "probe_between": [np.zeros(4)]}) is None
+    assert measured({"residual": [np.ones(9)]}) is None  # no probe: the constant
+
+
+def test_the_hybrid_measures_its_handicap_on_the_physics_data(
+    split, truth_physics, auto_truth, tmp_path
+):
+    from clutchlab.residual_ml.hybrid import STANDALONE_HANDICAP
+
+    train, _ = split
+    kappa = auto_truth.standalone_handicap_
+    assert np.isfinite(kappa) and kappa >= 1.0 and kappa != STANDALONE_HANDICAP
+    save_model(auto_truth, tmp_path / "auto.json")
+    assert load_model(tmp_path / "auto.json").standalone_handicap_ == kappa
+    model = HybridModel(physics=truth_physics)
+    outputs = [model._outputs(truth_physics, t) for t in train]
+    syn, between = model._probe_traces(truth_physics, train, outputs)
+    slow = [t.name for t in train if t.ramp == "slow"]
+    assert sorted(t.name for t in between) == sorted(f"{n}_x4" for n in slow)
+    for t, (raw, _) in zip(syn, outputs, strict=True):
+        np.testing.assert_array_equal(t.get("clutch_pressure_bar"), raw)
+    np.testing.assert_allclose(
+        between[0].get("clutch_pressure_bar"), truth_physics.predict(between[0]), rtol=1e-9
+    )
+    fast = [i for i, t in enumerate(train) if t.ramp == "fast"]  # one rate: nothing between
+    one_rate = [train[i] for i in fast], [outputs[i] for i in fast]
+    assert model._probe_traces(truth_physics, *one_rate) is None

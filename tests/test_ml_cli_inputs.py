@@ -239,6 +239,9 @@ def test_train_hybrid_states_its_form(tiny, tmp_path, capsys):
     doc = json.loads(js.read_text())
     assert doc["hybrid_form"] == model.form_
     assert doc["hybrid_form_loeo_rmse_bar"] == pytest.approx(model.form_scores_)
+    kappa = doc["hybrid_standalone_handicap"]  # the handicap the form choice used
+    assert kappa == pytest.approx(model.standalone_handicap_) and kappa >= 1.0
+    assert f"standalone compared after ÷ {kappa:.3g}" in stdout
 
 
 @pytest.mark.parametrize("line", [True, False])

@@ -62,6 +62,7 @@ from .local_gp import LocalGPRegressor, log_marginal_likelihood
 from .model_check import check_model, check_model_document
 from .persist import load_model, no_substeps_message, save_model
 from .physics import DefaultPhysics, PhysicsPredictor
+from .rate_probe import between_rate_inputs, play_faster, ramp_rate
 from .residual_variance import fit_variance_floor, loeo_residuals, variance_floor
 from .step import StepPredictor, step_predictor
 from .variants import VARIANTS, make_variant
@@ -108,6 +109,7 @@ __all__ = [
     "StepPredictor",
     "TraceEstimator",
     "as_traces",
+    "between_rate_inputs",
     "censored_share",
     "check_model",
     "check_model_document",
@@ -128,6 +130,8 @@ __all__ = [
     "make_variant",
     "mean_only",
     "no_substeps_message",
+    "play_faster",
+    "ramp_rate",
     "save_model",
     "score_traces",
     "select_lag",

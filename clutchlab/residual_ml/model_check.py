@@ -161,11 +161,16 @@ def _names(known, empty_ok: bool = False):
     return rule
 
 
-def _lag(value) -> str | None:
-    if value == "auto":
-        return None
-    problem = _number(0.0)(value)
-    return None if problem is None else "must be 'auto' or " + problem.removeprefix("must be ")
+def _auto_or(rule):
+    """Rule: ``"auto"`` or what ``rule`` accepts."""
+
+    def either(value) -> str | None:
+        if value == "auto":
+            return None
+        problem = rule(value)
+        return None if problem is None else "must be 'auto' or " + problem.removeprefix("must be ")
+
+    return either
 
 
 #: Rule of every constructor parameter of :data:`MODEL_CLASSES` (None: a nested object,
@@ -175,7 +180,7 @@ _PARAM_RULES: dict[str, Callable | None] = {
     "classifier_features": _optional(_names(tuple(FEATURES))),
     "didt_periods": _number(0.0, strict=True),
     "target": _one_of(("period_mean", "raw")),
-    "lag_s": _lag,
+    "lag_s": _auto_or(_number(0.0)),
     "kernel": _optional(_one_of(KERNELS)),
     "ard": _boolean,
     "bin_width": _number(0.0, strict=True),
@@ -203,7 +208,7 @@ _PARAM_RULES: dict[str, Callable | None] = {
     "residual": None,
     "form": _one_of(("auto", "residual", "standalone", "physics")),
     "form_folds": _integer(2),
-    "standalone_handicap": _number(0.0, strict=True),
+    "standalone_handicap": _auto_or(_number(0.0, strict=True)),
 }
 
 
@@ -421,7 +426,7 @@ class _Checker:
             return
         common = ("feature_names", "train_experiments", "n_features_in", "lag_s")
         own = {
-            HybridModel: ("physics", "residual", "form", "form_scores"),
+            HybridModel: ("physics", "residual", "form", "form_scores", "standalone_handicap"),
             SVCPartitionedGP: (
                 "classifier_columns",
                 "classifier_train_accuracy",
@@ -482,6 +487,13 @@ class _Checker:
                 problem = _one_of(forms)(k) or _number(0.0)(v)
                 if problem:
                     self.add(f"{where}.form_scores.{k}", problem)
+        self.key(
+            state,
+            "standalone_handicap",
+            where,
+            _optional(_number(0.0, strict=True)),
+            required=False,
+        )
         phys = self.key(state, "physics", where)
         if phys is not _MISSING and phys is not None:
             self.physics(phys, f"{where}.physics")

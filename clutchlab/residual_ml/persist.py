@@ -17,6 +17,7 @@ would write such a file is not written. The array file is read only from beside 
 from __future__ import annotations
 
 import json
+import math
 import zipfile
 import zlib
 from pathlib import Path
@@ -176,6 +177,8 @@ def _state(est, arrays: dict, prefix: str) -> dict:
         state["physics"] = None if est.physics_ is None else _as_predictor(est.physics_).to_dict()
         state["form"] = getattr(est, "form_", "residual")
         state["form_scores"] = dict(getattr(est, "form_scores_", {}))
+        kappa = float(getattr(est, "standalone_handicap_", math.nan))
+        state["standalone_handicap"] = kappa if math.isfinite(kappa) else None
         state["residual"] = {
             "class": type(est.residual_).__name__,
             "params": _params(est.residual_),
@@ -232,6 +235,8 @@ def _restore(est, state: dict, arrays, prefix: str) -> None:
         # Files written before the residual-form choice hold the residual form.
         est.form_ = state.get("form", "residual")
         est.form_scores_ = {k: float(v) for k, v in state.get("form_scores", {}).items()}
+        kappa = state.get("standalone_handicap")  # not in files written before it was measured
+        est.standalone_handicap_ = math.nan if kappa is None else float(kappa)
         r = state["residual"]
         res = _CLASSES[r["class"]](**_params_from(r["params"]))
         _restore(res, r["state"], arrays, prefix + "residual")

@@ -16,6 +16,7 @@ How the test experiments stay out of fitting and model selection:
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Collection, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -578,8 +579,9 @@ class Protocol:
         if getattr(model, "form_", None) is not None:  # a hybrid's residual form, and why
             details["residual_form"] = model.form_
             details["residual_form_loeo_rmse_bar"] = dict(getattr(model, "form_scores_", {}))
-            if hasattr(model, "standalone_handicap"):
-                details["residual_form_standalone_handicap"] = float(model.standalone_handicap)
+            kappa = float(getattr(model, "standalone_handicap_", math.nan))
+            if math.isfinite(kappa):  # the handicap the auto choice used
+                details["residual_form_standalone_handicap"] = kappa
         return VariantScore(
             name=name,
             metrics=metrics,
