@@ -56,13 +56,13 @@ def auto_truth(split, truth_physics):
     """The hybrid on the stand's own truth model, its form chosen on forked workers (shared:
     each such fit runs twelve fold fits)."""
     train, _ = split
-    return HybridModel(physics=truth_physics).fit(train)
+    return HybridModel(physics=truth_physics, standalone_handicap="auto").fit(train)
 
 
 def test_wrong_physics_gives_the_standalone_form_and_never_sees_the_test_ramp(split):
     train, test = split
     phys = _Recording()
-    model = HybridModel(physics=phys).fit(train)
+    model = HybridModel(physics=phys, standalone_handicap="auto").fit(train)
     assert model.form_ == "standalone"
     assert set(model.form_scores_) == {"residual", "standalone", "physics"}
     assert model.form_scores_["standalone"] < model.form_scores_["residual"]
@@ -93,7 +93,7 @@ def test_the_form_scores_are_the_same_on_worker_processes(
     train, _ = split
     forked = auto_truth.form_scores_
     monkeypatch.setattr(hybrid_module, "default_workers", lambda: 1)
-    here = HybridModel(physics=truth_physics).fit(train)
+    here = HybridModel(physics=truth_physics, standalone_handicap="auto").fit(train)
     assert forked == here.form_scores_
     assert auto_truth.standalone_handicap_ == here.standalone_handicap_
 
@@ -167,15 +167,16 @@ def test_the_standalone_handicap_decides_between_loeo_scores_and_is_checked():
     from clutchlab.residual_ml.hybrid import STANDALONE_HANDICAP
 
     scores = {"residual": 0.20, "standalone": 0.40, "physics": 0.50}
-    assert STANDALONE_HANDICAP == 3.0
+    assert STANDALONE_HANDICAP == 3.0 and HybridModel().standalone_handicap == 3.0
     assert HybridModel()._choose_form(scores) == "standalone"  # 0.40 / 3 < 0.20
     assert HybridModel(standalone_handicap=1.0)._choose_form(scores) == "residual"
     assert HybridModel()._choose_form({"residual": 0.03, "standalone": 0.3}) == "residual"
     for bad in (0.0, -1.0, float("nan"), "abc", None):
         with pytest.raises(ModelError, match="standalone_handicap"):
             HybridModel(standalone_handicap=bad)._choose_form(scores)
-    # "auto" (the default) takes the handicap measured on the physics' data; a number wins
-    assert HybridModel()._choose_form(scores, 1.0) == "residual"
+    # "auto" takes the handicap measured on the physics' data; a number wins
+    assert HybridModel(standalone_handicap="auto")._choose_form(scores, 1.0) == "residual"
+    assert HybridModel(standalone_handicap="auto")._choose_form(scores) == "standalone"
     assert HybridModel(standalone_handicap=3.0)._choose_form(scores, 1.0) == "standalone"
 
 
