@@ -160,9 +160,9 @@ def main() -> None:
     out: dict = {}
     cached = None
     if args.physics or 4 in only:
-        from clutchlab.residual_ml import DefaultPhysics, PhysicsPredictor
+        from clutchlab.residual_ml import PhysicsPredictor
 
-        phys = PhysicsPredictor.load(args.physics) if args.physics else DefaultPhysics()
+        phys = PhysicsPredictor.load(args.physics) if args.physics else PhysicsPredictor()
         cached = _CachedPhysics(phys, traces)
 
     def report(choice: str, scores: dict[str, float], decided: str, extra: str = "") -> None:

@@ -27,3 +27,16 @@ def test_substeps_that_are_not_a_step_count_are_refused(substeps):
 def test_integer_substeps_are_kept():
     assert PhysicsPredictor(substeps=np.int64(2)).substeps == 2
     assert PhysicsPredictor().substeps == 4
+
+
+def test_residual_ml_default_physics_is_a_deprecated_alias_of_the_datasheet_predictor():
+    """Two public DefaultPhysics meant different things (a PhysicsPredictor factory here, the
+    physics_default estimator in clutchlab.validation); the factory is now deprecated."""
+    import clutchlab.residual_ml as rm
+    from clutchlab import validation
+
+    with pytest.warns(DeprecationWarning, match=r"use PhysicsPredictor\(\)"):
+        old = rm.DefaultPhysics(substeps=2)
+    assert old == PhysicsPredictor(substeps=2)
+    assert "DefaultPhysics" not in rm.__all__
+    assert "DefaultPhysics" in validation.__all__  # the variant keeps its name

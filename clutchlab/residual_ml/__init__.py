@@ -61,7 +61,8 @@ from .latch_timing import LatchTiming
 from .local_gp import LocalGPRegressor, log_marginal_likelihood
 from .model_check import check_model, check_model_document
 from .persist import load_model, no_substeps_message, save_model
-from .physics import DefaultPhysics, PhysicsPredictor
+from .physics import DefaultPhysics as DefaultPhysics  # deprecated alias, not in __all__
+from .physics import PhysicsPredictor
 from .rate_probe import between_rate_inputs, play_faster, ramp_rate
 from .residual_variance import fit_variance_floor, loeo_residuals, variance_floor
 from .step import StepPredictor, step_predictor
@@ -93,7 +94,6 @@ __all__ = [
     "Bins",
     "ClassifierComparison",
     "ColumnWeights",
-    "DefaultPhysics",
     "FeatureBuilder",
     "GPBaseline",
     "GPWithDerivative",

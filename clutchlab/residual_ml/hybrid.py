@@ -27,7 +27,7 @@ from ..forkmap import default_workers, fork_map
 from .base import TraceEstimator
 from .estimators import DEFAULT_LATCH_MODEL, SVCPartitionedGP, mean_only
 from .features import DIDT_FEATURES, PHYSICS_FEATURES
-from .physics import DefaultPhysics, PhysicsPredictor
+from .physics import PhysicsPredictor
 from .rate_probe import between_rate_inputs
 
 __all__ = [
@@ -126,7 +126,7 @@ class HybridModel(TraceEstimator):
         :class:`~clutchlab.physics.fit.PhysicsFitter` or a
         :class:`~clutchlab.residual_ml.physics.PhysicsPredictor`; if it also has
         ``predict_outputs(trace) -> dict`` the pilot pressure is available as a feature.
-        Default: :func:`~clutchlab.residual_ml.physics.DefaultPhysics` (datasheet values).
+        Default: ``PhysicsPredictor()`` (datasheet values).
     residual : TraceEstimator, optional
         Residual model (cloned); default :class:`SVCPartitionedGP` on
         :data:`HYBRID_FEATURES` with the classifier on :data:`HYBRID_CLASSIFIER_FEATURES`.
@@ -199,7 +199,7 @@ class HybridModel(TraceEstimator):
         self.standalone_handicap = standalone_handicap
 
     def _physics(self):
-        phys = self.physics if self.physics is not None else DefaultPhysics()
+        phys = self.physics if self.physics is not None else PhysicsPredictor()
         if not hasattr(phys, "predict_outputs") and hasattr(phys, "params_"):
             phys = PhysicsPredictor.from_fitter(phys)  # a fitted PhysicsFitter: all outputs
         if not hasattr(phys, "predict"):

@@ -4,7 +4,7 @@
 clutch pressure (bar) on a trace by simulation; it also exposes the model's other outputs
 (pilot pressure, latch state, ...) that the hybrid model may use as features. With no
 arguments it is the datasheet-default model — the paper's "physics with default lumped
-parameters" (:func:`DefaultPhysics`); :meth:`PhysicsPredictor.from_fitter` wraps a fitted
+parameters"; :meth:`PhysicsPredictor.from_fitter` wraps a fitted
 :class:`~clutchlab.physics.fit.PhysicsFitter`. Saved as JSON (effects + parameter values).
 
 Any object with ``predict(trace) -> ndarray`` (bar) can serve as the hybrid's physics; one
@@ -14,6 +14,7 @@ with ``predict_outputs(trace) -> dict`` also supplies the extra outputs.
 from __future__ import annotations
 
 import json
+import warnings
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -199,11 +200,22 @@ class PhysicsPredictor:
 
 
 def DefaultPhysics(substeps: int = 4) -> PhysicsPredictor:
-    """The datasheet-default circuit model, no effects — the paper's default-parameter physics.
+    """Deprecated: ``PhysicsPredictor(substeps=substeps)``, the datasheet-default model.
+
+    The name is also :class:`clutchlab.validation.DefaultPhysics`, the ``physics_default``
+    variant (an estimator); this function returns a :class:`PhysicsPredictor` and is kept
+    only so existing scripts run.
 
     Parameters
     ----------
     substeps : int
         ROS2 steps per sample (default 4).
     """
+    warnings.warn(
+        "clutchlab.residual_ml.DefaultPhysics() is deprecated: use PhysicsPredictor() "
+        "(the datasheet-default model); clutchlab.validation.DefaultPhysics is the "
+        "physics_default variant",
+        DeprecationWarning,
+        stacklevel=2,
+    )
     return PhysicsPredictor((), None, substeps)
