@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 from synthetic import make_trace
 
@@ -42,7 +43,22 @@ def test_one_trace_is_one_experiment_and_a_mixed_list_is_named():
     flat = make_trace([0.0, 1.0], [0.0, 0.0])
     with pytest.raises(FitError, match=r"no excitation"):  # got as far as the data checks
         PhysicsFitter(settings=QUICK).fit(flat)
-    with pytest.raises(FitError, match="the experiments hold also str"):
+    with pytest.raises(FitError, match="expected only Traces, got also str"):
         PhysicsFitter(settings=QUICK).fit([flat, "medium_50Hz_B"])
     with pytest.raises(FitError, match="not int"):
         PhysicsFitter(settings=QUICK).fit(3)
+
+
+def test_the_fit_and_the_ml_estimators_read_experiments_through_one_function():
+    """PhysicsFitter._training and residual_ml had each their own path / type checks."""
+    from clutchlab.data import as_traces
+    from clutchlab.residual_ml import base
+
+    assert base.as_traces is as_traces
+    with pytest.raises(DataError, match=r"not int"):
+        as_traces(3, arrays=False)
+    assert as_traces(np.zeros((3, 2))) is None  # a feature matrix, for the ML estimators
+    with pytest.raises(DataError, match=r"expected only Traces, got also int"):
+        as_traces([3, 4], arrays=False)
+    with pytest.raises(FitError, match="no training experiments"):
+        PhysicsFitter(settings=QUICK).fit([])

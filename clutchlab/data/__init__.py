@@ -29,6 +29,7 @@ from .derived import (
     first_crossing,
     first_order_lag,
 )
+from .experiments import as_traces
 from .formats import FORMATS, FileFormat
 from .io_csv import read_csv, write_csv
 from .io_dataset import DatasetScan, load_dataset, save_dataset, scan_dataset
@@ -66,6 +67,7 @@ __all__ = [
     "SignalSpec",
     "Timing",
     "Trace",
+    "as_traces",
     "causal_didt",
     "causal_window",
     "check_log",

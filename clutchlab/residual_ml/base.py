@@ -15,7 +15,6 @@ Every estimator of :mod:`clutchlab.residual_ml` accepts two kinds of input:
 
 from __future__ import annotations
 
-import os
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -25,7 +24,7 @@ from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.exceptions import NotFittedError
 from sklearn.utils.validation import validate_data
 
-from ..data import Dataset, Trace, dither_period_samples
+from ..data import Trace, as_traces, dither_period_samples
 from ..errors import DataError
 from ._threads import single_thread
 from .features import FEATURES, FeatureBuilder, target_pressure
@@ -58,49 +57,6 @@ FIT_SIGNALS: tuple[str, ...] = (
 #: Signals a prediction reads from a trace, when the trace holds them: the fit's, less the
 #: target (the clutch pressure is only compared with, never read).
 PREDICT_SIGNALS: tuple[str, ...] = tuple(s for s in FIT_SIGNALS if s != "clutch_pressure_bar")
-
-
-def as_traces(X, role: str = "") -> list[Trace] | None:
-    """The traces in ``X`` (Trace, Dataset or sequence of Traces), or None for array input.
-
-    Parameters
-    ----------
-    X : Trace, Dataset, sequence of Trace, or array_like
-        The input.
-    role : str
-        What the experiments are for, in the error message (``"training"``: "no training
-        experiments").
-
-    Raises
-    ------
-    DataError
-        If ``X`` is an empty dataset, an empty list or tuple, a sequence mixing traces
-        and other objects, or a path (a str or os.PathLike).
-    """
-    if isinstance(X, Trace):
-        return [X]
-    if isinstance(X, str | os.PathLike):
-        raise DataError(
-            f"expected experiments (a Trace, a Dataset or a list of Traces) or a feature "
-            f"matrix, not a path ({str(X)!r}): load it first, clutchlab.data.load_dataset(path)"
-        )
-    if isinstance(X, Dataset):
-        traces = list(X)
-    elif isinstance(X, list | tuple) and not X:
-        traces = []  # no experiments (an empty feature matrix is an array, not a list)
-    elif (
-        isinstance(X, Sequence) and not isinstance(X, str) and any(isinstance(t, Trace) for t in X)
-    ):
-        traces = list(X)
-        bad = [type(t).__name__ for t in traces if not isinstance(t, Trace)]
-        if bad:
-            raise DataError(f"expected only Traces, got also {', '.join(sorted(set(bad)))}")
-    else:
-        return None
-    if not traces:
-        what = f"{role} experiments" if role else "experiments"
-        raise DataError(f"no {what} (an empty dataset or list was given)")
-    return traces
 
 
 def check_finite_signals(

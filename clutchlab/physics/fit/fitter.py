@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import os
 import time
 from dataclasses import asdict
 
@@ -11,8 +10,15 @@ import numpy as np
 from sklearn.exceptions import NotFittedError
 from tqdm.auto import tqdm
 
-from ...data import Dataset, Trace, dither_period_mean, dither_period_samples, pressure_metrics
-from ...errors import FitError, FitWarning, ModelError, warn_at_caller
+from ...data import (
+    Dataset,
+    Trace,
+    as_traces,
+    dither_period_mean,
+    dither_period_samples,
+    pressure_metrics,
+)
+from ...errors import DataError, FitError, FitWarning, ModelError, warn_at_caller
 from ...forkmap import fork_map
 from ..effects import EFFECTS, missing_effect
 from ..effects.flexible import switched_on
@@ -193,13 +199,6 @@ class PhysicsFitter:
 
     def _training(self, data) -> list[Trace]:
         settings = self.settings or FitSettings()
-        if isinstance(data, str | os.PathLike):
-            raise FitError(
-                f"fit takes the experiments, not a path ({str(data)!r}): "
-                "fit(clutchlab.data.load_dataset(path))"
-            )
-        if isinstance(data, Trace):
-            data = [data]  # one experiment
         if isinstance(data, Dataset):
             missing = [r for r in settings.train_ramps if r not in data.ramps]
             if missing:  # never train silently on fewer ramps than asked for
@@ -210,14 +209,9 @@ class PhysicsFitter:
             traces = list(data.select(ramps=[r for r in settings.train_ramps if r in data.ramps]))
         else:
             try:
-                traces = list(data)
-            except TypeError:
-                raise FitError(
-                    f"fit takes a Dataset, a Trace or a list of Traces, not {type(data).__name__}"
-                ) from None
-            bad = sorted({type(t).__name__ for t in traces if not isinstance(t, Trace)})
-            if bad:
-                raise FitError(f"fit takes Traces; the experiments hold also {', '.join(bad)}")
+                traces = as_traces(data, "training", arrays=False)
+            except DataError as exc:  # a path, a mixed list, not experiments at all
+                raise FitError(f"fit: {exc}") from None
         if not traces:
             raise FitError("no training experiments")
         problems = []
