@@ -72,6 +72,6 @@ def as_traces(X, role: str = "", *, arrays: bool = True) -> list[Trace] | None:
     else:
         raise DataError(f"expected {what}, not {type(X).__name__}")
     if not traces:
-        what = f"{role} experiments" if role else "experiments"
-        raise DataError(f"no {what} (an empty dataset or list was given)")
+        none = f"{role} experiments" if role else "experiments"
+        raise DataError(f"no {none} (an empty dataset or list was given)")
     return traces
