@@ -61,6 +61,21 @@ def test_alternatives_add_at_most_the_candidates_parameters():
     assert alt.free[-2:] == ("lthr_p_on", "lthr_p_off")
 
 
+def test_the_latch_pilot_lag_is_offered_once_the_model_holds_the_regulator_lag():
+    """The second, separately placed lag: a base that holds reg_pilot_lag (a staged fit on
+    a zoo plant) would otherwise leave a one-parameter lag candidate nothing of its size
+    but the net-0 thresholds to meet; without reg_pilot_lag, that law is the lag offered."""
+    base = CircuitModel()
+    assert "latch_pilot_lag" not in _sizes(base, DEFAULT_FREE, 4)
+    held = base.with_effects("reg_pilot_lag", "latch_line_select")
+    free = (*DEFAULT_FREE, "rlag_tau")
+    assert _sizes(held, free, 0) == {"latch_free_thresholds": 0}
+    assert _sizes(held, free, 1) == {"latch_free_thresholds": 0, "latch_pilot_lag": 1}
+    (alt,) = [a for a in alternatives_for(held, free, 1) if a.law == "latch_pilot_lag"]
+    assert alt.free == (*free, "llag_tau")
+    assert alt.model.effect_names == ("reg_pilot_lag", "latch_line_select", "latch_pilot_lag")
+
+
 def test_the_most_flexible_alternative_comes_first():
     """A candidate must beat every law, so the order only decides how soon a matched one
     stops: the law with the most freedom, the likeliest to match, is refitted first."""

@@ -119,11 +119,15 @@ class LatchValve(Component):
     def build(self, asm: Assembly) -> None:
         lam = asm.state(StateSpec("latch", "-", 0.0, "latch valve opening (0 closed, 1 open)", _C))
 
+        # the pressure on the latch's pilot faces: the VFS accumulator's (a flexible law
+        # may lag it, latch_pilot_lag)
+        asm.define("p_latch_pilot", lambda a: a.x("p_a"), "Pa")
+
         def f_net(a):
             a1 = math.pi / 4.0 * a.p("latch_d1") ** 2
             a2 = math.pi / 4.0 * a.p("latch_d2") ** 2
             return (
-                a.x("p_a") * (a1 + (a2 - a1) * lam)
+                a["p_latch_pilot"] * (a1 + (a2 - a1) * lam)
                 - a.p("latch_F0")
                 - a.p("latch_k") * a.p("latch_stroke") * lam
             )

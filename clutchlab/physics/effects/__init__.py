@@ -14,6 +14,7 @@ from .base import Effect
 from .flexible import (
     FreeLatchThresholds,
     LatchLineSelect,
+    LatchPilotLag,
     MonotoneForceCorrection,
     PlayHysteresis,
     RegulatorPilotLag,
@@ -42,6 +43,7 @@ __all__ = [
     "FlowForce",
     "FreeLatchThresholds",
     "LatchLineSelect",
+    "LatchPilotLag",
     "LatchThresholdDrift",
     "MagneticHysteresis",
     "MonotoneForceCorrection",
@@ -69,6 +71,7 @@ FLEXIBLE_LAWS: dict[str, type[Effect]] = {
         FreeLatchThresholds,
         LatchLineSelect,
         RegulatorPilotLag,
+        LatchPilotLag,
     )
 }
 

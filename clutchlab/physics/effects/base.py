@@ -35,6 +35,10 @@ class Effect(ABC):
     ``HELD_SWITCH``
         The ``STRENGTH`` weights are a switch a fit holds on at 1 and never frees
         (``reg_pilot_lag``, ``latch_line_select``; default False).
+    ``ALTERNATIVE_AFTER``
+        A flexible law that discovery offers as an alternative to a candidate only
+        when the model already holds these laws (``latch_pilot_lag`` after
+        ``reg_pilot_lag``; default: always).
     """
 
     name: str = ""
@@ -48,6 +52,8 @@ class Effect(ABC):
     REPLACES: tuple[str, ...] = ()
     #: A switch whose STRENGTH weight a fit holds on at 1, never frees (flexible laws).
     HELD_SWITCH: bool = False
+    #: Laws the model must hold before discovery offers this one as an alternative.
+    ALTERNATIVE_AFTER: tuple[str, ...] = ()
 
     @classmethod
     def fit_parameters(cls) -> tuple[str, ...]:

@@ -20,6 +20,10 @@ as the training data ask. All forms are smooth (``tanh`` / logistic; no ``if_els
 - :class:`LatchLineSelect` (``latch_line_select``): the latch valve as a selector of the
   clutch feed — latched, the clutch port sees line pressure while the regulator keeps
   regulating its own output — in place of the datasheet valve's feedback exhaust.
+- :class:`RegulatorPilotLag` (``reg_pilot_lag``): a lag of the pilot pressure at the
+  regulator alone.
+- :class:`LatchPilotLag` (``latch_pilot_lag``): a lag of the pilot pressure at the latch
+  valve alone — with the regulator's, the two branches each have a lag of their own.
 """
 
 from __future__ import annotations
@@ -39,6 +43,7 @@ __all__ = [
     "PLAY_WIDTHS_MA",
     "FreeLatchThresholds",
     "LatchLineSelect",
+    "LatchPilotLag",
     "MonotoneForceCorrection",
     "PlayHysteresis",
     "RegulatorPilotLag",
@@ -199,7 +204,7 @@ class FreeLatchThresholds(Effect):
         def f_net(a):
             a1 = math.pi / 4.0 * a.p("latch_d1") ** 2
             a2 = math.pi / 4.0 * a.p("latch_d2") ** 2
-            lam, p = a.x("latch"), a.x("p_a")
+            lam, p = a.x("latch"), a["p_latch_pilot"]
             return (1.0 - lam) * a1 * (p - a.p("lthr_p_on")) + lam * a2 * (p - a.p("lthr_p_off"))
 
         asm.redefine("latch_F_net", f_net)
@@ -306,11 +311,52 @@ class RegulatorPilotLag(Effect):
         asm.wrap("p_reg_pilot", lambda a, prev: prev + a.p("rlag_w") * (q - prev))
 
 
+class LatchPilotLag(Effect):
+    """A first-order lag of the pilot pressure on the latch valve's pilot faces alone.
+
+    The latch sees ``p_l = p_a + w (q − p_a)`` with ``τ dq/dt = p_a − q``; the regulator
+    still sees its own pilot pressure. The complement of :class:`RegulatorPilotLag`: a
+    valve body whose latch pilot is fed through a damping orifice of its own snaps and
+    releases later behind the current, the more so the faster the ramp, while the
+    regulated branch is untouched. With both laws the regulated branch and the latch
+    each have a lag of their own. ``w = 0`` (the default) is exactly today's model; a fit
+    that switches the law on holds ``w = 1`` and frees ``τ``.
+
+    Discovery offers it as a flexible alternative only to a model that already holds
+    ``reg_pilot_lag`` (:attr:`ALTERNATIVE_AFTER`): without it, the regulator's lag is
+    the one-parameter lag the candidates meet. The latch pilot's own flow (the valve's
+    swept volume) is still drawn from the accumulator.
+    """
+
+    name = "latch_pilot_lag"
+    description = "first-order lag of the pilot pressure at the latch valve alone"
+    signature = (
+        "latch snap and release lag the current more at fast ramps than the regulated "
+        "branch does; regulated branch and latched plateau unaffected"
+    )
+    PARAMETERS = (
+        param("llag", "w", "-", 0.0, 0.0, 1.0, "weight of the lagged latch pilot", "linear"),
+        param("llag", "tau", "ms", 20.0, 1.0, 1000.0, "time constant of the latch pilot lag"),
+    )
+    STRENGTH = ("llag_w",)
+    FIT = ("llag_tau",)
+    #: A fit holds the weight on (:func:`switched_on`).
+    HELD_SWITCH = True
+    ALTERNATIVE_AFTER = ("reg_pilot_lag",)
+
+    def apply(self, asm: Assembly) -> None:
+        spec = StateSpec("p_llag", "bar", 0.5, "lagged latch pilot pressure", self.name)
+        q = asm.state(spec)
+        asm.define("der:p_llag", lambda a: (a.x("p_a") - q) / a.p("llag_tau"), "Pa/s")
+        asm.wrap("p_latch_pilot", lambda a, prev: prev + a.p("llag_w") * (q - prev))
+
+
 def switched_on(model) -> dict[str, float]:
     """Start values that switch on ``model``'s held switches: ``{weight: 1.0}``.
 
     A held switch is a flexible law whose strength (a weight, default 0: today's model) a
-    fit does not free — ``reg_pilot_lag`` (``rlag_w``), ``latch_line_select``
+    fit does not free — ``reg_pilot_lag`` (``rlag_w``), ``latch_pilot_lag`` (``llag_w``),
+    ``latch_line_select``
     (``lsel_w``). Named on a model to be fitted, such a law is meant on: at weight 0 it
     would act on nothing and its own fit parameters would be unidentifiable.
 

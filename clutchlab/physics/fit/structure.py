@@ -66,10 +66,11 @@ STRUCTURES: dict[str, tuple[str, ...]] = {
     "play": ("vfs_play_hysteresis",),
     "latch": ("latch_free_thresholds",),
     "vfs": ("vfs_force_monotone", "vfs_play_hysteresis"),
-    # reg_pilot_lag and latch_line_select are switched on by the staged start's lag
-    # signature (FitSettings.regulator_lag), not as candidates: at their default weight 0
-    # they act on nothing.
-    "flex": tuple(n for n in FLEXIBLE_LAWS if n not in ("reg_pilot_lag", "latch_line_select")),
+    # the held switches (reg_pilot_lag, latch_line_select, latch_pilot_lag) are no
+    # candidates: the first two are switched on by the staged start's lag signature
+    # (FitSettings.regulator_lag), the third is discovery's alternative; at their default
+    # weight 0 they act on nothing.
+    "flex": tuple(n for n, law in FLEXIBLE_LAWS.items() if not law.HELD_SWITCH),
 }
 
 #: Candidates compared by default: the datasheet form and each flexible law alone

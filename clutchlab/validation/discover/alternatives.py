@@ -6,7 +6,8 @@ name: on a circuit whose component laws differ from clutchlab's, any added param
 that bends the model towards the data helps, whatever physics it stands for. So before
 an effect is added, each flexible component law (:data:`~clutchlab.physics.effects.
 FLEXIBLE_LAWS`: a monotone VFS force correction, a play-operator hysteresis, free latch
-thresholds, a regulator pilot lag) that adds **at most as many free parameters** as the
+thresholds, a regulator pilot lag and — once the model holds that one — a latch pilot
+lag) that adds **at most as many free parameters** as the
 effect and is not in the model yet is refitted the same way, on the same experiments,
 from the same current fit; the effect is claimed only when it fits better than each such
 alternative **and** predicts the left-out training experiments better on the geometric
@@ -20,8 +21,9 @@ and the broken one only when every other law was beaten.
 
 Sizes are counted against the current fit's free parameters: ``latch_free_thresholds``
 replaces the datasheet latch's preload and rate by its two thresholds (net 0 when those
-are free), ``reg_pilot_lag`` frees one time constant (its weight held at 1), the play
-operator three heights, the monotone force correction four steps.
+are free), ``reg_pilot_lag`` and ``latch_pilot_lag`` free one time constant each (their
+weight held at 1), the play operator three heights, the monotone force correction four
+steps.
 """
 
 from __future__ import annotations
@@ -55,10 +57,16 @@ __all__ = [
     "held_out_log_ratio",
 ]
 
-#: Time constants (ms) tried as the start of a ``reg_pilot_lag`` alternative (the best by
-#: the kept residual sum of squares, one simulation each): its time constant is the only
+#: Time constants (ms) tried as the start of a pilot-lag alternative (the best by the
+#: kept residual sum of squares, one simulation each): its time constant is the only
 #: parameter it frees, and the objective is far from quadratic in it.
 PILOT_LAG_STARTS_MS: tuple[float, ...] = (5.0, 20.0, 80.0, 300.0)
+
+#: The pilot-lag laws: name -> (held weight, time constant (ms)).
+_PILOT_LAGS: dict[str, tuple[str, str]] = {
+    "reg_pilot_lag": ("rlag_w", "rlag_tau"),
+    "latch_pilot_lag": ("llag_w", "llag_tau"),
+}
 
 #: What a failing alternative refit may raise (recorded in its evidence, never raised).
 _FAILURES = (ClutchlabError, ArithmeticError, ValueError)
@@ -105,13 +113,17 @@ def alternatives_for(current: CircuitModel, free: tuple[str, ...], k: int) -> li
         Most flexible first (most added parameters; then by name). A candidate is
         claimed only when it beats every law, so the order decides nothing but how soon
         a matched candidate stops: the law with the most freedom is the likeliest to
-        match it, and the laws after it are then not refitted.
+        match it, and the laws after it are then not refitted. A law with
+        ``ALTERNATIVE_AFTER`` is offered only when ``current`` holds those laws.
     """
     out = []
+    held = set(current.effect_names)
     for name, cls in FLEXIBLE_LAWS.items():
-        if name in current.effect_names or not cls.fit_parameters():
+        if name in held or not cls.fit_parameters():
             # a switch with nothing to fit (latch_line_select) is at its start the current
             # model itself: no alternative
+            continue
+        if not held.issuperset(cls.ALTERNATIVE_AFTER):
             continue
         retired = getattr(cls, "REPLACES", ())
         kept = tuple(n for n in free if n not in retired)
@@ -148,7 +160,7 @@ def _start(
     * free latch thresholds at the better of the fitted latch's thresholds and the
       thresholds the current model's pilot pressure has at the data's latch snaps
       (:func:`~clutchlab.physics.fit.staged.measured_thresholds`, slowest experiments);
-    * the pilot lag (weight 1) at the best of :data:`PILOT_LAG_STARTS_MS`;
+    * a pilot lag (weight 1) at the best of :data:`PILOT_LAG_STARTS_MS`;
     * the play operator and the force correction at zero (the current model).
     """
     specs = {p.name: p for p in alt.model.parameters}
@@ -175,8 +187,9 @@ def _start(
             for p_on, p_off in points
         ]
         return _best_start(alt, starts, traces, settings)
-    if alt.law == "reg_pilot_lag":
-        starts = [alt.model.params(**base, rlag_w=1.0, rlag_tau=tau) for tau in PILOT_LAG_STARTS_MS]
+    if alt.law in _PILOT_LAGS:
+        weight, tau = _PILOT_LAGS[alt.law]
+        starts = [alt.model.params(**base, **{weight: 1.0, tau: ms}) for ms in PILOT_LAG_STARTS_MS]
         return _best_start(alt, starts, traces, settings)
     return alt.model.params(**base)
 
