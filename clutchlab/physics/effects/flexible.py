@@ -267,6 +267,18 @@ class LatchLineSelect(Effect):
         )
 
 
+def _pilot_lag(asm: Assembly, pilot: str, state: StateSpec, prefix: str) -> None:
+    """Blend signal ``pilot`` towards a first-order lag of the accumulator pressure.
+
+    ``pilot + w (q − pilot)`` with ``τ dq/dt = p_a − q``; ``w`` and ``τ`` are the
+    parameters ``{prefix}_w`` (-) and ``{prefix}_tau`` (ms), ``q`` the new state.
+    """
+    q = asm.state(state)
+    w, tau = f"{prefix}_w", f"{prefix}_tau"
+    asm.define(f"der:{state.name}", lambda a: (a.x("p_a") - q) / a.p(tau), "Pa/s")
+    asm.wrap(pilot, lambda a, prev: prev + a.p(w) * (q - prev))
+
+
 class RegulatorPilotLag(Effect):
     """A first-order lag of the pilot pressure on the regulator spool's pilot face alone.
 
@@ -306,9 +318,12 @@ class RegulatorPilotLag(Effect):
     HELD_SWITCH = True
 
     def apply(self, asm: Assembly) -> None:
-        q = asm.state(StateSpec("p_rlag", "bar", 0.5, "lagged regulator pilot", self.name))
-        asm.define("der:p_rlag", lambda a: (a.x("p_a") - q) / a.p("rlag_tau"), "Pa/s")
-        asm.wrap("p_reg_pilot", lambda a, prev: prev + a.p("rlag_w") * (q - prev))
+        _pilot_lag(
+            asm,
+            "p_reg_pilot",
+            StateSpec("p_rlag", "bar", 0.5, "lagged regulator pilot", self.name),
+            "rlag",
+        )
 
 
 class LatchPilotLag(Effect):
@@ -346,9 +361,7 @@ class LatchPilotLag(Effect):
 
     def apply(self, asm: Assembly) -> None:
         spec = StateSpec("p_llag", "bar", 0.5, "lagged latch pilot pressure", self.name)
-        q = asm.state(spec)
-        asm.define("der:p_llag", lambda a: (a.x("p_a") - q) / a.p("llag_tau"), "Pa/s")
-        asm.wrap("p_latch_pilot", lambda a, prev: prev + a.p("llag_w") * (q - prev))
+        _pilot_lag(asm, "p_latch_pilot", spec, "llag")
 
 
 def switched_on(model) -> dict[str, float]:
