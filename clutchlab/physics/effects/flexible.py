@@ -369,9 +369,9 @@ def switched_on(model) -> dict[str, float]:
 
     A held switch is a flexible law whose strength (a weight, default 0: today's model) a
     fit does not free — ``reg_pilot_lag`` (``rlag_w``), ``latch_pilot_lag`` (``llag_w``),
-    ``latch_line_select``
-    (``lsel_w``). Named on a model to be fitted, such a law is meant on: at weight 0 it
-    would act on nothing and its own fit parameters would be unidentifiable.
+    ``latch_line_select`` (``lsel_w``). Named on a model to be fitted, such a law is meant
+    on: at weight 0 it would act on nothing and its own fit parameters would be
+    unidentifiable.
 
     Parameters
     ----------
