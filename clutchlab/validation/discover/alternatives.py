@@ -62,12 +62,6 @@ __all__ = [
 #: parameter it frees, and the objective is far from quadratic in it.
 PILOT_LAG_STARTS_MS: tuple[float, ...] = (5.0, 20.0, 80.0, 300.0)
 
-#: The pilot-lag laws: name -> (held weight, time constant (ms)).
-_PILOT_LAGS: dict[str, tuple[str, str]] = {
-    "reg_pilot_lag": ("rlag_w", "rlag_tau"),
-    "latch_pilot_lag": ("llag_w", "llag_tau"),
-}
-
 #: What a failing alternative refit may raise (recorded in its evidence, never raised).
 _FAILURES = (ClutchlabError, ArithmeticError, ValueError)
 
@@ -187,11 +181,22 @@ def _start(
             for p_on, p_off in points
         ]
         return _best_start(alt, starts, traces, settings)
-    if alt.law in _PILOT_LAGS:
-        weight, tau = _PILOT_LAGS[alt.law]
-        starts = [alt.model.params(**base, **{weight: 1.0, tau: ms}) for ms in PILOT_LAG_STARTS_MS]
+    tau = _pilot_lag_time_constant(alt.law, specs)
+    if tau is not None:
+        on = dict.fromkeys(FLEXIBLE_LAWS[alt.law].STRENGTH, 1.0)
+        starts = [alt.model.params(**base, **on, **{tau: ms}) for ms in PILOT_LAG_STARTS_MS]
         return _best_start(alt, starts, traces, settings)
     return alt.model.params(**base)
+
+
+def _pilot_lag_time_constant(law: str, specs: dict) -> str | None:
+    """The time constant (ms) a pilot-lag law frees — a held switch whose one fit
+    parameter is a time constant (``reg_pilot_lag``, ``latch_pilot_lag``) — else None."""
+    cls = FLEXIBLE_LAWS[law]
+    fitted = cls.fit_parameters()
+    if cls.HELD_SWITCH and len(fitted) == 1 and specs[fitted[0]].unit == "ms":
+        return fitted[0]
+    return None
 
 
 def _names(model: CircuitModel) -> set[str]:
