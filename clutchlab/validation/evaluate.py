@@ -250,7 +250,10 @@ class Evaluation:
                 "std_error": res.std_errors.get(n, float("nan")),
                 "unit": res.units.get(n, ""),
                 "default": spec.default if spec is not None else float("nan"),
-                "identifiable": n not in res.unidentifiable,
+                # not known when the sensitivities diverged (the report shows n/a)
+                "identifiable": None
+                if getattr(res, "uncertainty_note", "")
+                else n not in res.unidentifiable,
                 "description": spec.description if spec is not None else "",
             }
         # the limits it ran under, for the report to say which one to raise (None for a fit
@@ -270,6 +273,8 @@ class Evaluation:
             "train_rmse_bar": {k: v["rmse_bar"] for k, v in res.per_experiment.items()},
             # what the model is when not the solver's best iterate (the staged start)
             "note": getattr(res, "note", ""),
+            # why standard errors are not reported ("" when they are)
+            "uncertainty_note": getattr(res, "uncertainty_note", ""),
         }
 
     def to_dict(self) -> dict[str, Any]:

@@ -209,8 +209,9 @@ def _fit_status(fit: dict[str, Any]) -> str:
         f"Status: {fit['status']} ({state}); {fit['iterations']} iterations; "
         f"{fmt(fit['wall_s'])} s; effects: {', '.join(fit.get('effects') or []) or 'none'}."
     )
-    if fit.get("note"):  # e.g. the solver never got below the staged start
-        text += f" {fit['note'][0].upper()}{fit['note'][1:]}."
+    for key in ("note", "uncertainty_note"):  # the staged start kept; no standard errors
+        if fit.get(key):
+            text += f" {fit[key][0].upper()}{fit[key][1:]}."
     if fit["converged"]:
         return text
     limits = []

@@ -3,7 +3,13 @@
 from .fitter import PhysicsFitter, check_savable, resolve_free
 from .problem import FitProblem
 from .rate import FIT_RATE_MARGIN, SUGGESTED_FIT_RATE_HZ, at_fit_rate, faster_than_fit
-from .result import FitResult, identifiability
+from .result import (
+    FitResult,
+    ParameterUncertainty,
+    diverged_sensitivities,
+    identifiability,
+    parameter_uncertainty,
+)
 from .sensitivity import (
     SENSITIVITY_CHUNK,
     SensitivityRun,
@@ -34,6 +40,7 @@ __all__ = [
     "FitProblem",
     "FitResult",
     "FitSettings",
+    "ParameterUncertainty",
     "PhysicsFitter",
     "SensitivityRun",
     "StructureSelection",
@@ -43,8 +50,10 @@ __all__ = [
     "compile_fit_code",
     "compile_sensitivities_for",
     "compile_sensitivities_in_background",
+    "diverged_sensitivities",
     "faster_than_fit",
     "identifiability",
+    "parameter_uncertainty",
     "prefit_settings",
     "prefit_subset",
     "refine_settings",

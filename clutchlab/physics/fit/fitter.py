@@ -29,7 +29,7 @@ from ..simulate import simulate
 from .nlp import COST_PLATEAU, ITERATION_LIMIT, WALL_TIME_LIMIT, solve_ipopt
 from .problem import FitProblem
 from .rate import at_fit_rate
-from .result import FitResult, identifiability
+from .result import FitResult, ParameterUncertainty, parameter_uncertainty
 from .sensitivity import compile_sensitivities_for
 from .settings import DEFAULT_FREE, FitSettings
 from .staged import (
@@ -595,28 +595,11 @@ class PhysicsFitter:
                 ss.close()
         names = list(problem.shared)
         specs = {p.name: p for p in model.parameters}
-        se, corr, sv, unid, weak = {}, [], [], list(names), []
         if ev.get("J") is not None:
-            jz = ev["J"].toarray()
-            r = ev["r"]
-            dof = max(len(r) - jz.shape[1], 1)
-            sigma2 = float(np.dot(r, r)) / dof
-            cov = sigma2 * np.linalg.pinv(jz.T @ jz)
-            sd_z = np.sqrt(np.clip(np.diag(cov), 0, None))
-            rel = []
-            for k, n in enumerate(names):
-                spec = specs[n]
-                deriv = fitted[n] if spec.transform == "log" else spec.scale
-                se[n] = float(abs(deriv) * sd_z[k])
-                ref = (
-                    abs(fitted[n])
-                    if spec.transform == "log"
-                    else max(abs(fitted[n]), 0.01 * spec.scale)
-                )
-                rel.append(se[n] / ref)
-            d = np.where(sd_z > 0, sd_z, 1.0)
-            corr = (cov / np.outer(d, d)).tolist()
-            sv, unid, weak = identifiability(jz, names, np.array(rel))
+            unc = parameter_uncertainty(ev["J"].toarray(), ev["r"], names, specs, fitted)
+        else:
+            unc = ParameterUncertainty({}, [], [], list(names), [])
+        se = dict(unc.std_errors)
         for n in problem.per_exp:
             se[n] = float("nan")
         per_values = (
@@ -633,10 +616,10 @@ class PhysicsFitter:
             units={p.name: p.unit for p in model.parameters},
             free=free,
             std_errors=se,
-            correlation=corr,
-            singular_values=sv,
-            unidentifiable=unid,
-            weak_directions=weak,
+            correlation=unc.correlation,
+            singular_values=unc.singular_values,
+            unidentifiable=unc.unidentifiable,
+            weak_directions=unc.weak_directions,
             per_experiment=per_exp,
             per_experiment_values=per_values,
             cost_history=list(history),
@@ -648,6 +631,7 @@ class PhysicsFitter:
             settings={
                 k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(settings).items()
             },
+            uncertainty_note=unc.note,
         )
 
     # ---- use --------------------------------------------------------------------------

@@ -16,13 +16,61 @@ from ..model import CircuitModel
 from ..parameters import ParameterSet
 from ..units import unit_shown
 
-__all__ = ["FitResult", "check_fit_document", "identifiability"]
+__all__ = [
+    "FitResult",
+    "ParameterUncertainty",
+    "check_fit_document",
+    "diverged_sensitivities",
+    "identifiability",
+    "parameter_uncertainty",
+]
 
 #: A parameter whose relative standard error exceeds this is reported unidentifiable.
 REL_SE_LIMIT = 0.5
 #: Singular values (unit-norm columns) below this fraction of the largest mark
 #: directions along which parameters trade off exactly (collinear sensitivities).
 SV_RATIO_LIMIT = 1e-3
+#: Output sensitivities (bar per unit of a scaled free parameter, the solver's coordinates)
+#: above this are no linearization of the model: its sensitivity equations diverge there
+#: (a locally unstable parameter set, e.g. negative damping), even where the simulated
+#: pressure stays finite. Sound fits stay many orders of magnitude below (a unit step of a
+#: scaled parameter moves the dither-period-mean pressure by at most a few tens of bar).
+SENSITIVITY_LIMIT = 1e6
+
+
+def diverged_sensitivities(jz: np.ndarray) -> str:
+    """Why the output sensitivities ``jz`` cannot give standard errors (``""`` when they can).
+
+    Parameters
+    ----------
+    jz : ndarray
+        Residuals (bar) × scaled free parameters.
+
+    Returns
+    -------
+    str
+        Empty, or a sentence for people: the sensitivities are not finite, or larger than
+        :data:`SENSITIVITY_LIMIT`; the covariance computed from them would be meaningless
+        (standard errors of 1e-40 and every parameter "unidentifiable").
+    """
+    jz = np.asarray(jz, dtype=float)
+    bad = int(np.count_nonzero(~np.isfinite(jz)))
+    if bad:
+        size = f"{bad} of them not finite"
+    else:
+        top = float(np.max(np.abs(jz))) if jz.size else 0.0
+        if top <= SENSITIVITY_LIMIT:
+            return ""
+        size = (
+            f"up to {top:.3g} bar per scaled parameter unit; sound fits stay below "
+            f"{SENSITIVITY_LIMIT:g}"
+        )
+    return (
+        f"standard errors, correlations and identifiability are not reported: the model's "
+        f"output sensitivities at the fitted values diverge ({size}), so the model is locally "
+        "unstable there or the integration step is too long for it; more substeps "
+        "(--substeps) tell the two apart"
+    )
 
 
 def identifiability(
@@ -45,6 +93,84 @@ def identifiability(
             weak.append({"singular_value": float(s), "loadings": load})
             bad |= set(load)
     return [float(s) for s in sv], sorted(bad, key=names.index), weak
+
+
+@dataclass
+class ParameterUncertainty:
+    """Standard errors and identifiability of the free parameters at a fit's values.
+
+    Attributes
+    ----------
+    std_errors : dict
+        Parameter name -> standard error (its unit; NaN when not reported).
+    correlation : list of list
+        Correlation matrix (order of the names; empty when not reported).
+    singular_values : list of float
+        Of the column-normalized sensitivities (empty when not reported).
+    unidentifiable : list of str
+        Parameters the data cannot determine.
+    weak_directions : list of dict
+        Near-null directions with their loadings.
+    note : str
+        Why nothing is reported (``""`` when it is; :func:`diverged_sensitivities`).
+    """
+
+    std_errors: dict[str, float]
+    correlation: list[list[float]]
+    singular_values: list[float]
+    unidentifiable: list[str]
+    weak_directions: list[dict]
+    note: str = ""
+
+
+def parameter_uncertainty(
+    jz: np.ndarray,
+    r: np.ndarray,
+    names: list[str],
+    specs: dict,
+    values,
+) -> ParameterUncertainty:
+    """Gauss–Newton standard errors and identifiability from the output sensitivities.
+
+    The covariance is ``σ² (JᵀJ)⁺`` with ``σ²`` the residual variance (``r·r / dof``), in
+    the solver's scaled coordinates, then mapped to engineering units (a log-scaled
+    parameter's standard error is its value times that of its log). When the
+    sensitivities diverged (:func:`diverged_sensitivities`) nothing is computed from
+    them: the standard errors are NaN and the note says why.
+
+    Parameters
+    ----------
+    jz : ndarray
+        Residuals (bar) × scaled free parameters.
+    r : ndarray
+        Residuals (bar) at the fitted values.
+    names : list of str
+        Free parameters, in the column order of ``jz``.
+    specs : dict
+        Parameter name -> its specification (``transform``, ``scale``).
+    values : mapping
+        Fitted values (engineering units).
+
+    Returns
+    -------
+    ParameterUncertainty
+    """
+    note = diverged_sensitivities(jz)
+    if note:  # a covariance from these would be noise (1e-40 "standard errors")
+        return ParameterUncertainty(dict.fromkeys(names, math.nan), [], [], [], [], note)
+    dof = max(len(r) - jz.shape[1], 1)
+    sigma2 = float(np.dot(r, r)) / dof
+    cov = sigma2 * np.linalg.pinv(jz.T @ jz)
+    sd_z = np.sqrt(np.clip(np.diag(cov), 0, None))
+    se, rel = {}, []
+    for k, n in enumerate(names):
+        spec, v = specs[n], values[n]
+        se[n] = float(abs(v if spec.transform == "log" else spec.scale) * sd_z[k])
+        ref = abs(v) if spec.transform == "log" else max(abs(v), 0.01 * spec.scale)
+        rel.append(se[n] / ref)
+    d = np.where(sd_z > 0, sd_z, 1.0)
+    sv, unid, weak = identifiability(jz, names, np.array(rel))
+    return ParameterUncertainty(se, (cov / np.outer(d, d)).tolist(), sv, unid, weak)
 
 
 @dataclass
@@ -94,6 +220,11 @@ class FitResult:
         What the model is when that is not the solver's best iterate, in words (empty
         otherwise; written to JSON only when not empty): a fit whose solver never got
         below its staged start keeps the staged start.
+    uncertainty_note : str
+        Why ``std_errors`` are NaN and ``correlation``, ``singular_values``,
+        ``unidentifiable`` empty, in words (empty when they are reported; written to JSON
+        only when not empty): the output sensitivities at the fitted values diverged
+        (:func:`diverged_sensitivities`).
     """
 
     effects: list[str]
@@ -115,6 +246,7 @@ class FitResult:
     train: list[str]
     settings: dict = field(default_factory=dict)
     note: str = ""
+    uncertainty_note: str = ""
 
     def __repr__(self) -> str:
         # the dataclass repr printed every value, the correlation matrix and the cost history
@@ -142,13 +274,16 @@ class FitResult:
                 f"{n:18s} {self.values[n]:12.5g} {self.std_errors.get(n, math.nan):12.3g}  "
                 f"{unit_shown(self.units[n])}{flag}"
             )
+        if self.uncertainty_note:
+            lines.append(f"({self.uncertainty_note})")
         return "\n".join(lines)
 
     def to_json(self, path: str | Path | None = None) -> str:
         """JSON text (written to ``path`` when given, atomically)."""
         doc = asdict(self)
-        if not doc["note"]:
-            del doc["note"]  # files of fits without one stay as they were
+        for key in ("note", "uncertainty_note"):
+            if not doc[key]:
+                del doc[key]  # files of fits without one stay as they were
         text = json.dumps(doc, indent=2, ensure_ascii=False, allow_nan=True)
         if path is not None:
             write_file_atomic(path, (text + "\n").encode("utf-8"), overwrite=True)
@@ -214,8 +349,9 @@ _FIELDS: dict[str, tuple[str, object]] = {
     "train": ("a list of experiment names", lambda v: _list_of(str, v)),
     "settings": ("an object", lambda v: isinstance(v, dict)),
     "note": ("a string", lambda v: isinstance(v, str)),
+    "uncertainty_note": ("a string", lambda v: isinstance(v, str)),
 }
-_OPTIONAL = ("settings", "note")
+_OPTIONAL = ("settings", "note", "uncertainty_note")
 
 
 def check_fit_document(doc, source: str = "fit result") -> None:

@@ -332,7 +332,7 @@ def _parameter_rows(parameters: list[dict]) -> list[list[str]]:
     ``N·A⁻¹``, which would read as "not applicable"; the JSON keeps ``N/A``)."""
     return [
         [
-            p["name"] + ("" if p.get("identifiable", True) else " (not identifiable)"),
+            p["name"] + (" (not identifiable)" if p.get("identifiable", True) is False else ""),
             _fmt(p["value"], ".5g"),
             _fmt(p["std_error"], ".3g"),
             unit_shown(p["unit"]),

@@ -63,7 +63,8 @@ def _parameters(fit: FitResult) -> list[dict[str, Any]]:
             "value": fit.values[n],
             "std_error": fit.std_errors.get(n, math.nan),
             "unit": fit.units.get(n, ""),
-            "identifiable": n not in fit.unidentifiable,
+            # None: not known (the sensitivities diverged, see fit.uncertainty_note)
+            "identifiable": None if fit.uncertainty_note else n not in fit.unidentifiable,
         }
         for n in fit.free
     ]

@@ -1,0 +1,131 @@
+"""Standard errors from a fit's sensitivities, and what is said when those diverged.
+
+Two zoo fits of session 45 (saturating_lugre seeds 1 and 2, stopped with
+``Error_In_Step_Computation``) reported relative standard errors of 1e-90 … 1e-31 and
+flagged every parameter "not identifiable": the covariance had been computed from
+sensitivities of ~1e35 bar per scaled unit (a locally unstable parameter set).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from fit_support import synthetic_fit
+
+from clutchlab.errors import FitResultError
+from clutchlab.physics import CircuitModel
+from clutchlab.physics.fit import (
+    FitResult,
+    diverged_sensitivities,
+    parameter_uncertainty,
+)
+from clutchlab.physics.fit.result import SENSITIVITY_LIMIT
+from clutchlab.validation.report import _fit_status
+
+NAMES = ["vfs_K_m", "latch_F0", "vfs_d_orf"]
+
+
+def _sound_problem(seed: int = 0):
+    """Sensitivities of a sound fit's size (≲ 1 bar per scaled unit), residuals of 0.02 bar."""
+    rng = np.random.default_rng(seed)
+    jz = rng.normal(0.0, 0.3, (2000, len(NAMES)))
+    r = rng.normal(0.0, 0.02, 2000)
+    specs = {p.name: p for p in CircuitModel().parameters}
+    values = CircuitModel().default_params()
+    return jz, r, specs, values
+
+
+def test_sound_sensitivities_give_finite_standard_errors():
+    jz, r, specs, values = _sound_problem()
+    assert diverged_sensitivities(jz) == ""
+    unc = parameter_uncertainty(jz, r, NAMES, specs, values)
+    assert unc.note == ""
+    for n in NAMES:
+        assert math.isfinite(unc.std_errors[n]) and unc.std_errors[n] > 0
+    assert np.allclose(np.diag(unc.correlation), 1.0)
+    assert len(unc.singular_values) == len(NAMES) and unc.unidentifiable == []
+
+
+def test_standard_errors_scale_with_the_residual_and_not_with_a_sound_jacobian_scale():
+    jz, r, specs, values = _sound_problem(1)
+    base = parameter_uncertainty(jz, r, NAMES, specs, values).std_errors
+    noisier = parameter_uncertainty(jz, 3.0 * r, NAMES, specs, values).std_errors
+    stiffer = parameter_uncertainty(10.0 * jz, r, NAMES, specs, values).std_errors
+    for n in NAMES:
+        assert noisier[n] == pytest.approx(3.0 * base[n])
+        assert stiffer[n] == pytest.approx(base[n] / 10.0)
+
+
+@pytest.mark.parametrize(
+    ("blow", "says"),
+    [
+        (1e35, "up to 1e+35 bar per scaled parameter unit"),
+        (math.inf, "not finite"),
+        (math.nan, "not finite"),
+    ],
+)
+def test_diverged_sensitivities_give_no_standard_errors_and_say_why(blow, says):
+    jz, r, specs, values = _sound_problem(2)
+    jz[700:705, 1] = blow  # a few samples where the sensitivity equations ran away
+    unc = parameter_uncertainty(jz, r, NAMES, specs, values)
+    assert says in unc.note and "--substeps" in unc.note
+    assert all(math.isnan(unc.std_errors[n]) for n in NAMES)
+    # nothing is claimed either way: not "identifiable", not "unidentifiable"
+    assert unc.unidentifiable == [] and unc.correlation == [] and unc.singular_values == []
+
+
+def test_the_limit_sits_between_sound_and_diverged_sensitivities():
+    jz = np.full((10, 2), SENSITIVITY_LIMIT)
+    assert diverged_sensitivities(jz) == ""
+    jz[3, 1] = -2.0 * SENSITIVITY_LIMIT  # the sign does not matter
+    assert "up to 2e+06" in diverged_sensitivities(jz)
+
+
+def test_the_note_is_saved_read_back_and_shown(tmp_path):
+    res = synthetic_fit({"vfs_K_m": 14.2}, status="Error_In_Step_Computation (pre-fit)")
+    assert '"uncertainty_note"' not in res.to_json()  # files without one stay as they were
+    res.std_errors = {"vfs_K_m": math.nan}
+    res.uncertainty_note = diverged_sensitivities(np.array([[1e40]]))
+    back = FitResult.from_json(res.to_json(tmp_path / "fit.json"))
+    assert back.uncertainty_note == res.uncertainty_note
+    assert math.isnan(back.std_errors["vfs_K_m"])
+    table = back.table()
+    assert "nan" in table and res.uncertainty_note in table
+    assert "not identifiable" not in table
+    # the report's status line of the fitted physics says it too
+    status = _fit_status(
+        {
+            "status": back.status,
+            "converged": False,
+            "iterations": 8,
+            "wall_s": 42.6,
+            "effects": [],
+            "uncertainty_note": back.uncertainty_note,
+        }
+    )
+    assert "Standard errors, correlations and identifiability are not reported" in status
+
+
+def test_a_note_of_the_wrong_type_is_a_damaged_file(tmp_path):
+    doc = synthetic_fit({"vfs_K_m": 14.2}).to_json()
+    bad = doc.replace('"settings": {}', '"settings": {},\n  "uncertainty_note": 3')
+    with pytest.raises(FitResultError, match="uncertainty_note: must be a string"):
+        FitResult.from_json(bad)
+
+
+def test_reports_call_nothing_identifiable_or_not_when_the_sensitivities_diverged():
+    from clutchlab.validation.discover.report import _parameter_rows
+    from clutchlab.validation.discover.result import _parameters
+
+    res = synthetic_fit({"vfs_K_m": 14.2, "latch_F0": 28.0})
+    res.unidentifiable = ["latch_F0"]
+    rows = _parameter_rows(_parameters(res))
+    assert [r[0] for r in rows] == ["vfs_K_m", "latch_F0 (not identifiable)"]
+    res.std_errors = {"vfs_K_m": math.nan, "latch_F0": math.nan}
+    res.unidentifiable = []
+    res.uncertainty_note = diverged_sensitivities(np.array([[math.inf]]))
+    params = _parameters(res)
+    assert [p["identifiable"] for p in params] == [None, None]
+    assert [r[0] for r in _parameter_rows(params)] == ["vfs_K_m", "latch_F0"]
