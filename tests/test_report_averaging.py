@@ -254,6 +254,35 @@ def test_a_fit_whose_staged_start_is_the_model_says_so(folders, tmp_path):
     assert any("its staged start is scored" in line for line in lines), lines
 
 
+def test_a_fit_whose_sensitivities_diverged_reports_no_standard_errors(folders, tmp_path):
+    """A fit whose output sensitivities diverged (FitResult.uncertainty_note) has NaN
+    standard errors: the report says why and marks nothing identifiable or not (it printed
+    1e-90 "standard errors" and "not identifiable" before)."""
+    from types import SimpleNamespace
+
+    from clutchlab.physics import CircuitModel
+    from clutchlab.physics.fit import diverged_sensitivities
+    from clutchlab.validation.evaluate import Evaluation
+    from clutchlab.validation.report import jsonable, render_html, render_markdown
+
+    note = diverged_sensitivities([[1.45e89]])
+    res = SimpleNamespace(
+        model=CircuitModel, free=["reg_F0"], values={"reg_F0": -1.6},
+        std_errors={"reg_F0": float("nan")}, units={"reg_F0": "N"}, unidentifiable=(),
+        status="Error_In_Step_Computation (pre-fit)", success=False, iterations=11,
+        wall_s=57.4, effects=(), per_experiment={}, uncertainty_note=note,
+    )  # fmt: skip
+    model = SimpleNamespace(result_=res, settings=None, converged_=False, fitted=None)
+    fit = Evaluation.physics_fit(SimpleNamespace(models={"physics_fitted": model}))
+    assert fit["uncertainty_note"] == note
+    assert fit["parameters"]["reg_F0"]["identifiable"] is None
+    _, files = _report(folders[0], tmp_path / "fit")
+    doc = files.doc | {"physics_fit": jsonable(fit)}
+    for text in (render_markdown(doc, []), render_html(doc, [])):
+        assert "Standard errors, correlations and identifiability are not reported" in text
+        assert "up to 1.45e+89 bar per scaled parameter unit" in text
+
+
 def test_every_hysteresis_panel_above_a_hidden_one_has_its_current_axis(folders):
     """With three sources (measured + two models) the top-right panel sat above a hidden
     one: shared x axis, no tick labels, no "nominal VFS current (mA)" under it."""
