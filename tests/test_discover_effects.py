@@ -32,8 +32,10 @@ from clutchlab.validation.discover.scenarios import (
 pytestmark = pytest.mark.slow
 
 #: The effects that passed at the outcome-blind size of ``effect_size.calibrate_effect_size``
-#: in ``studies/discover_effect_size.py`` (5 of 13; every row is in BENCHMARKS.md). The
-#: magnetic hysteresis passes since the profile look (7918097).
+#: in ``studies/discover_effect_size.py`` (every row is in BENCHMARKS.md). The magnetic
+#: hysteresis passes since the profile look (7918097). air_entrainment passes too (6 of 13
+#: on session 51's code) but by one point (51 % against the 50 % bar), so it is not pinned
+#: here as a regression check.
 SIZED_PASSING = (
     "accumulator_spring_nonlinearity",
     "sensor_lag",
