@@ -194,26 +194,40 @@ def test_the_classifier_table_names_its_worst_experiment(folders, tmp_path):
     assert "<td>0.9902 (slow_50Hz_B)</td>" in html
 
 
+def _physics_fit_summary(*, settings=None, converged=False, **result):
+    """Evaluate's summary of a one-parameter (``reg_F0``) physics fit made without fitting:
+    ``result`` sets or overrides the fit result's fields (status, iterations, notes, …)."""
+    from types import SimpleNamespace
+
+    from clutchlab.physics import CircuitModel
+    from clutchlab.validation.evaluate import Evaluation
+
+    fields = {
+        "model": CircuitModel, "free": ["reg_F0"], "values": {"reg_F0": -1.6},
+        "std_errors": {"reg_F0": 0.01}, "units": {"reg_F0": "N"}, "unidentifiable": (),
+        "effects": (), "per_experiment": {},
+    }  # fmt: skip
+    res = SimpleNamespace(**(fields | result))
+    model = SimpleNamespace(result_=res, settings=settings, converged_=converged, fitted=None)
+    return Evaluation.physics_fit(SimpleNamespace(models={"physics_fitted": model}))
+
+
 @pytest.mark.parametrize("converged", [False, True])
 def test_a_fit_stopped_at_a_limit_says_which_limits_and_what_to_do(folders, tmp_path, converged):
     """The report gave "Status: Maximum_WallTime_Exceeded (pre-fit) (NOT converged — best
     iterate used)" and nothing on the limit it hit or how to get a converged fit."""
-    from types import SimpleNamespace
 
-    from clutchlab.physics import CircuitModel
     from clutchlab.physics.fit import FitSettings
-    from clutchlab.validation.evaluate import Evaluation
     from clutchlab.validation.report import jsonable, render_html, render_markdown
 
-    res = SimpleNamespace(
-        model=CircuitModel, free=["reg_F0"], values={"reg_F0": -1.6},
-        std_errors={"reg_F0": 0.01}, units={"reg_F0": "N"}, unidentifiable=(),
-        status="Maximum_WallTime_Exceeded", success=converged, iterations=4, wall_s=29.0,
-        effects=(), per_experiment={},
-    )  # fmt: skip
-    settings = FitSettings(time_limit_s=30.0, max_iter=7)
-    model = SimpleNamespace(result_=res, settings=settings, converged_=converged, fitted=None)
-    fit = Evaluation.physics_fit(SimpleNamespace(models={"physics_fitted": model}))
+    fit = _physics_fit_summary(
+        settings=FitSettings(time_limit_s=30.0, max_iter=7),
+        converged=converged,
+        status="Maximum_WallTime_Exceeded",
+        success=converged,
+        iterations=4,
+        wall_s=29.0,
+    )
     assert (fit["time_limit_s"], fit["max_iter"]) == (30.0, 7)
     _, files = _report(folders[0], tmp_path / "fit")
     doc = files.doc | {"physics_fit": jsonable(fit)}
@@ -229,21 +243,17 @@ def test_a_fit_whose_staged_start_is_the_model_says_so(folders, tmp_path):
     """A fit whose solver never got below its staged start keeps the staged start
     (FitResult.note): the report and the terminal summary say the staged start is scored,
     not "best iterate"."""
-    from types import SimpleNamespace
 
-    from clutchlab.physics import CircuitModel
-    from clutchlab.validation.evaluate import Evaluation
     from clutchlab.validation.report import jsonable, render_html, render_markdown, summary_lines
 
     note = "the solver did not get below the staged start, …: the staged start is the model"
-    res = SimpleNamespace(
-        model=CircuitModel, free=["reg_F0"], values={"reg_F0": -1.6},
-        std_errors={"reg_F0": 0.01}, units={"reg_F0": "N"}, unidentifiable=(),
-        status="Maximum_WallTime_Exceeded (pre-fit)", success=False, iterations=12,
-        wall_s=112.7, effects=(), per_experiment={}, note=note,
-    )  # fmt: skip
-    model = SimpleNamespace(result_=res, settings=None, converged_=False, fitted=None)
-    fit = Evaluation.physics_fit(SimpleNamespace(models={"physics_fitted": model}))
+    fit = _physics_fit_summary(
+        status="Maximum_WallTime_Exceeded (pre-fit)",
+        success=False,
+        iterations=12,
+        wall_s=112.7,
+        note=note,
+    )
     assert fit["note"] == note
     _, files = _report(folders[0], tmp_path / "fit")
     doc = files.doc | {"physics_fit": jsonable(fit)}
@@ -258,22 +268,19 @@ def test_a_fit_whose_sensitivities_diverged_reports_no_standard_errors(folders, 
     """A fit whose output sensitivities diverged (FitResult.uncertainty_note) has NaN
     standard errors: the report says why and marks nothing identifiable or not (it printed
     1e-90 "standard errors" and "not identifiable" before)."""
-    from types import SimpleNamespace
 
-    from clutchlab.physics import CircuitModel
     from clutchlab.physics.fit import diverged_sensitivities
-    from clutchlab.validation.evaluate import Evaluation
     from clutchlab.validation.report import jsonable, render_html, render_markdown
 
     note = diverged_sensitivities([[1.45e89]])
-    res = SimpleNamespace(
-        model=CircuitModel, free=["reg_F0"], values={"reg_F0": -1.6},
-        std_errors={"reg_F0": float("nan")}, units={"reg_F0": "N"}, unidentifiable=(),
-        status="Error_In_Step_Computation (pre-fit)", success=False, iterations=11,
-        wall_s=57.4, effects=(), per_experiment={}, uncertainty_note=note,
-    )  # fmt: skip
-    model = SimpleNamespace(result_=res, settings=None, converged_=False, fitted=None)
-    fit = Evaluation.physics_fit(SimpleNamespace(models={"physics_fitted": model}))
+    fit = _physics_fit_summary(
+        std_errors={"reg_F0": float("nan")},
+        status="Error_In_Step_Computation (pre-fit)",
+        success=False,
+        iterations=11,
+        wall_s=57.4,
+        uncertainty_note=note,
+    )
     assert fit["uncertainty_note"] == note
     assert fit["parameters"]["reg_F0"]["identifiable"] is None
     _, files = _report(folders[0], tmp_path / "fit")
