@@ -55,8 +55,8 @@ from clutchlab.validation.discover.refit import candidate_free, run_fit
 from clutchlab.validation.discover.scenarios import MAX_ERROR_RATIO, discovery_stand
 
 
-def _rmse(fit_or_model, params, traces) -> float:
-    return period_mean_metrics(fit_or_model, params, traces)[0]["rmse_bar"]
+def _rmse(model, params, traces) -> float:
+    return period_mean_metrics(model, params, traces)[0]["rmse_bar"]
 
 
 #: Simulation settings of the truth oracle's columns (label → settings).
@@ -70,7 +70,8 @@ ORACLE_STEPS = {
 
 def truth_oracle(run, traces) -> dict[str, float]:
     """Medium RMSE (bar, dither-period mean) of the stand's truth at each of
-    :data:`ORACLE_STEPS` (inf where the integration diverges)."""
+    :data:`ORACLE_STEPS` (inf where the simulation fails; a diverging step that does not
+    raise shows as pressures far outside the circuit's range, with a SimulationWarning)."""
     out = {}
     for label, sim in ORACLE_STEPS.items():
         err = []
