@@ -212,13 +212,22 @@ def _physics_fit_summary(*, settings=None, converged=False, **result):
     return Evaluation.physics_fit(SimpleNamespace(models={"physics_fitted": model}))
 
 
+def _fit_report(folder, out, fit):
+    """The report's document with ``fit`` as its physics-fit summary, and its Markdown and
+    HTML renderings."""
+    from clutchlab.validation.report import jsonable, render_html, render_markdown
+
+    _, files = _report(folder, out)
+    doc = files.doc | {"physics_fit": jsonable(fit)}
+    return doc, (render_markdown(doc, []), render_html(doc, []))
+
+
 @pytest.mark.parametrize("converged", [False, True])
 def test_a_fit_stopped_at_a_limit_says_which_limits_and_what_to_do(folders, tmp_path, converged):
     """The report gave "Status: Maximum_WallTime_Exceeded (pre-fit) (NOT converged — best
     iterate used)" and nothing on the limit it hit or how to get a converged fit."""
 
     from clutchlab.physics.fit import FitSettings
-    from clutchlab.validation.report import jsonable, render_html, render_markdown
 
     fit = _physics_fit_summary(
         settings=FitSettings(time_limit_s=30.0, max_iter=7),
@@ -229,9 +238,8 @@ def test_a_fit_stopped_at_a_limit_says_which_limits_and_what_to_do(folders, tmp_
         wall_s=29.0,
     )
     assert (fit["time_limit_s"], fit["max_iter"]) == (30.0, 7)
-    _, files = _report(folders[0], tmp_path / "fit")
-    doc = files.doc | {"physics_fit": jsonable(fit)}
-    for text in (render_markdown(doc, []), render_html(doc, [])):
+    _, texts = _fit_report(folders[0], tmp_path / "fit", fit)
+    for text in texts:
         said = "wall-time limit of 30 s (--fit-time-limit)" in text
         assert said is not converged
         assert ("an iteration limit of 7 (--fit-max-iter)" in text) is not converged
@@ -244,7 +252,7 @@ def test_a_fit_whose_staged_start_is_the_model_says_so(folders, tmp_path):
     (FitResult.note): the report and the terminal summary say the staged start is scored,
     not "best iterate"."""
 
-    from clutchlab.validation.report import jsonable, render_html, render_markdown, summary_lines
+    from clutchlab.validation.report import summary_lines
 
     note = "the solver did not get below the staged start, …: the staged start is the model"
     fit = _physics_fit_summary(
@@ -255,9 +263,8 @@ def test_a_fit_whose_staged_start_is_the_model_says_so(folders, tmp_path):
         note=note,
     )
     assert fit["note"] == note
-    _, files = _report(folders[0], tmp_path / "fit")
-    doc = files.doc | {"physics_fit": jsonable(fit)}
-    for text in (render_markdown(doc, []), render_html(doc, [])):
+    doc, texts = _fit_report(folders[0], tmp_path / "fit", fit)
+    for text in texts:
         assert "NOT converged — staged start used" in text
         assert "The solver did not get below the staged start" in text
     lines = summary_lines(doc | {"variants": {"physics_fitted": {"rmse_bar": 0.3}}})
@@ -270,7 +277,6 @@ def test_a_fit_whose_sensitivities_diverged_reports_no_standard_errors(folders, 
     1e-90 "standard errors" and "not identifiable" before)."""
 
     from clutchlab.physics.fit import diverged_sensitivities
-    from clutchlab.validation.report import jsonable, render_html, render_markdown
 
     note = diverged_sensitivities([[1.45e89]])
     fit = _physics_fit_summary(
@@ -283,9 +289,8 @@ def test_a_fit_whose_sensitivities_diverged_reports_no_standard_errors(folders, 
     )
     assert fit["uncertainty_note"] == note
     assert fit["parameters"]["reg_F0"]["identifiable"] is None
-    _, files = _report(folders[0], tmp_path / "fit")
-    doc = files.doc | {"physics_fit": jsonable(fit)}
-    for text in (render_markdown(doc, []), render_html(doc, [])):
+    _, texts = _fit_report(folders[0], tmp_path / "fit", fit)
+    for text in texts:
         assert "Standard errors, correlations and identifiability are not reported" in text
         assert "up to 1.45e+89 bar per scaled parameter unit" in text
 
