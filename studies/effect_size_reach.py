@@ -42,9 +42,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from clutchlab.data import dither_period_mean, dither_period_samples
 from clutchlab.errors import ClutchlabError
-from clutchlab.physics import CircuitModel, SimulationSettings, simulate
+from clutchlab.physics import CircuitModel, SimulationSettings
 from clutchlab.physics.effects import EFFECTS
 from clutchlab.physics.fit import resolve_free
 from clutchlab.physics.stand import run_stand
@@ -74,16 +73,10 @@ def truth_oracle(run, traces) -> dict[str, float]:
     raise shows as pressures far outside the circuit's range, with a SimulationWarning)."""
     out = {}
     for label, sim in ORACLE_STEPS.items():
-        err = []
-        for t in traces:
-            n = dither_period_samples(t)
-            y = dither_period_mean(t.get("clutch_pressure_bar"), n)
-            try:
-                yh = dither_period_mean(simulate(run.model, run.params, t, sim).pressure_bar, n)
-            except ClutchlabError:
-                yh = np.full_like(y, np.inf)
-            err.append(yh - y)
-        out[label] = float(np.sqrt(np.mean(np.concatenate(err) ** 2)))
+        try:
+            out[label] = period_mean_metrics(run.model, run.params, traces, sim)[0]["rmse_bar"]
+        except ClutchlabError:
+            out[label] = float("inf")
     return out
 
 
@@ -115,9 +108,8 @@ def null_floor(n_settings: int, settings: DiscoverySettings, seed: int = 1) -> f
 def named_refit(effect: str, settings: DiscoverySettings, seed: int = 1) -> dict:
     """The truth oracle and the named refit of ``effect`` at its outcome-blind size."""
     run, size = sized_stand(effect, seed)
-    test_all = [t for t in run.dataset if t.ramp in settings.test_ramps]
-    oracle = truth_oracle(run, test_all)
     base, train, test = _baseline(run.dataset, settings)
+    oracle = truth_oracle(run, test)
     cand = CircuitModel().with_effects(effect)
     own = [p.name for p in cand.parameters if p.name not in set(base.params())]
     truth = {k: run.params[k] for k in own}
@@ -129,7 +121,8 @@ def named_refit(effect: str, settings: DiscoverySettings, seed: int = 1) -> dict
         label: run_fit(cand, train, settings, free, cand.params(**vals), budget_ok=True)
         for label, vals in starts.items()
     }
-    label = min(refits, key=lambda k: _rmse(cand, refits[k].params(), train))
+    train_after = {k: _rmse(cand, r.params(), train) for k, r in refits.items()}
+    label = min(train_after, key=train_after.__getitem__)
     ref = refits[label]
     before = _rmse(base.model(), base.params(), test)
     after = _rmse(cand, ref.params(), test)
@@ -139,10 +132,7 @@ def named_refit(effect: str, settings: DiscoverySettings, seed: int = 1) -> dict
         "at_bound": size.at_bound,
         "truth": truth,
         "oracle_bar": oracle,
-        "train_rmse_bar": [
-            _rmse(base.model(), base.params(), train),
-            _rmse(cand, ref.params(), train),
-        ],
+        "train_rmse_bar": [_rmse(base.model(), base.params(), train), train_after[label]],
         "test_rmse_bar": [before, after],
         "drop_pct": 100.0 * (1.0 - after / before),
         "start": label,

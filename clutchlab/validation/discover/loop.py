@@ -32,7 +32,7 @@ from tqdm.auto import tqdm
 
 from ...data import Dataset, Trace, dither_period_mean, dither_period_samples, pressure_metrics
 from ...errors import ClutchlabError, FitError, FitWarning, warn_at_caller
-from ...physics import CircuitModel, simulate
+from ...physics import CircuitModel, SimulationSettings, simulate
 from ...physics.effects import EFFECTS
 from ...physics.fit import FitResult, at_fit_rate, resolve_free
 from ...physics.parameters import ParameterSet, quiet_design_checks
@@ -55,10 +55,14 @@ _FIGURE_POINTS = 2000
 
 
 def period_mean_metrics(
-    model: CircuitModel, params: ParameterSet, traces: list[Trace]
+    model: CircuitModel,
+    params: ParameterSet,
+    traces: list[Trace],
+    sim: SimulationSettings | None = None,
 ) -> tuple[dict[str, float], dict[str, tuple[np.ndarray, np.ndarray]]]:
     """RMSE (bar) and fit % of the dither-period-mean pressure over ``traces`` (concatenated).
 
+    ``sim``: the simulation settings (the defaults, as every scored ramp, when None).
     Returns the metrics and, per trace, ``(nominal current mA, residual bar)`` thinned
     for figures. NaN metrics for no traces.
     """
@@ -68,7 +72,7 @@ def period_mean_metrics(
     for tr in traces:
         n = dither_period_samples(tr)
         y = dither_period_mean(tr.get("clutch_pressure_bar"), n)
-        yh = dither_period_mean(simulate(model, params, tr).pressure_bar, n)
+        yh = dither_period_mean(simulate(model, params, tr, sim).pressure_bar, n)
         meas.append(y)
         pred.append(yh)
         step = max(len(y) // _FIGURE_POINTS, 1)
