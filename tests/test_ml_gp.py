@@ -38,6 +38,26 @@ def test_lml_gradient_matches_finite_differences(name, ard):
     np.testing.assert_allclose(grad, num, rtol=1e-4, atol=1e-4)
 
 
+@pytest.mark.parametrize("name", ["rq", "rbf"])
+@pytest.mark.parametrize("ard", [True, False])
+def test_gradient_contractions_equal_the_derivative_matrices(name, ard):
+    """The likelihood's gradient sums, taken without the derivative matrices, are theirs."""
+    X, _ = _data(80, 4)
+    spec = kernel_spec(name, X.shape[1], ard)
+    theta = np.random.default_rng(2).normal(0, 0.5, spec.n_params)
+    W = np.random.default_rng(3).standard_normal((80, 80))
+    W += W.T
+    K, grads = spec.with_gradient(theta, X)
+    K2, contract = spec.with_contractions(theta, X)
+    np.testing.assert_allclose(K2, K, rtol=1e-12, atol=1e-14)
+    ref = np.array([np.einsum("ij,ij->", W, g) for g in grads])
+    tol = 1e-10 * np.abs(ref).max()
+    np.testing.assert_allclose(contract(W), ref, rtol=1e-10, atol=tol)
+    # a common offset of the inputs (the kernel ignores it) costs the expansion no digits
+    _, shifted = spec.with_contractions(theta, X + 1e4)
+    np.testing.assert_allclose(shifted(W), ref, rtol=1e-9, atol=10 * tol)
+
+
 @pytest.mark.parametrize(
     ("name", "sk_kernel"),
     [

@@ -177,6 +177,66 @@ class KernelSpec:
             grads.append(K * alpha * (-logb + u / base))
         return K, grads
 
+    def with_contractions(self, theta: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, object]:
+        """K(x, x) and a function that contracts a symmetric matrix with every ``dK/dθ_i``.
+
+        The marginal likelihood's gradient needs only ``Σ_kl W_kl ∂K_kl/∂θ_i`` for one
+        symmetric ``W``; this gives those sums without forming the d + 2 derivative
+        matrices of :meth:`with_gradient`: for a length scale
+        ``Σ_kl M_kl (x_kj − x_lj)² = 2 Σ_k m_k x_kj² − 2 x_jᵀ M x_j`` with
+        ``M = W ⊙ ∂k/∂(r²)``-like weights and ``m`` its row sums (inputs centred first,
+        so the expansion loses no digits to a common offset).
+
+        Parameters
+        ----------
+        theta : numpy.ndarray
+            Log-hyperparameters.
+        x : numpy.ndarray
+            n × d inputs (scaled units).
+
+        Returns
+        -------
+        K : numpy.ndarray
+            n × n kernel matrix (a new array the caller may modify).
+        contract : callable
+            ``contract(W)`` → array of ``Σ W ⊙ dK/dθ_i`` in the order of
+            :attr:`param_names`, for a symmetric n × n ``W``.
+        """
+        s2, ell, alpha = self.unpack(theta)
+        xs = x / ell
+        xs -= xs.mean(axis=0)
+        d2 = sq_dist(xs, xs)
+        if self.name == "rbf":
+            kern = np.exp(-0.5 * d2)
+            dr, logb, base = kern, None, None
+        else:
+            base = 1.0 + d2 / (2.0 * alpha)
+            logb = np.log(base)
+            kern = np.exp(-alpha * logb)
+            dr = kern / base
+
+        def contract(W: np.ndarray) -> np.ndarray:
+            out = np.empty(self.n_params)
+            out[0] = s2 * np.vdot(W, kern)
+            M = W * dr
+            M *= s2
+            if self.ard:
+                m = M.sum(axis=1)
+                out[1 : 1 + self.n_dims] = 2.0 * (m @ xs**2) - 2.0 * np.einsum(
+                    "kj,kj->j", xs, M @ xs
+                )
+            else:
+                out[1] = np.vdot(M, d2)
+            if self.name == "rq":
+                u = d2 / (2.0 * alpha)
+                u /= base
+                u -= logb
+                u *= kern
+                out[-1] = s2 * alpha * np.vdot(W, u)
+            return out
+
+        return s2 * kern, contract
+
 
 def kernel_spec(name: str, n_dims: int, ard: bool = True) -> KernelSpec:
     """The :class:`KernelSpec` of kernel ``name`` ("rq" or "rbf") on ``n_dims`` inputs."""

@@ -51,6 +51,7 @@ import warnings
 
 import numpy as np
 from scipy.linalg import LinAlgError, cho_solve, cholesky, solve_triangular
+from scipy.linalg.lapack import dpotri
 from scipy.optimize import minimize
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.utils import check_random_state
@@ -79,6 +80,18 @@ def _jittered_cholesky(K: np.ndarray) -> np.ndarray:
         except LinAlgError:
             continue
     raise LinAlgError("kernel matrix is not positive definite even with jitter")
+
+
+def _cho_inverse(L: np.ndarray) -> np.ndarray:
+    """K⁻¹ from the lower Cholesky factor L of K (LAPACK ``potri``: half the work of solving
+    against the identity)."""
+    inv, info = dpotri(L, lower=1)
+    if info != 0:
+        raise LinAlgError(f"inverse from the Cholesky factor failed (LAPACK potri info={info})")
+    inv = np.tril(inv)
+    inv += inv.T  # numpy buffers the overlapping transpose
+    inv[np.diag_indices_from(inv)] *= 0.5
+    return inv
 
 
 def split_blocks(
@@ -159,10 +172,9 @@ def log_marginal_likelihood(
     noise = math.exp(theta[-1]) / weight
     n = y.size
     if eval_gradient:
-        K, grads = kernel.with_gradient(theta[:-1], x)
-        K = K.copy()  # grads[0] is K itself (dK/dlog s²)
+        K, contract = kernel.with_contractions(theta[:-1], x)
     else:
-        K, grads = kernel(theta[:-1], x), []
+        K = kernel(theta[:-1], x)
     K[np.diag_indices_from(K)] += noise
     try:
         L = cholesky(K, lower=True, check_finite=False)
@@ -173,10 +185,9 @@ def log_marginal_likelihood(
     if not eval_gradient:
         return lml
     W = np.outer(a, a)
-    W -= cho_solve((L, True), np.eye(n), check_finite=False)
+    W -= _cho_inverse(L)
     grad = np.empty(theta.size)
-    for i, dK in enumerate(grads):
-        grad[i] = 0.5 * np.einsum("ij,ij->", W, dK)
+    grad[:-1] = 0.5 * contract(W)
     grad[-1] = 0.5 * float(np.diag(W) @ noise)
     return lml, grad
 
