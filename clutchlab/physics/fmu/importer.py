@@ -31,8 +31,12 @@ __all__ = ["FmuPhysics", "FmuSimulation"]
 
 _WAVES = ("sine", "triangle", "square")
 _FMI2_WARNING = 1
-#: Extra wall time (s) granted to an isolated run for starting the child interpreter.
+#: Extra wall time (s) granted to an isolated run for starting the child interpreter and
+#: loading and initializing the FMU, before its stepping (and so its clock) starts.
 SPAWN_ALLOWANCE_S = 30.0
+#: Wall time (s) the parent waits past ``timeout_s`` once the child reported that its
+#: stepping started: the child's own check (between steps) normally fires first.
+KILL_MARGIN_S = 1.0
 
 
 @dataclass
@@ -124,7 +128,10 @@ class FmuPhysics(BaseEstimator):
         FMU's own start value is listed in each simulation's messages and in
         :meth:`parameter_summary`.
     timeout_s : float
-        Wall-time limit of one trace's simulation (s).
+        Wall-time limit of one trace's simulation (s), from its first step; an isolated
+        run is granted :data:`SPAWN_ALLOWANCE_S` more for starting its process and loading
+        and initializing the FMU, and is killed :data:`KILL_MARGIN_S` past the limit once
+        it is stepping.
     isolate : bool
         Run the FMU in a child process (forked: ~15 ms per trace), killed at the timeout:
         an FMU that hangs inside one step or crashes gives a clear error instead of hanging
@@ -442,8 +449,10 @@ class _Job:
     trace_name: str
 
 
-def _run(job: _Job) -> tuple[np.ndarray, list[str]]:
-    """The stepping loop, through FMPy's FMU2Slave and its ctypes functions."""
+def _run(job: _Job, started=None) -> tuple[np.ndarray, list[str]]:
+    """The stepping loop, through FMPy's FMU2Slave and its ctypes functions.
+
+    ``started``, if given, is called when the stepping (and its clock) starts."""
     from fmpy import calloc, free
     from fmpy.fmi2 import (
         FMU2Slave,
@@ -522,6 +531,8 @@ def _run(job: _Job) -> tuple[np.ndarray, list[str]]:
         if get_real(fmu.component, vr_out, ny, val_out) > _FMI2_WARNING:
             raise err("fmi2GetReal failed")
         y[0] = v_out
+        if started is not None:
+            started()
         t_start = time.perf_counter()
         for k in range(n - 1):
             status = do_step(fmu.component, float(t[k]), float(dt[k]), 1)
@@ -562,7 +573,7 @@ def _child(conn, job: _Job) -> None:  # pragma: no cover - runs in the child pro
 
     faulthandler.disable()  # a crashing FMU is reported by the parent, not dumped here
     try:
-        conn.send(("ok", _run(job)))
+        conn.send(("ok", _run(job, started=lambda: conn.send(("started", None)))))
     except BaseException as exc:
         conn.send(("error", exc))
     finally:
@@ -577,21 +588,28 @@ def _run_isolated(job: _Job) -> tuple[np.ndarray, list[str]]:
     proc.start()
     child.close()
     try:
-        if not parent.poll(job.timeout_s + SPAWN_ALLOWANCE_S):
-            proc.kill()
-            proc.join()
-            raise FmuTimeoutError(
-                f"FMU {job.fmu} on {job.trace_name}: timeout after {job.timeout_s:g} s "
-                "(child process killed)"
-            )
-        try:
-            kind, payload = parent.recv()
-        except EOFError:
-            proc.join()
-            raise SimulationError(
-                f"FMU {job.fmu} on {job.trace_name}: the FMU process died "
-                f"(exit code {proc.exitcode})"
-            ) from None
+        # Starting the child, loading and initializing the FMU: the allowance; once the child
+        # says its stepping started, the timeout (plus a margin for its own check).
+        wait = job.timeout_s + SPAWN_ALLOWANCE_S
+        while True:
+            if not parent.poll(wait):
+                proc.kill()
+                proc.join()
+                raise FmuTimeoutError(
+                    f"FMU {job.fmu} on {job.trace_name}: timeout after {job.timeout_s:g} s "
+                    "(child process killed)"
+                )
+            try:
+                kind, payload = parent.recv()
+            except EOFError:
+                proc.join()
+                raise SimulationError(
+                    f"FMU {job.fmu} on {job.trace_name}: the FMU process died "
+                    f"(exit code {proc.exitcode})"
+                ) from None
+            if kind != "started":
+                break
+            wait = job.timeout_s + KILL_MARGIN_S
     finally:
         parent.close()
         proc.join(timeout=5)
