@@ -135,6 +135,22 @@ class KernelSpec:
         """Prior variance k(x, x) for n points (s², stationary)."""
         return np.full(n, float(np.exp(theta[0])))
 
+    def _gradient_terms(self, theta: np.ndarray, x: np.ndarray):
+        """What both gradient forms share: s², α, the centred scaled inputs, r², the
+        unit-variance kernel, ``dr`` (dk/dlog ℓ_j = s²·dr·r_j²) and, for the rational
+        quadratic, ``1 + r²/2α`` and its log (None for the RBF)."""
+        s2, ell, alpha = self.unpack(theta)
+        xs = x / ell
+        xs -= xs.mean(axis=0)  # distances unchanged; the contractions' expansion keeps digits
+        d2 = sq_dist(xs, xs)
+        if self.name == "rbf":
+            kern = np.exp(-0.5 * d2)
+            return s2, alpha, xs, d2, kern, kern, None, None  # dk/d(r²) = −½ k
+        base = 1.0 + d2 / (2.0 * alpha)
+        logb = np.log(base)
+        kern = np.exp(-alpha * logb)
+        return s2, alpha, xs, d2, kern, kern / base, base, logb  # (1 + r²/2α)^(−α−1)
+
     def with_gradient(self, theta: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, list]:
         """K(x, x) and its derivatives with respect to each log-hyperparameter.
 
@@ -152,17 +168,7 @@ class KernelSpec:
         grads : list of numpy.ndarray
             ``dK/dθ_i`` (n × n each), in the order of :attr:`param_names`.
         """
-        s2, ell, alpha = self.unpack(theta)
-        xs = x / ell
-        d2 = sq_dist(xs, xs)
-        if self.name == "rbf":
-            kern = np.exp(-0.5 * d2)
-            dr = kern  # dk/d(r²) = −½ k ;  dk/dlog ℓ_j = k · r_j²
-        else:
-            base = 1.0 + d2 / (2.0 * alpha)
-            logb = np.log(base)
-            kern = np.exp(-alpha * logb)
-            dr = kern / base  # dk/dlog ℓ_j = (1 + r²/2α)^(−α−1) · r_j²
+        s2, alpha, xs, d2, kern, dr, base, logb = self._gradient_terms(theta, x)
         K = s2 * kern
         grads = [K]
         if self.ard:
@@ -202,18 +208,7 @@ class KernelSpec:
             ``contract(W)`` → array of ``Σ W ⊙ dK/dθ_i`` in the order of
             :attr:`param_names`, for a symmetric n × n ``W``.
         """
-        s2, ell, alpha = self.unpack(theta)
-        xs = x / ell
-        xs -= xs.mean(axis=0)
-        d2 = sq_dist(xs, xs)
-        if self.name == "rbf":
-            kern = np.exp(-0.5 * d2)
-            dr, logb, base = kern, None, None
-        else:
-            base = 1.0 + d2 / (2.0 * alpha)
-            logb = np.log(base)
-            kern = np.exp(-alpha * logb)
-            dr = kern / base
+        s2, alpha, xs, d2, kern, dr, base, logb = self._gradient_terms(theta, x)
 
         def contract(W: np.ndarray) -> np.ndarray:
             out = np.empty(self.n_params)
