@@ -380,7 +380,10 @@ def decode_csv(path: str | Path, wanted: Callable[[str], bool] | None = None) ->
         while trailing < len(header) and len(header) - 1 - trailing in unnamed:
             trailing += 1
         needed = len(header) - trailing
-        short = _short_rows(path, needed, n, dialect.sep)
+        # a row with fewer fields reads as NaN in its last needed column: only a file with a
+        # missing value there is scanned for short rows (the scan re-reads the whole file)
+        gaps = needed > 0 and bool(np.isnan(columns[header[needed - 1]]).any())
+        short = _short_rows(path, needed, n, dialect.sep) if gaps else []
     except csv.Error as exc:  # e.g. a field longer than the csv module's field size limit
         raise DataError(f"{path}: malformed CSV ({exc})") from None
     if fields < needed:
