@@ -74,6 +74,67 @@ def fit_rate_note(dataset, settings) -> str:
     )
 
 
+def start_from_fit(path: str, effects: tuple[str, ...]):
+    """The model and start of a fit that goes on from a saved fit.
+
+    The saved fit's structure (its effects and flexible laws) plus ``effects``, started at
+    its values; a law or effect it did not hold starts at its defaults, a held switch of
+    one switched on (:func:`~clutchlab.physics.effects.flexible.switched_on`).
+
+    Parameters
+    ----------
+    path : str
+        A fit JSON written by ``clutchlab fit-physics`` (or :meth:`PhysicsFitter.save`).
+    effects : tuple of str
+        Effects and flexible laws to add to the saved fit's structure.
+
+    Returns
+    -------
+    (CircuitModel, ParameterSet)
+        The model to fit and its start.
+
+    Raises
+    ------
+    FitError
+        The file cannot be read or is not a fit result.
+    """
+    from .physics.effects.flexible import switched_on
+    from .physics.fit import FitResult
+
+    saved = FitResult.from_json(path)
+    held = set(saved.effects)
+    model = saved.model().with_effects(*(e for e in effects if e not in held))
+    names = {p.name for p in model.parameters}
+    start = model.params(**{k: v for k, v in saved.values.items() if k in names})
+    new = {k: v for k, v in switched_on(model).items() if k not in saved.values}
+    print(
+        f"starting from {path} ({', '.join(saved.effects) or 'base circuit'}"
+        + (f"; added {', '.join(e for e in effects if e not in held)}" if effects else "")
+        + "): its values, no staged start"
+    )
+    return model, start.replace(**new) if new else start
+
+
+def _worse_than_start(fitter, dataset, start) -> str:
+    """Why a fit from ``--start`` ended worse than its start on the training experiments
+    (RMS over them of each one's period-mean RMSE), or ``""``. A solver stage judges its
+    own experiments only: a pre-fit on a subset can end where every training experiment
+    is worse off than at the start."""
+    import math
+
+    def rms(rows: dict) -> float:
+        return math.sqrt(sum(m["rmse_bar"] ** 2 for m in rows.values()) / max(len(rows), 1))
+
+    before, after = rms(fitter.training_metrics(dataset, start)), rms(fitter.result_.per_experiment)
+    if after <= before:
+        return ""
+    return (
+        f"the fit did not improve on its start: training RMSE {after:.4f} bar against "
+        f"{before:.4f} at the start (RMS over the training experiments); the start stays "
+        "the better model"
+    )
+
+
 def _cmd_fit_physics(args: argparse.Namespace) -> int:
     from .data import load_dataset
     from .errors import FitError, FitWarning
@@ -82,7 +143,9 @@ def _cmd_fit_physics(args: argparse.Namespace) -> int:
 
     dataset = load_dataset(args.dataset, channel_map=args.map)
     print_dither_notes(dataset)
-    model = CircuitModel().with_effects(*_csv(args.effects))
+    model, start = CircuitModel().with_effects(*_csv(args.effects)), None
+    if args.start:
+        model, start = start_from_fit(args.start, _csv(args.effects))
     kw = {
         "train_ramps": _csv(args.train) or ("fast", "slow"),
         "progress": not args.quiet,
@@ -104,7 +167,7 @@ def _cmd_fit_physics(args: argparse.Namespace) -> int:
     settings = FitSettings(**kw)
     if note := fit_rate_note(dataset, settings):
         print(note)
-    fitter = PhysicsFitter(model, settings)
+    fitter = PhysicsFitter(model, settings, start=start)
     out = Path(args.out)
     try:
         with warnings.catch_warnings():
@@ -124,6 +187,9 @@ def _cmd_fit_physics(args: argparse.Namespace) -> int:
         print(f"clutchlab fit-physics: error: {exc}", file=sys.stderr)
         return 1
     res = fitter.result_
+    if start is not None and (worse := _worse_than_start(fitter, dataset, start)):
+        print(f"clutchlab fit-physics: error: {worse}; nothing written", file=sys.stderr)
+        return 1
     fitter.save(out)
     if fitter.staged_ is not None:
         print(fitter.staged_.summary())
@@ -180,6 +246,12 @@ def register(sub) -> None:
         type=int,
         help="solver iterations of the fit's main stage (default 50; the refinement on all "
         "training data keeps its own few)",
+    )
+    p.add_argument(
+        "--start",
+        metavar="FIT.json",
+        help="go on from a saved fit: its structure (plus --effects) and its values as the "
+        "start, no staged start (e.g. to add a flexible law to a fit already made)",
     )
     p.add_argument(
         "--no-staged-start",

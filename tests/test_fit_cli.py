@@ -7,7 +7,7 @@ import subprocess
 import sys
 from types import SimpleNamespace
 
-from clutchlab.cli_fit import limit_hint, plateau_note
+from clutchlab.cli_fit import _worse_than_start, limit_hint, plateau_note
 from clutchlab.data import save_dataset
 from clutchlab.physics.fit import FitResult
 from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
@@ -97,6 +97,37 @@ def test_fit_physics_cli_writes_model_and_json(tmp_path):
     )
     assert bad.returncode == 2 and "substeps must be 1..16" in bad.stderr
     assert not fresh.exists()
+
+    # --start: go on from the fit just written, an effect added, at the fit's values
+    more = tmp_path / "more.json"
+    for start, target, why in (
+        (out, out, "is this command's input"),
+        (tmp_path / "none.json", more, "cannot read"),
+    ):
+        bad = subprocess.run(
+            [*cmd[:-1], str(target), "--train", "fast", "--quiet", "--start", str(start)],
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+        assert bad.returncode == 2 and why in bad.stderr, bad.stderr
+    assert not more.exists()
+    base = [*cmd[:-1], str(more), "--train", "fast", "--substeps", "3", "--quiet"]
+    res = subprocess.run(
+        [*base, "--start", str(out), "--effects", "sensor_lag", "--free", "slag_tau"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert f"starting from {out}" in res.stdout and "added sensor_lag" in res.stdout
+    assert res.returncode == 0, res.stderr
+    again = FitResult.from_json(more)
+    assert "sensor_lag" in again.effects and again.free == ["slag_tau"]
+    assert all(again.values[k] == v for k, v in fit.values.items())  # the start's values
+    assert (
+        again.per_experiment["fast_50Hz_A"]["rmse_bar"]
+        <= fit.per_experiment["fast_50Hz_A"]["rmse_bar"]
+    )
 
 
 def test_fit_stopped_at_its_limit_writes_the_best_iterate_as_the_model(
@@ -193,3 +224,19 @@ def test_a_cost_plateau_is_explained_in_the_fit_s_numbers():
     note = plateau_note(status, FitSettings(prefit_plateau_iter=4, prefit_obj_change_tol=2e-3))
     assert "0.2 %" in note and "last 4 iterations" in note
     assert plateau_note("Solved_To_Acceptable_Level (pre-fit)", FitSettings()) == ""
+
+
+def test_a_fit_from_a_start_that_ends_worse_there_says_so():
+    """A pre-fit on a subset can end where every training experiment is worse off."""
+
+    def fitter(start_rmse, fit_rmse):
+        rows = {"a": {"rmse_bar": fit_rmse}, "b": {"rmse_bar": fit_rmse}}
+        return SimpleNamespace(
+            training_metrics=lambda data, start: {k: {"rmse_bar": start_rmse} for k in rows},
+            result_=SimpleNamespace(per_experiment=rows),
+        )
+
+    why = _worse_than_start(fitter(0.1, 0.2), None, None)
+    assert "did not improve on its start: training RMSE 0.2000 bar against 0.1000" in why
+    assert _worse_than_start(fitter(0.2, 0.1), None, None) == ""
+    assert _worse_than_start(fitter(0.1, 0.1), None, None) == ""

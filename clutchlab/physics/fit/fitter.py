@@ -644,6 +644,31 @@ class PhysicsFitter:
         self._check_fitted()
         return simulate(self.model_, self.params_, trace, settings).pressure_bar
 
+    def training_metrics(
+        self, data: Dataset | Trace | list[Trace], params: ParameterSet | None = None
+    ) -> dict[str, dict[str, float]]:
+        """Each training experiment's RMSE (bar) and fit (%) of the dither-period-mean clutch
+        pressure, as the fit result's ``per_experiment``.
+
+        Parameters
+        ----------
+        data : Dataset, Trace or list of Trace
+            As for :meth:`fit` (its training experiments are scored).
+        params : ParameterSet, optional
+            Values of the fitted model's parameters (e.g. the fit's start); the fitted
+            values by default.
+
+        Returns
+        -------
+        dict
+            ``experiment name -> {"rmse_bar": …, "fit_pct": …}``.
+        """
+        self._check_fitted()
+        settings = self.settings or FitSettings()
+        traces = at_fit_rate(self._training(data), settings.fit_rate_Hz)
+        values = [params if params is not None else self.params_] * len(traces)
+        return _per_experiment_metrics(self.model_, values, traces, settings.workers)
+
     def save(self, path) -> None:
         """Write the fit result as JSON.
 
