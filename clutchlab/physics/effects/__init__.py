@@ -13,6 +13,7 @@ from ...errors import ModelError
 from .base import Effect
 from .flexible import (
     FreeLatchThresholds,
+    LatchDitherBand,
     LatchLineSelect,
     LatchPilotLag,
     MonotoneForceCorrection,
@@ -42,6 +43,7 @@ __all__ = [
     "Effect",
     "FlowForce",
     "FreeLatchThresholds",
+    "LatchDitherBand",
     "LatchLineSelect",
     "LatchPilotLag",
     "LatchThresholdDrift",
@@ -72,6 +74,7 @@ FLEXIBLE_LAWS: dict[str, type[Effect]] = {
         LatchLineSelect,
         RegulatorPilotLag,
         LatchPilotLag,
+        LatchDitherBand,
     )
 }
 

@@ -39,6 +39,10 @@ class Effect(ABC):
         A flexible law that discovery offers as an alternative to a candidate only
         when the model already holds these laws (``latch_pilot_lag`` after
         ``reg_pilot_lag``; default: always).
+    ``WARM_ONLY``
+        A flexible law meant to be added to a fit already made (``fit-physics --start``):
+        no structure selection fits it from the datasheet start and discovery never
+        offers it as an alternative (``latch_dither_band``; default False).
     """
 
     name: str = ""
@@ -54,6 +58,8 @@ class Effect(ABC):
     HELD_SWITCH: bool = False
     #: Laws the model must hold before discovery offers this one as an alternative.
     ALTERNATIVE_AFTER: tuple[str, ...] = ()
+    #: Added to a fit already made only (no structure selection, no discovery alternative).
+    WARM_ONLY: bool = False
 
     @classmethod
     def fit_parameters(cls) -> tuple[str, ...]:

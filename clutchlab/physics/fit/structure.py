@@ -70,7 +70,8 @@ STRUCTURES: dict[str, tuple[str, ...]] = {
     # candidates: the first two are switched on by the staged start's lag signature
     # (FitSettings.regulator_lag), the third is discovery's alternative; at their default
     # weight 0 they act on nothing.
-    "flex": tuple(n for n, law in FLEXIBLE_LAWS.items() if not law.HELD_SWITCH),
+    # (nor the laws added to a fit already made only, WARM_ONLY: latch_dither_band)
+    "flex": tuple(n for n, law in FLEXIBLE_LAWS.items() if not (law.HELD_SWITCH or law.WARM_ONLY)),
 }
 
 #: Candidates compared by default: the datasheet form and each flexible law alone

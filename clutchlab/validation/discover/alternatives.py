@@ -113,7 +113,7 @@ def alternatives_for(current: CircuitModel, free: tuple[str, ...], k: int) -> li
     out = []
     held = set(current.effect_names)
     for name, cls in FLEXIBLE_LAWS.items():
-        if name in held or not cls.fit_parameters():
+        if name in held or not cls.fit_parameters() or cls.WARM_ONLY:
             # a switch with nothing to fit (latch_line_select) is at its start the current
             # model itself: no alternative
             continue
