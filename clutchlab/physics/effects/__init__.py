@@ -19,6 +19,7 @@ from .flexible import (
     MonotoneForceCorrection,
     PlayHysteresis,
     RegulatorPilotLag,
+    dither_band_terms,
 )
 from .friction import DitherFrictionReduction, StribeckFriction
 from .hydraulic import (
@@ -57,6 +58,7 @@ __all__ = [
     "StribeckFriction",
     "SupplyDroop",
     "TransportDelay",
+    "dither_band_terms",
     "effect_names",
     "effect_of_parameter",
     "effect_table",

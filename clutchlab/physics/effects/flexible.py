@@ -35,6 +35,7 @@ from __future__ import annotations
 import math
 
 import casadi as ca
+import numpy as np
 
 from ..assembly import Assembly, StateSpec
 from ..components.base import param
@@ -52,6 +53,7 @@ __all__ = [
     "MonotoneForceCorrection",
     "PlayHysteresis",
     "RegulatorPilotLag",
+    "dither_band_terms",
     "switched_on",
 ]
 
@@ -378,6 +380,31 @@ BAND_A_REF_MA = 100.0
 BAND_A_ON_MA = 10.0
 
 
+def dither_band_terms(amp_mA, freq_Hz, log=np.log) -> tuple:
+    """The five terms of :class:`LatchDitherBand`'s half-width, one per parameter.
+
+    ``w = Σ p_i t_i`` with ``(t_i) = (g v, g v², a/100, a/100 · v, a/100 · v²)``, ``a`` the
+    dither amplitude (mA), ``v = log₂(√(f² + 1) / 50 Hz)`` (smooth, ≥ 1 Hz without dither)
+    and ``g = a / (a + 10 mA)``; in the order of ``LatchDitherBand.FIT``.
+
+    Parameters
+    ----------
+    amp_mA, freq_Hz : float, ndarray or CasADi expression
+        Dither amplitude (mA) and frequency (Hz).
+    log : callable
+        Natural logarithm for the argument type (``numpy.log``, ``casadi.log``).
+
+    Returns
+    -------
+    tuple
+        The five terms (per unit of their parameter, bar).
+    """
+    v = log((freq_Hz**2 + 1.0) ** 0.5 / BAND_F_REF_HZ) / math.log(2.0)
+    gate = amp_mA / (amp_mA + BAND_A_ON_MA)
+    scale = amp_mA / BAND_A_REF_MA
+    return (gate * v, gate * v * v, scale, scale * v, scale * v * v)
+
+
 class LatchDitherBand(Effect):
     """A latch hysteresis band that depends on the dither amplitude and frequency.
 
@@ -398,8 +425,11 @@ class LatchDitherBand(Effect):
     with the latch's own thresholds. All five parameters at 0 (the default) is exactly
     today's model; without dither (``a = 0``) the law does nothing.
 
-    Fit it from a fit already made, ``clutchlab fit-physics DATA --start FIT.json --effects
-    latch_dither_band`` (:attr:`WARM_ONLY`).
+    The default fit adds it after its solver where the slow ramps' latch snaps ask for it,
+    held at the values the snaps give (``FitSettings.latch_band``,
+    :mod:`~clutchlab.physics.fit.latch_band`); it can also be fitted from a fit already
+    made, ``clutchlab fit-physics DATA --start FIT.json --effects latch_dither_band``
+    (:attr:`WARM_ONLY`).
     """
 
     name = "latch_dither_band"
@@ -418,21 +448,16 @@ class LatchDitherBand(Effect):
     )
     # signed (a band can widen or narrow): fitted parameters, not one-sided strengths
     STRENGTH = ()
-    #: Meant to be added to a fit already made (``fit-physics --start FIT.json --effects
-    #: latch_dither_band``): fitted from the datasheet start it did worse (session 55, E4),
-    #: so no structure selection fits it from there.
+    #: Added to a fit already made (the fit's latch band stage, or ``fit-physics --start
+    #: FIT.json --effects latch_dither_band``): fitted from the datasheet start it did worse
+    #: (session 55, E4), so no structure selection fits it from there.
     WARM_ONLY = True
     FIT = ("ldb_c1", "ldb_c2", "ldb_k0", "ldb_k1", "ldb_k2")
 
     def apply(self, asm: Assembly) -> None:
         def pilot(a, prev):
-            amp = a.u["dither_amp_mA"]
-            f = ca.sqrt(a.u["dither_freq_Hz"] ** 2 + 1.0)  # smooth, ≥ 1 Hz without dither
-            v = ca.log(f / BAND_F_REF_HZ) / math.log(2.0)
-            gate = amp / (amp + BAND_A_ON_MA)
-            w = gate * (a.p("ldb_c1") * v + a.p("ldb_c2") * v * v) + amp / BAND_A_REF_MA * (
-                a.p("ldb_k0") + a.p("ldb_k1") * v + a.p("ldb_k2") * v * v
-            )
+            terms = dither_band_terms(a.u["dither_amp_mA"], a.u["dither_freq_Hz"], ca.log)
+            w = sum(a.p(n) * t for n, t in zip(self.FIT, terms, strict=True))
             return prev + (2.0 * a.x("latch") - 1.0) * w
 
         asm.wrap("p_latch_pilot", pilot)
