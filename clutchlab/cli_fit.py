@@ -120,12 +120,10 @@ def _worse_than_start(fitter, dataset, start) -> str:
     (RMS over them of each one's period-mean RMSE), or ``""``. A solver stage judges its
     own experiments only: a pre-fit on a subset can end where every training experiment
     is worse off than at the start."""
-    import math
+    from .physics.fit import training_rms
 
-    def rms(rows: dict) -> float:
-        return math.sqrt(sum(m["rmse_bar"] ** 2 for m in rows.values()) / max(len(rows), 1))
-
-    before, after = rms(fitter.training_metrics(dataset, start)), rms(fitter.result_.per_experiment)
+    before = training_rms(fitter.training_metrics(dataset, start))
+    after = training_rms(fitter.result_.per_experiment)
     if after <= before:
         return ""
     return (
@@ -155,6 +153,7 @@ def _cmd_fit_physics(args: argparse.Namespace) -> int:
         "staged_start": not args.no_staged_start,
         "latch_law": args.latch_law,
         "regulator_lag": args.regulator_lag,
+        "latch_band": args.latch_band,
     }
     if args.free:
         kw["free"] = _csv(args.free)
@@ -274,6 +273,15 @@ def register(sub) -> None:
         "more than the latch delay allows (lag signature, logged), add the reg_pilot_lag law "
         "and choose the latch port (feedback exhaust or latch_line_select) on the fast "
         "ramps; off: never",
+    )
+    p.add_argument(
+        "--latch-band",
+        choices=("auto", "off"),
+        default="auto",
+        help="auto (default): when the slow training ramps' latch snaps move with the dither "
+        "amplitude and frequency more than the latch thresholds can follow "
+        "(leave-one-experiment-out, logged), add the latch_dither_band law after the solver, "
+        "held at the snaps' values, kept only when it lowers the training RMSE; off: never",
     )
     p.add_argument(
         "--strict",

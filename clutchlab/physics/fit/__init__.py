@@ -9,6 +9,7 @@ from .result import (
     diverged_sensitivities,
     identifiability,
     parameter_uncertainty,
+    training_rms,
 )
 from .sensitivity import (
     SENSITIVITY_CHUNK,
@@ -61,4 +62,5 @@ __all__ = [
     "select_structure",
     "sensitivity_chunk",
     "simulate_sensitivities",
+    "training_rms",
 ]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict
+from dataclasses import asdict, replace
 
 import numpy as np
 from sklearn.exceptions import NotFittedError
@@ -26,10 +26,11 @@ from ..model import CircuitModel
 from ..parameters import ParameterSet, quiet_design_checks
 from ..settings import SimulationSettings
 from ..simulate import simulate
+from .latch_band import BAND_FINISH_S, BAND_RESERVE_S, band_asked, latch_band_structure
 from .nlp import COST_PLATEAU, ITERATION_LIMIT, WALL_TIME_LIMIT, solve_ipopt
 from .problem import FitProblem
 from .rate import at_fit_rate
-from .result import FitResult, ParameterUncertainty, parameter_uncertainty
+from .result import FitResult, ParameterUncertainty, parameter_uncertainty, training_rms
 from .sensitivity import compile_sensitivities_for
 from .settings import DEFAULT_FREE, FitSettings
 from .staged import (
@@ -81,6 +82,23 @@ def resolve_free(model: CircuitModel, settings: FitSettings) -> tuple[str, ...]:
     if not free:
         raise FitError("no free parameters")
     return free
+
+
+def _uncertainty_at(model, traces, shared, settings, fitted, ev=None) -> ParameterUncertainty:
+    """Standard errors and identifiability of ``shared`` at ``fitted`` from the
+    single-shooting Jacobian on ``traces``: ``ev``'s when it has one, else one pass."""
+    if ev is None or ev.get("J") is None:
+        ss_settings = {**asdict(settings), "method": "single_shooting", "per_experiment": ()}
+        ss = FitProblem(model, traces, shared, FitSettings(**ss_settings), fitted)
+        ss.start_workers(traces, settings.workers)
+        try:
+            ev = ss.evaluate(np.zeros(ss.n_z), True)
+        finally:
+            ss.close()
+    specs = {p.name: p for p in model.parameters}
+    if ev.get("J") is not None:
+        return parameter_uncertainty(ev["J"].toarray(), ev["r"], list(shared), specs, fitted)
+    return ParameterUncertainty({}, [], [], list(shared), [])
 
 
 def _stopped_by_time(best: dict) -> bool:
@@ -309,6 +327,7 @@ class PhysicsFitter:
         free = resolve_free(model, settings)
         self._check_bounds(model, free, settings, start)
         self.staged_ = None
+        band_reserve_s = 0.0  # solver time kept for the latch band stage
         datasheet = (model, start, free)  # what the staged start starts from
         if settings.staged_start and self.start is None and not settings.per_experiment:
             # the main stages' Jacobian code compiles on the other core meanwhile
@@ -340,6 +359,11 @@ class PhysicsFitter:
                 start = match_latch_snaps(
                     model, start, traces, free, settings, self.staged_, match_s
                 )
+            if settings.latch_band == "auto" and settings.free is None:
+                # the staged start's own snaps decide whether the fit keeps time for the
+                # latch band after the solver (latch_band.py)
+                if band_asked(model, start, traces, free, settings, self.staged_):
+                    band_reserve_s = BAND_RESERVE_S
         history: list[float] = []
         bar = tqdm(
             total=settings.max_iter,
@@ -363,6 +387,8 @@ class PhysicsFitter:
         stage_costs: list[tuple[float, float]] = []
         cost_stages: list[int] = []  # the stage of each entry of stage_costs
         stages = self._stages(traces, settings)
+        # the rest of the limit is kept for the result (and the latch band stage)
+        solver_deadline = t_start + SOLVER_TIME_FRACTION * settings.time_limit_s - band_reserve_s
         sample_s = None  # wall time of one iteration per sample, measured on the last stage
         try:
             for stage, (stage_traces, stage_settings) in enumerate(stages):
@@ -372,8 +398,7 @@ class PhysicsFitter:
                 # can is, as that Jacobian also gives the result's standard errors. Within
                 # a stage the solver starts no iteration it cannot finish (nlp.py).
                 first = 0.0 if sample_s is None else sample_s * n_samples
-                elapsed = time.perf_counter() - t_start
-                left = SOLVER_TIME_FRACTION * settings.time_limit_s - elapsed
+                left = solver_deadline - time.perf_counter()
                 if stage > 0 and left < first:
                     statuses.append(SHORT_OF_TIME)
                     break
@@ -392,7 +417,7 @@ class PhysicsFitter:
                 t_stage += time.perf_counter() - t_compile
                 problem.start_workers(stage_traces, settings.workers)
                 try:
-                    best = self._solve_starts(problem, starts, stage_settings, t_start)
+                    best = self._solve_starts(problem, starts, stage_settings, solver_deadline)
                     if best["z"] is not None and _stopped_by_time(best):
                         # The result's standard errors need the Jacobian at this iterate,
                         # which a solver stopped mid-way has not computed: on the workers.
@@ -421,6 +446,8 @@ class PhysicsFitter:
         result = self._result(
             model, problem, best, history, traces, settings, time.perf_counter() - t_start
         )
+        if band_reserve_s and best["z"] is not None:
+            result = self._with_latch_band(result, problem, traces, settings, t_start)
         # A refinement stopped by its iteration limit after a converged pre-fit is a
         # finished fit: the limit is the refinement's budget, not a failure.
         converged = bool(statuses) and (
@@ -522,8 +549,9 @@ class PhysicsFitter:
         return [lo + (hi - lo) * np.clip(frac[:, k], 0.02, 0.98) for k in range(n)]
 
     @staticmethod
-    def _solve_starts(problem, starts, settings, t_start):
-        """Run IPOPT from each start; keep the lowest cost."""
+    def _solve_starts(problem, starts, settings, deadline):
+        """Run IPOPT from each start until ``deadline`` (``time.perf_counter()``, s); keep
+        the lowest cost."""
         lo, hi = problem.bounds_z()
         slo, shi = problem.state_bounds()
         lbz, ubz = np.concatenate([lo, slo]), np.concatenate([hi, shi])
@@ -537,8 +565,7 @@ class PhysicsFitter:
                 )
             # The rest of the limit is kept for the result (per-experiment errors,
             # uncertainty pass), so the whole fit stays within its limit.
-            elapsed = time.perf_counter() - t_start
-            remaining = SOLVER_TIME_FRACTION * settings.time_limit_s - elapsed
+            remaining = deadline - time.perf_counter()
             if remaining <= 0:
                 break
             try:
@@ -583,22 +610,7 @@ class PhysicsFitter:
             and best["z"] is not None
         )
         ev = problem.evaluate(best["z"], True) if reuse else None
-        if ev is None or ev.get("J") is None:
-            ss_settings = {**asdict(settings), "method": "single_shooting", "per_experiment": ()}
-            ss = FitProblem(
-                model, traces, tuple(problem.shared), FitSettings(**ss_settings), fitted
-            )
-            ss.start_workers(traces, settings.workers)
-            try:
-                ev = ss.evaluate(np.zeros(ss.n_z), True)
-            finally:
-                ss.close()
-        names = list(problem.shared)
-        specs = {p.name: p for p in model.parameters}
-        if ev.get("J") is not None:
-            unc = parameter_uncertainty(ev["J"].toarray(), ev["r"], names, specs, fitted)
-        else:
-            unc = ParameterUncertainty({}, [], [], list(names), [])
+        unc = _uncertainty_at(model, traces, tuple(problem.shared), settings, fitted, ev)
         se = dict(unc.std_errors)
         for n in problem.per_exp:
             se[n] = float("nan")
@@ -631,6 +643,49 @@ class PhysicsFitter:
             settings={
                 k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(settings).items()
             },
+            uncertainty_note=unc.note,
+        )
+
+    def _with_latch_band(self, result, problem, traces, settings, t_start) -> FitResult:
+        """The fit's result with the latch band stage after the solver (``latch_band.py``):
+        ``latch_dither_band`` held at the values the quasi-static snaps give, the latch
+        thresholds matched with it; kept only when its training RMS (over experiments) is
+        lower than the fit's. Runs within the time the solver left it."""
+        model, fitted = result.model(), result.params()
+        budget = settings.time_limit_s - (time.perf_counter() - t_start) - BAND_FINISH_S
+        band_model, params = latch_band_structure(
+            model, fitted, traces, tuple(result.free), settings, self.staged_, budget
+        )
+        if band_model is model:
+            return result
+        per_exp = _per_experiment_metrics(
+            band_model, [params] * len(traces), traces, settings.workers
+        )
+        before, after = training_rms(result.per_experiment), training_rms(per_exp)
+        self.staged_.latch_band.update(
+            {"training_rms_before_bar": before, "training_rms_after_bar": after}
+        )
+        if not after < before:
+            self.staged_.notes.append(
+                f"latch band not kept: training RMS {after:.4f} bar with it, {before:.4f} without"
+            )
+            return result
+        self.staged_.notes.append(f"latch band kept: training RMS {before:.4f} → {after:.4f} bar")
+        unc = _uncertainty_at(band_model, traces, tuple(problem.shared), settings, params)
+        se = dict(unc.std_errors)
+        se.update(dict.fromkeys(problem.per_exp, float("nan")))
+        return replace(
+            result,
+            effects=list(band_model.effect_names),
+            values=dict(params.values),
+            units={p.name: p.unit for p in band_model.parameters},
+            std_errors=se,
+            correlation=unc.correlation,
+            singular_values=unc.singular_values,
+            unidentifiable=unc.unidentifiable,
+            weak_directions=unc.weak_directions,
+            per_experiment=per_exp,
+            wall_s=time.perf_counter() - t_start,
             uncertainty_note=unc.note,
         )
 

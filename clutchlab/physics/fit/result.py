@@ -23,6 +23,7 @@ __all__ = [
     "diverged_sensitivities",
     "identifiability",
     "parameter_uncertainty",
+    "training_rms",
 ]
 
 #: A parameter whose relative standard error exceeds this is reported unidentifiable.
@@ -37,6 +38,14 @@ SV_RATIO_LIMIT = 1e-3
 #: where a parameter moves the snap's time), diverged ones 3e29 and 1e89 (two zoo fits that
 #: stopped with Error_In_Step_Computation); the limit sits far from both.
 SENSITIVITY_LIMIT = 1e15
+
+
+def training_rms(per_experiment: dict[str, dict[str, float]]) -> float:
+    """RMS (bar) over experiments of each one's period-mean RMSE (a fit result's
+    ``per_experiment``, or :meth:`PhysicsFitter.training_metrics`); nan when empty."""
+    if not per_experiment:
+        return float("nan")
+    return math.sqrt(sum(m["rmse_bar"] ** 2 for m in per_experiment.values()) / len(per_experiment))
 
 
 def diverged_sensitivities(jz: np.ndarray) -> str:

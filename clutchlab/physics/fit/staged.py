@@ -68,6 +68,7 @@ __all__ = [
     "ramp_rate",
     "regulated_band",
     "regulator_lag_structure",
+    "snap_offsets_each",
     "staged_start",
 ]
 
@@ -126,6 +127,13 @@ class StagedStart:
         Latch-snap matching: the model's latch-on / latch-off current minus the measured
         one (mA, median over the quasi-static experiments) before (``on_before``,
         ``off_before``) and after (``on_after``, ``off_after``), and ``simulations``.
+    latch_jacobian : list of list of float or None
+        The matching's last Jacobian: d(latch-on, latch-off offset, mA) / d(latch-on,
+        latch-off pilot threshold, bar) (for :func:`~clutchlab.physics.fit.latch_band.
+        latch_band_structure`).
+    latch_band : dict of str to float
+        The latch band stage's record (:func:`~clutchlab.physics.fit.latch_band.
+        latch_band_structure`), when it ran.
     latch_tie_violated : bool
         The measured thresholds do not fit the datasheet latch: with its areas and
         stroke, the spring rate they need lies outside its bounds (a latch-off far below
@@ -144,6 +152,8 @@ class StagedStart:
     latch_port: dict[str, float] = field(default_factory=dict)
     static_experiments: list[str] = field(default_factory=list)
     latch_match_mA: dict[str, float] = field(default_factory=dict)
+    latch_jacobian: list[list[float]] | None = None
+    latch_band: dict[str, float] = field(default_factory=dict)
     latch_tie_violated: bool = False
     wall_s: float = 0.0
     notes: list[str] = field(default_factory=list)
@@ -466,9 +476,10 @@ def _threshold_stage(model, start, traces, latch, settings, free, info):
     return params
 
 
-def _snap_offsets(model, params, traces, latch, substeps) -> np.ndarray | None:
-    """The model's latch-on and latch-off current minus the measured one (mA), median over
-    ``traces``; None when the model does not snap on both branches of every trace."""
+def snap_offsets_each(model, params, traces, latch, substeps) -> np.ndarray | None:
+    """The model's latch-on and latch-off current minus the measured one (mA), one row per
+    trace (``latch``: measured indices by name); None when the model does not snap on both
+    branches of every trace."""
     rows = []
     sim = SimulationSettings(substeps=substeps, out_of_range="ignore")
     for tr in traces:
@@ -478,7 +489,13 @@ def _snap_offsets(model, params, traces, latch, substeps) -> np.ndarray | None:
             return None
         i, k = _period_mean(tr, _current(tr)), latch[tr.name]
         rows.append([i[own[0]] - i[k[0]], i[own[1]] - i[k[1]]])
-    return np.median(np.asarray(rows), axis=0)
+    return np.asarray(rows)
+
+
+def _snap_offsets(model, params, traces, latch, substeps) -> np.ndarray | None:
+    """:func:`snap_offsets_each`, median over ``traces``."""
+    rows = snap_offsets_each(model, params, traces, latch, substeps)
+    return None if rows is None else np.median(rows, axis=0)
 
 
 @quiet_design_checks  # its probes are not the user's values
@@ -584,6 +601,7 @@ def match_latch_snaps(
         x, f = x_new, f_new
         best = (float(np.max(np.abs(f))), p_new, f)
     info.values.update({n: best[1][n] for n in free if best[1][n] != params[n]})
+    info.latch_jacobian = jac.tolist()
     info.latch_match_mA = {
         "on_before": float(first[0]),
         "off_before": float(first[1]),
@@ -848,5 +866,6 @@ def latch_port_structure(
     if not keep:
         return model, exhaust
     info.latch_match_mA = trial.latch_match_mA
+    info.latch_jacobian = trial.latch_jacobian
     info.values.update(trial.values)
     return sel_model, selected

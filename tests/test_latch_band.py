@@ -1,0 +1,192 @@
+"""The staged start's latch band stage: ``latch_dither_band`` estimated from the snaps.
+
+A latch that trips on its pilot only after a dwell time (the zoo's quadratic_play) snaps at
+currents that move with the dither amplitude and frequency; clutchlab's own latch does
+not. The stage reads the law's five parameters (with the two thresholds) off the slow
+training ramps' snaps and adds the law only where leave-one-experiment-out says the
+thresholds alone cannot follow them.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from clutchlab.errors import FitError, FitWarning
+from clutchlab.physics import CircuitModel
+from clutchlab.physics.effects import LatchDitherBand, dither_band_terms
+from clutchlab.physics.fit import FitSettings, PhysicsFitter, training_rms
+from clutchlab.physics.fit.fitter import resolve_free
+from clutchlab.physics.fit.latch_band import (
+    BAND_GAIN,
+    BAND_MIN_MA,
+    band_asked,
+    band_design,
+    latch_band_structure,
+)
+from clutchlab.physics.fit.staged import (
+    _measured_latches,
+    match_latch_snaps,
+    quasi_static_traces,
+    staged_start,
+)
+from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
+from clutchlab.physics.stand.plants import PlantConfig, run_plant
+
+RAMPS = (RampProfile("slow", 12.0, 0.5),)
+SETTINGS = tuple(DitherSetting(f, s) for f in (30.0, 50.0, 70.0) for s in ("A", "B", "C"))
+
+
+@pytest.fixture(scope="module")
+def stand_band():
+    """clutchlab's own circuit: its latch band does not move with the dither."""
+    return list(run_stand(StandConfig(settings=SETTINGS, ramps=RAMPS), False).dataset)
+
+
+@pytest.fixture(scope="module")
+def zoo_band():
+    """A zoo plant whose latch needs its pilot beyond a threshold for a dwell time."""
+    cfg = PlantConfig("quadratic_play", settings=SETTINGS, ramps=RAMPS, seed=0)
+    return list(run_plant(cfg, progress=False).dataset)
+
+
+def test_terms_are_the_law_and_vanish_without_dither():
+    amp, freq = np.array([0.0, 40.0, 200.0]), np.array([0.0, 50.0, 70.0])
+    terms = np.array(dither_band_terms(amp, freq))
+    assert terms.shape == (len(LatchDitherBand.FIT), 3)
+    np.testing.assert_allclose(terms[:, 0], 0.0)  # no dither: the law does nothing
+    v = math.log2(math.sqrt(70.0**2 + 1.0) / 50.0)
+    g, s = 200.0 / 210.0, 2.0
+    np.testing.assert_allclose(terms[:, 2], [g * v, g * v * v, s, s * v, s * v * v])
+    # at the reference frequency only the amplitude's own term is left
+    np.testing.assert_allclose(terms[:, 1], [0.0, 0.0, 0.4, 0.0, 0.0], atol=1e-3)
+
+
+def test_design_moves_latch_on_up_and_latch_off_down(stand_band):
+    traces = quasi_static_traces(stand_band)
+    latch = _measured_latches(traces)
+    used = [tr for tr in traces if tr.name in latch]
+    jac = np.array([[20.0, 1.0], [2.0, 15.0]])
+    a = band_design(used, latch, jac)
+    assert a.shape == (2 * len(used), 7)
+    np.testing.assert_array_equal(a[0::2, :2], np.tile(jac[0], (len(used), 1)))
+    np.testing.assert_array_equal(a[1::2, :2], np.tile(jac[1], (len(used), 1)))
+    # a positive half-width delays the snap (on up) and advances the release (off down):
+    # in each row the law's columns are (J_on − J_off) × the terms
+    for row, tr in zip(range(0, len(a), 2), used, strict=True):
+        terms_on = a[row, 2:] / (jac[0, 0] - jac[0, 1])
+        terms_off = a[row + 1, 2:] / (jac[1, 0] - jac[1, 1])
+        assert np.all(np.isfinite(terms_on)) and np.all(np.isfinite(terms_off))
+        assert abs(terms_on[2]) > 0, tr.name  # every setting dithers
+
+
+def _through_matching(traces, model=None):
+    model = model or CircuitModel()
+    settings = FitSettings(progress=False, regulator_lag="off")
+    free = resolve_free(model, settings)
+    start, info = staged_start(model, traces, settings, model.default_params(), free, 20.0)
+    start = match_latch_snaps(model, start, traces, free, settings, info)
+    return model, start, free, settings, info
+
+
+@pytest.mark.parametrize("which", ["stand", "zoo"])
+def test_law_is_added_only_where_the_snaps_ask(which, request):
+    traces = request.getfixturevalue(f"{which}_band")
+    model, start, free, settings, info = _through_matching(traces)
+    assert info.latch_jacobian is not None, info.summary()
+    chosen, params = latch_band_structure(model, start, traces, free, settings, info)
+    band = info.latch_band
+    added = "latch_dither_band" in chosen.effect_names
+    ask = band["loo_thresholds_mA"] > BAND_MIN_MA and (
+        band["loo_law_mA"] < BAND_GAIN * band["loo_thresholds_mA"]
+    )
+    assert added == ask, info.summary()
+    assert ("structure: latch_dither_band" in info.summary()) == added
+    # the dwell-timer latch asks for it; clutchlab's own latch does not
+    assert added == (which == "zoo"), info.summary()
+    if added:
+        assert band["offsets_after_mA"] < 0.5 * band["offsets_rms_mA"], band
+        assert any(params[n] != 0.0 for n in LatchDitherBand.FIT)
+    else:
+        assert chosen is model and params is start
+        assert "latch band: not added" in info.summary()
+
+
+def test_a_model_that_names_the_law_is_left_alone(zoo_band):
+    named = CircuitModel().with_effects("latch_dither_band")
+    model, start, free, settings, info = _through_matching(zoo_band, named)
+    assert not band_asked(model, start, zoo_band, free, settings, info)
+    chosen, params = latch_band_structure(model, start, zoo_band, free, settings, info)
+    assert chosen is named and params is start
+    assert "names latch_dither_band" in info.summary()
+
+
+@pytest.mark.parametrize("which", ["stand", "zoo"])
+def test_the_staged_check_agrees_with_the_stage_on_the_same_model(which, request):
+    traces = request.getfixturevalue(f"{which}_band")
+    model, start, free, settings, info = _through_matching(traces)
+    asked = band_asked(model, start, traces, free, settings, info)
+    assert asked == (which == "zoo"), info.summary()
+    assert info.latch_band["staged_loo_thresholds_mA"] > 0
+    chosen, _ = latch_band_structure(model, start, traces, free, settings, info)
+    assert ("latch_dither_band" in chosen.effect_names) == asked
+
+
+def test_no_time_left_estimates_nothing(zoo_band):
+    model, start, free, settings, info = _through_matching(zoo_band)
+    chosen, params = latch_band_structure(model, start, zoo_band, free, settings, info, 0.0)
+    assert chosen is model and params is start and "no time left" in info.summary()
+
+
+def test_without_the_matching_nothing_is_estimated(zoo_band):
+    model, start, free, settings, info = _through_matching(zoo_band)
+    info.latch_jacobian = None  # as when the matching could not run
+    chosen, params = latch_band_structure(model, start, zoo_band, free, settings, info)
+    assert chosen is model and params is start and not info.latch_band
+
+
+def test_settings_refuse_an_unknown_latch_band():
+    with pytest.raises(FitError, match="latch_band 'maybe' is not auto or off"):
+        FitSettings(latch_band="maybe")
+
+
+@pytest.fixture(scope="module")
+def zoo_fits(zoo_band):
+    """The default fit on the zoo plant's slow ramps, and the same with the latch band off."""
+    fits = {}
+    for band in ("auto", "off"):
+        settings = FitSettings(
+            progress=False, train_ramps=("slow",), latch_band=band, max_iter=6, refine_max_iter=1
+        )
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FitWarning)  # a fit stopped at a limit is fine here
+            fits[band] = PhysicsFitter(settings=settings).fit(zoo_band)
+    return fits
+
+
+def test_the_fit_keeps_the_band_only_when_it_lowers_the_training_rms(zoo_fits, zoo_band, tmp_path):
+    auto, off = zoo_fits["auto"], zoo_fits["off"]
+    assert "latch_dither_band" not in off.result_.effects
+    band = auto.staged_.latch_band
+    assert band["staged_loo_law_mA"] < BAND_GAIN * band["staged_loo_thresholds_mA"], band
+    kept = "latch_dither_band" in auto.result_.effects
+    assert "training_rms_after_bar" in band, auto.staged_.summary()
+    assert kept == (band["training_rms_after_bar"] < band["training_rms_before_bar"])
+    # the dwell-timer latch: kept, and the result is the band model's
+    assert kept, auto.staged_.summary()
+    res = auto.result_
+    assert training_rms(res.per_experiment) == pytest.approx(band["training_rms_after_bar"])
+    assert training_rms(auto.training_metrics(zoo_band)) == pytest.approx(
+        band["training_rms_after_bar"], rel=1e-6
+    )
+    assert not set(LatchDitherBand.FIT) & set(res.free)  # held, not fitted
+    assert any(res.values[n] != 0.0 for n in LatchDitherBand.FIT)
+    assert set(res.std_errors) >= set(res.free)
+    assert "latch band kept" in auto.staged_.summary()
+    # saved and loaded as any fit (JSON), predicting the same
+    auto.save(tmp_path / "fit.json")
+    again = PhysicsFitter.load(tmp_path / "fit.json")
+    np.testing.assert_allclose(again.predict(zoo_band[0]), auto.predict(zoo_band[0]))
