@@ -101,6 +101,20 @@ def _uncertainty_at(model, traces, shared, settings, fitted, ev=None) -> Paramet
     return ParameterUncertainty({}, [], [], list(shared), [])
 
 
+def _model_fields(model, fitted, unc: ParameterUncertainty, std_errors: dict) -> dict:
+    """A fit result's fields that follow from its model, values and uncertainty."""
+    return {
+        "effects": list(model.effect_names),
+        "values": dict(fitted.values),
+        "units": {p.name: p.unit for p in model.parameters},
+        "std_errors": std_errors,
+        "correlation": unc.correlation,
+        "singular_values": unc.singular_values,
+        "unidentifiable": unc.unidentifiable,
+        "weak_directions": unc.weak_directions,
+    }
+
+
 def _stopped_by_time(best: dict) -> bool:
     """The solver of this best start stopped at its wall-time limit."""
     stats = best["stats"]
@@ -623,15 +637,8 @@ class PhysicsFitter:
         per_exp = _per_experiment_metrics(model, params, traces, settings.workers)
         stats = best["stats"] or {"return_status": "not run", "iter_count": 0}
         return FitResult(
-            effects=list(model.effect_names),
-            values=dict(fitted.values),
-            units={p.name: p.unit for p in model.parameters},
+            **_model_fields(model, fitted, unc, se),
             free=free,
-            std_errors=se,
-            correlation=unc.correlation,
-            singular_values=unc.singular_values,
-            unidentifiable=unc.unidentifiable,
-            weak_directions=unc.weak_directions,
             per_experiment=per_exp,
             per_experiment_values=per_values,
             cost_history=list(history),
@@ -676,14 +683,7 @@ class PhysicsFitter:
         se.update(dict.fromkeys(problem.per_exp, float("nan")))
         return replace(
             result,
-            effects=list(band_model.effect_names),
-            values=dict(params.values),
-            units={p.name: p.unit for p in band_model.parameters},
-            std_errors=se,
-            correlation=unc.correlation,
-            singular_values=unc.singular_values,
-            unidentifiable=unc.unidentifiable,
-            weak_directions=unc.weak_directions,
+            **_model_fields(band_model, params, unc, se),
             per_experiment=per_exp,
             wall_s=time.perf_counter() - t_start,
             uncertainty_note=unc.note,
