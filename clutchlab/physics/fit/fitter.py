@@ -678,12 +678,12 @@ class PhysicsFitter:
             )
             return result
         self.staged_.notes.append(f"latch band kept: training RMS {before:.4f} → {after:.4f} bar")
+        # (no per-experiment parameters here: the stage needs the staged start, which
+        # does not run with them)
         unc = _uncertainty_at(band_model, traces, tuple(problem.shared), settings, params)
-        se = dict(unc.std_errors)
-        se.update(dict.fromkeys(problem.per_exp, float("nan")))
         return replace(
             result,
-            **_model_fields(band_model, params, unc, se),
+            **_model_fields(band_model, params, unc, dict(unc.std_errors)),
             per_experiment=per_exp,
             wall_s=time.perf_counter() - t_start,
             uncertainty_note=unc.note,
