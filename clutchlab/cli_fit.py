@@ -133,6 +133,17 @@ def _worse_than_start(fitter, dataset, start) -> str:
     )
 
 
+def _latches_where_data_do_not(fitter, dataset, train) -> list[str]:
+    """Training experiments on which the fitted model latches and the measurement never
+    does (:func:`~clutchlab.physics.fit.latches_where_data_do_not`)."""
+    from .physics.fit import FitSettings, latches_where_data_do_not
+
+    names = set(train)
+    traces = [t for t in dataset if t.name in names]
+    substeps = (fitter.settings or FitSettings()).substeps
+    return latches_where_data_do_not(fitter.model_, fitter.params_, traces, substeps)
+
+
 def _cmd_fit_physics(args: argparse.Namespace) -> int:
     from .data import load_dataset
     from .errors import FitError, FitWarning
@@ -212,6 +223,13 @@ def _cmd_fit_physics(args: argparse.Namespace) -> int:
         print(f"not identifiable from these data: {', '.join(res.unidentifiable)}")
     for name, m in res.per_experiment.items():
         print(f"  {name:20s} RMSE {m['rmse_bar']:.4f} bar  fit {m['fit_pct']:.1f} %")
+    if spurious := _latches_where_data_do_not(fitter, dataset, res.train):
+        print(
+            f"note: the model latches on {', '.join(spurious)}, where the measured clutch "
+            "pressure never reaches line pressure: the circuit's latch does not trip at "
+            "that dither setting (a dwell latch or a filtered latch pilot under a large, "
+            "slow dither), which the model's latch does not follow"
+        )
     print(f"model written to {out}")
     if args.json:
         from .cli import write_json_output

@@ -11,12 +11,14 @@ from __future__ import annotations
 
 import math
 import warnings
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
+from clutchlab.cli_fit import _latches_where_data_do_not
 from clutchlab.errors import FitError, FitWarning
-from clutchlab.physics import CircuitModel
+from clutchlab.physics import CircuitModel, SimulationSettings, simulate
 from clutchlab.physics.effects import LatchDitherBand, dither_band_terms
 from clutchlab.physics.fit import FitSettings, PhysicsFitter, training_rms
 from clutchlab.physics.fit.fitter import resolve_free
@@ -29,7 +31,9 @@ from clutchlab.physics.fit.latch_band import (
 )
 from clutchlab.physics.fit.staged import (
     _measured_latches,
+    latches_where_data_do_not,
     match_latch_snaps,
+    never_latches,
     quasi_static_traces,
     staged_start,
 )
@@ -113,6 +117,39 @@ def test_law_is_added_only_where_the_snaps_ask(which, request):
     else:
         assert chosen is model and params is start
         assert "latch band: not added" in info.summary()
+
+
+@pytest.fixture(scope="module")
+def zoo_never():
+    """The dwell-timer plant at an as-built spread (seed 2) where a large, slow dither
+    (30 Hz, shape B) never lets the latch trip: slow_30Hz_B never reaches line pressure."""
+    cfg = PlantConfig("quadratic_play", settings=SETTINGS, ramps=RAMPS, seed=2)
+    return list(run_plant(cfg, progress=False).dataset)
+
+
+def test_the_model_latching_where_the_data_never_do_is_named(zoo_never, stand_band):
+    assert [tr.name for tr in zoo_never if never_latches(tr)] == ["slow_30Hz_B"]
+    model = CircuitModel()
+    params = model.default_params()
+    # clutchlab's latch switches on the dithered pilot: it latches there
+    assert latches_where_data_do_not(model, params, zoo_never) == ["slow_30Hz_B"]
+    # a trace whose "measurement" is the model's own prediction latches where it does
+    sim = SimulationSettings(substeps=2, out_of_range="ignore")
+    own = [
+        tr.with_signals(clutch_pressure_bar=simulate(model, params, tr, sim).pressure_bar)
+        for tr in zoo_never
+        if never_latches(tr)
+    ]
+    assert latches_where_data_do_not(model, params, own) == []
+    # every stand experiment latches: nothing to name, and nothing simulated
+    assert not any(never_latches(tr) for tr in stand_band)
+    assert latches_where_data_do_not(model, params, stand_band) == []
+    # the CLI's note names the same experiments of the fit's training set
+    fitter = SimpleNamespace(model_=model, params_=params, settings=None)
+    names = [tr.name for tr in zoo_never]
+    assert _latches_where_data_do_not(fitter, zoo_never, names) == ["slow_30Hz_B"]
+    others = [n for n in names if n != "slow_30Hz_B"]
+    assert _latches_where_data_do_not(fitter, zoo_never, others) == []
 
 
 def test_a_model_that_names_the_law_is_left_alone(zoo_band):

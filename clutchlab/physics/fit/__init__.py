@@ -21,6 +21,7 @@ from .sensitivity import (
     simulate_sensitivities,
 )
 from .settings import DEFAULT_FREE, FIT_BUDGET_S, FitSettings
+from .staged import latches_where_data_do_not
 from .stages import prefit_settings, prefit_subset, refine_settings
 from .structure import (
     STRUCTURES,
@@ -54,6 +55,7 @@ __all__ = [
     "diverged_sensitivities",
     "faster_than_fit",
     "identifiability",
+    "latches_where_data_do_not",
     "parameter_uncertainty",
     "prefit_settings",
     "prefit_subset",

@@ -61,9 +61,11 @@ __all__ = [
     "free_latch_structure",
     "lag_signature",
     "latch_port_structure",
+    "latches_where_data_do_not",
     "match_latch_snaps",
     "measured_latch_indices",
     "measured_thresholds",
+    "never_latches",
     "quasi_static_traces",
     "ramp_rate",
     "regulated_band",
@@ -275,22 +277,67 @@ def regulated_band(trace: Trace, pressure: np.ndarray | None = None) -> tuple[fl
     return float(np.median(fall - rise)), float(np.median(dpdt[band]))
 
 
+def _near_line(trace: Trace) -> tuple[np.ndarray, np.ndarray]:
+    """The period-mean current's slope (mA per sample) and where the period-mean clutch
+    pressure is within the latch margin of line pressure (latched)."""
+    i = _period_mean(trace, _current(trace))
+    p = _period_mean(trace, trace.get("clutch_pressure_bar"))
+    return np.gradient(i), p > _line(trace, len(p)) - _LATCH_MARGIN_BAR
+
+
 def measured_latch_indices(trace: Trace) -> tuple[int, int] | None:
     """Sample indices where the pressure snaps to line (rising) and leaves it (falling).
 
     ``None`` when the experiment never reaches line pressure, or reaches it only on one
     branch.
     """
-    i = _period_mean(trace, _current(trace))
-    p = _period_mean(trace, trace.get("clutch_pressure_bar"))
-    line = _line(trace, len(p))
-    di = np.gradient(i)
-    near = p > line - _LATCH_MARGIN_BAR
+    di, near = _near_line(trace)
     rising = np.flatnonzero((di > 0) & near)
     falling = np.flatnonzero((di < 0) & near)
     if not len(rising) or not len(falling):
         return None
     return int(rising[0]), int(falling[-1])
+
+
+def never_latches(trace: Trace) -> bool:
+    """Whether the experiment's clutch pressure never comes near line pressure (within
+    the latch margin, dither-period means): the circuit does not latch on it at all."""
+    return not np.any(_near_line(trace)[1])
+
+
+def latches_where_data_do_not(
+    model: CircuitModel, params: ParameterSet, traces: list[Trace], substeps: int = 2
+) -> list[str]:
+    """Experiments on which the measured clutch pressure never reaches line pressure but the
+    model's does (:func:`never_latches` on each).
+
+    A latch that the dither keeps from tripping (one that needs its pilot beyond a threshold
+    for a dwell time longer than the dither's trough leaves it, or whose pilot passage
+    filters the dither) never latches on a large, slow dither; clutchlab's latch switches
+    on the dithered pilot and does. One simulation per experiment that never latches.
+
+    Parameters
+    ----------
+    model, params : CircuitModel, ParameterSet
+        The (fitted) model and its values.
+    traces : list of Trace
+        Experiments (training ones, for a fit's report).
+    substeps : int
+        Integrator substeps.
+
+    Returns
+    -------
+    list of str
+        Their names, in the order given.
+    """
+    sim = SimulationSettings(substeps=substeps, out_of_range="ignore")
+    found = []
+    for tr in traces:
+        if never_latches(tr):
+            y = simulate(model, params, tr, sim).outputs["clutch_pressure_bar"]
+            if not never_latches(tr.with_signals(clutch_pressure_bar=y)):
+                found.append(tr.name)
+    return found
 
 
 def _static_stage(model, start, traces, latch, settings, free, budget_s, info):
