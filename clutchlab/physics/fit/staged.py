@@ -299,6 +299,12 @@ def measured_latch_indices(trace: Trace) -> tuple[int, int] | None:
     return int(rising[0]), int(falling[-1])
 
 
+def _predicted(model, params, trace: Trace, sim: SimulationSettings) -> Trace:
+    """``trace`` with the model's clutch pressure (bar) in place of the measured one."""
+    y = simulate(model, params, trace, sim).outputs["clutch_pressure_bar"]
+    return trace.with_signals(clutch_pressure_bar=y)
+
+
 def never_latches(trace: Trace) -> bool:
     """Whether the experiment's clutch pressure never comes near line pressure (within
     the latch margin, dither-period means): the circuit does not latch on it at all."""
@@ -333,10 +339,8 @@ def latches_where_data_do_not(
     sim = SimulationSettings(substeps=substeps, out_of_range="ignore")
     found = []
     for tr in traces:
-        if never_latches(tr):
-            y = simulate(model, params, tr, sim).outputs["clutch_pressure_bar"]
-            if not never_latches(tr.with_signals(clutch_pressure_bar=y)):
-                found.append(tr.name)
+        if never_latches(tr) and not never_latches(_predicted(model, params, tr, sim)):
+            found.append(tr.name)
     return found
 
 
@@ -530,8 +534,7 @@ def snap_offsets_each(model, params, traces, latch, substeps) -> np.ndarray | No
     rows = []
     sim = SimulationSettings(substeps=substeps, out_of_range="ignore")
     for tr in traces:
-        y = simulate(model, params, tr, sim).outputs["clutch_pressure_bar"]
-        own = measured_latch_indices(tr.with_signals(clutch_pressure_bar=y))
+        own = measured_latch_indices(_predicted(model, params, tr, sim))
         if own is None:
             return None
         i, k = _period_mean(tr, _current(tr)), latch[tr.name]
