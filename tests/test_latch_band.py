@@ -141,7 +141,7 @@ def test_the_model_latching_where_the_data_never_do_is_named(zoo_never, stand_ba
         if never_latches(tr)
     ]
     assert latches_where_data_do_not(model, params, own) == []
-    # every stand experiment latches: nothing to name, and nothing simulated
+    # every stand experiment latches: nothing to name
     assert not any(never_latches(tr) for tr in stand_band)
     assert latches_where_data_do_not(model, params, stand_band) == []
     # the CLI's note names the same experiments of the fit's training set
