@@ -294,12 +294,14 @@ def register(sub) -> None:
     )
     p.add_argument(
         "--latch-band",
-        choices=("auto", "off"),
+        choices=("auto", "off", "line"),
         default="auto",
         help="auto (default): when the slow training ramps' latch snaps move with the dither "
         "amplitude and frequency more than the latch thresholds can follow "
         "(leave-one-experiment-out, logged), add the latch_dither_band law after the solver, "
-        "held at the snaps' values, kept only when it lowers the training RMSE; off: never",
+        "held at the snaps' values, kept only when it lowers the training RMSE; line: the "
+        "same, also offering latch_line_threshold (switch currents that follow the logged "
+        "line pressure; opt-in); off: never",
     )
     p.add_argument(
         "--strict",

@@ -186,7 +186,7 @@ def test_without_the_matching_nothing_is_estimated(zoo_band):
 
 
 def test_settings_refuse_an_unknown_latch_band():
-    with pytest.raises(FitError, match="latch_band 'maybe' is not auto or off"):
+    with pytest.raises(FitError, match="latch_band 'maybe' is not auto, off or line"):
         FitSettings(latch_band="maybe")
 
 

@@ -15,6 +15,7 @@ from .flexible import (
     FreeLatchThresholds,
     LatchDitherBand,
     LatchLineSelect,
+    LatchLineThreshold,
     LatchPilotLag,
     MonotoneForceCorrection,
     PlayHysteresis,
@@ -46,6 +47,7 @@ __all__ = [
     "FreeLatchThresholds",
     "LatchDitherBand",
     "LatchLineSelect",
+    "LatchLineThreshold",
     "LatchPilotLag",
     "LatchThresholdDrift",
     "MagneticHysteresis",
@@ -77,6 +79,7 @@ FLEXIBLE_LAWS: dict[str, type[Effect]] = {
         RegulatorPilotLag,
         LatchPilotLag,
         LatchDitherBand,
+        LatchLineThreshold,
     )
 }
 

@@ -28,6 +28,8 @@ as the training data ask. All forms are smooth (``tanh`` / logistic; no ``if_els
   narrows with the dither amplitude and frequency (a latch that needs its pilot beyond a
   threshold for a dwell time, or that filters the dither, switches where the model's
   crest-tripping latch does not).
+- :class:`LatchLineThreshold` (``latch_line_threshold``): latch thresholds that move with
+  line pressure (a latch valve balanced against line rather than a spring alone).
 """
 
 from __future__ import annotations
@@ -49,6 +51,7 @@ __all__ = [
     "FreeLatchThresholds",
     "LatchDitherBand",
     "LatchLineSelect",
+    "LatchLineThreshold",
     "LatchPilotLag",
     "MonotoneForceCorrection",
     "PlayHysteresis",
@@ -371,6 +374,10 @@ class LatchPilotLag(Effect):
         _pilot_lag(asm, "p_latch_pilot", spec, "llag")
 
 
+#: Default reference line pressure (bar) of :class:`LatchLineThreshold` (the stand's nominal
+#: line pressure; a fit holds the training data's median).
+_LINE_REF_BAR = 17.7
+
 #: Reference dither frequency (Hz) of :class:`LatchDitherBand`'s frequency terms.
 BAND_F_REF_HZ = 50.0
 #: Dither amplitude (mA) per unit of :class:`LatchDitherBand`'s amplitude terms.
@@ -459,6 +466,53 @@ class LatchDitherBand(Effect):
             terms = dither_band_terms(a.u["dither_amp_mA"], a.u["dither_freq_Hz"], ca.log)
             w = sum(a.p(n) * t for n, t in zip(self.FIT, terms, strict=True))
             return prev + (2.0 * a.x("latch") - 1.0) * w
+
+        asm.wrap("p_latch_pilot", pilot)
+
+
+class LatchLineThreshold(Effect):
+    """Latch-on and latch-off thresholds that move with line pressure.
+
+    The latch valve sees ``p_l = p_a − ((1 − λ) r_on + λ r_off)(p_line − p_ref)`` with
+    ``λ`` its opening: closed, its latch-on threshold lies ``r_on`` bar higher per bar of
+    line pressure above ``p_ref``; open, its latch-off threshold ``r_off`` bar higher. A
+    latch valve whose reference face is fed by line pressure (a differential valve
+    balanced against line, not against its spring alone) snaps and releases at pilot
+    pressures proportional to line, so its switch currents follow the line pressure's
+    wander from run to run and within a run; the datasheet valve's do not. The smooth
+    valve is part-open near its release, so ``r_on`` moves the release too (about half as
+    far as the snap, on the stand's fast ramp). ``r_on = r_off = 0`` (the default) is
+    exactly today's model; without a logged line pressure the line is the nominal one and
+    the law does nothing.
+
+    A fit with ``FitSettings.latch_band = "line"`` (``fit-physics --latch-band line``,
+    opt-in) adds it after its solver, with :class:`LatchDitherBand` or alone, where the
+    quasi-static snaps ask for it (:mod:`~clutchlab.physics.fit.latch_band`): ``p_ref`` is
+    then held at the median line pressure at the snaps and ``r_on``, ``r_off`` at the values
+    the snaps give (:attr:`WARM_ONLY`).
+    """
+
+    name = "latch_line_threshold"
+    description = "latch-on / latch-off thresholds that move with line pressure"
+    signature = (
+        "latch snap and release currents that follow the line pressure at the switch "
+        "(higher line, later snap), at every ramp rate and dither"
+    )
+    PARAMETERS = (
+        param("llt", "r_on", "-", 0.0, -3.0, 3.0, "latch-on threshold per bar of line", "linear"),
+        param("llt", "r_off", "-", 0.0, -3.0, 3.0, "latch-off threshold per bar of line", "linear"),
+        param("llt", "p_ref", "bar", _LINE_REF_BAR, 1.0, 100.0, "line pressure of the thresholds"),
+    )
+    # signed slopes: fitted parameters, not one-sided strengths; p_ref is held
+    STRENGTH = ()
+    WARM_ONLY = True
+    FIT = ("llt_r_on", "llt_r_off")
+
+    def apply(self, asm: Assembly) -> None:
+        def pilot(a, prev):
+            lam = a.x("latch")
+            slope = (1.0 - lam) * a.p("llt_r_on") + lam * a.p("llt_r_off")
+            return prev - slope * (a["p_line"] - a.p("llt_p_ref"))
 
         asm.wrap("p_latch_pilot", pilot)
 

@@ -1,29 +1,45 @@
-"""The latch band stage of the fit: ``latch_dither_band`` from the measured snaps.
+"""The latch band stage of the fit: ``latch_dither_band`` and ``latch_line_threshold`` from
+the measured snaps.
 
 A latch that must see its pilot beyond a threshold for a dwell time, or whose pilot passage
 filters the dither, snaps and releases at currents that move with the dither amplitude by an
 amount that depends on the dither frequency; the model's latch switches on the dithered pilot,
-near the dither's crest. Where the training data's latch band does that, the fit adds the
-:class:`~clutchlab.physics.effects.flexible.LatchDitherBand` law, held at values read off the
-data, after the solver: fitted from zero by the solver the law lost its way (session 55, E4),
-fitted from values read at the staged start it absorbed what the solver would have put
-elsewhere (session 56, B1), added to the fitted model it did what the data ask (B2).
+near the dither's crest. A latch valve balanced against line pressure switches at currents
+that follow the line pressure's wander; the datasheet valve's thresholds are fixed. Where the
+training data's snaps do either, the fit adds the
+:class:`~clutchlab.physics.effects.flexible.LatchDitherBand` and / or the
+:class:`~clutchlab.physics.effects.flexible.LatchLineThreshold` law, held at values read off
+the data, after the solver: fitted from zero by the solver the band law lost its way (session
+55, E4), fitted from values read at the staged start it absorbed what the solver would have
+put elsewhere (session 56, B1), added to the fitted model it did what the data ask (B2).
 
 On every quasi-static training experiment with a measured snap, the model gives its latch-on
-and latch-off current minus the measured one (mA). The law moves the latch-on threshold by
-``+w`` and the latch-off threshold by ``−w`` (bar), ``w`` linear in its five parameters at
-the dither amplitude and frequency of each snap; with the staged start's latch-matching
-Jacobian (mA per bar of threshold) the offsets are linear in the two thresholds and the five
-parameters. One least-squares solve of that system (the thresholds with the law, so the band's
-centre moves too), then a few chord rounds (a simulation of the quasi-static experiments
-each, the Jacobian kept), the best kept.
+and latch-off current minus the measured one (mA). The band law moves the latch-on threshold
+by ``+w`` and the latch-off threshold by ``−w`` (bar), ``w`` linear in its five parameters at
+the dither amplitude and frequency of each snap; the line law moves them by ``r_on`` and
+``r_off`` times the line pressure's excess over its reference at the snap. With the staged
+start's latch-matching Jacobian (mA per bar of threshold) the offsets are linear in the two
+thresholds and the laws' parameters. One least-squares solve of that system (the thresholds
+with the laws, so the band's centre moves too), then a few chord rounds (a simulation of the
+quasi-static experiments each, the Jacobian kept), the best kept.
 
-The law is added only where the data ask for it: the offsets that leave-one-experiment-out
-predicts with the law must be below :data:`BAND_GAIN` times those predicted with the two
-thresholds alone, and the thresholds alone must leave more than :data:`BAND_MIN_MA` (RMS).
-The same test on the staged start's model (:func:`band_asked`) decides whether the solver
-leaves :data:`BAND_RESERVE_S` of its time for the stage. The fitter keeps the law only when
-it lowers the training RMS. Training experiments only.
+A law is added only where the data ask for it: each structure's offsets are predicted
+leave-one-experiment-out, and a structure must bring them below :data:`BAND_GAIN` times
+those of every structure it contains (the thresholds alone; with both laws, each law alone),
+with the thresholds alone leaving more than :data:`BAND_MIN_MA` (RMS); the eligible structure
+with the lowest offsets is adopted. The same test on the staged start's model
+(:func:`band_asked`) decides whether the solver leaves :data:`BAND_RESERVE_S` of its time for
+the stage. The fitter keeps the laws only when they lower the training RMS. Training
+experiments only.
+
+The line law is opt-in (``FitSettings.latch_band = "line"``, ``fit-physics --latch-band
+line``), and offered only when the training data log a line pressure that varies at the snaps
+(:data:`LINE_MIN_BAR`). With it the stage uses the fitted model's own threshold Jacobian (the
+staged start's is taken on a cruder model: on stribeck_supply s0 it gave the latch-on 51 mA per
+bar of the latch-off threshold, the fitted model 8) and the solver always leaves the stage its
+time (the staged start's test can miss what the fitted model's snaps show). Measured in
+session 58 (BENCHMARKS): held-back error −57 % and −35 % on a line-referenced latch, +2.2 % on
+a dwell latch; so not the default.
 """
 
 from __future__ import annotations
@@ -34,17 +50,18 @@ import time
 import numpy as np
 
 from ...data import Trace
-from ..effects.flexible import LatchDitherBand, dither_band_terms
+from ..effects.flexible import LatchDitherBand, LatchLineThreshold, dither_band_terms
 from ..model import CircuitModel
 from ..parameters import ParameterSet, quiet_design_checks
+from .sensitivity import compile_sensitivities_for
 from .settings import FitSettings
 from .staged import (
     StagedStart,
     _latch_law,
+    _line,
     _measured_latches,
     _period_mean,
     _thresholds_of,
-    _with_law,
     _with_thresholds,
     quasi_static_traces,
     snap_offsets_each,
@@ -55,9 +72,11 @@ __all__ = [
     "BAND_GAIN",
     "BAND_MIN_MA",
     "BAND_RESERVE_S",
+    "LINE_MIN_BAR",
     "band_asked",
     "band_design",
     "latch_band_structure",
+    "line_design",
 ]
 
 #: The law is adopted when its leave-one-experiment-out snap offsets (RMS) are below this
@@ -72,12 +91,22 @@ _BAND_ROUNDS = 3
 #: Relative ridge on the law's columns (the five terms are close to collinear at three
 #: dither frequencies).
 _BAND_RIDGE = 1e-3
-#: Solver time (s) kept for the stage when the staged start's snaps ask for the law.
+#: Threshold step (bar) of the fitted model's finite-difference Jacobian.
+_FD_BAR = 0.1
+#: Solver time (s) kept for the stage when the staged start's snaps ask for a law (always
+#: with the line law offered).
 BAND_RESERVE_S = 15.0
 #: Time (s) the stage leaves the fitter at the end of its limit (the result's uncertainty
 #: pass and per-experiment errors).
 BAND_FINISH_S = 5.0
 LAW = LatchDitherBand.name
+LINE_LAW = LatchLineThreshold.name
+#: The line terms are offered only when the line pressure at the quasi-static snaps varies by
+#: more than this (bar, standard deviation): otherwise their columns are zero.
+LINE_MIN_BAR = 0.02
+#: Columns of the stage's system: the two thresholds, the band law's five, the line law's two.
+_THR = (0, 1)
+_GROUPS = {LAW: (2, 3, 4, 5, 6), LINE_LAW: (7, 8)}
 
 
 def band_design(
@@ -114,8 +143,47 @@ def band_design(
     return np.asarray(rows)
 
 
-def _solve(a: np.ndarray, d: np.ndarray, cols: slice) -> np.ndarray:
-    """Least-squares ``θ`` (on ``cols``; 0 elsewhere) with ``a θ ≈ −d``, ridge on the law."""
+def line_design(
+    traces: list[Trace], latch: dict[str, tuple[int, int]], jacobian: np.ndarray, p_ref: float
+) -> np.ndarray:
+    """The line law's columns of the linearized snap offsets: ``Δd = A (r_on, r_off)``.
+
+    Rows as :func:`band_design`'s. The law raises the latch-on (latch-off) threshold by
+    ``r_on`` (``r_off``) bar per bar of line pressure above ``p_ref`` at the snap.
+
+    Parameters
+    ----------
+    traces, latch, jacobian
+        As :func:`band_design`.
+    p_ref : float
+        Reference line pressure (bar).
+
+    Returns
+    -------
+    ndarray, shape (2 n, 2)
+        mA per unit of the slopes.
+    """
+    rows = []
+    for tr in traces:
+        line = _line(tr, len(tr))
+        for branch, k in enumerate(latch[tr.name]):
+            rows.append(jacobian[branch] * (float(line[k]) - p_ref))
+    return np.asarray(rows)
+
+
+def _line_reference(traces: list[Trace], latch: dict[str, tuple[int, int]]) -> float | None:
+    """Median line pressure (bar) at the snaps of ``traces``; None when the training data log
+    no line pressure or it varies by less than :data:`LINE_MIN_BAR` there."""
+    if not all(tr.has("line_pressure_bar") for tr in traces):
+        return None
+    at = [float(_line(tr, len(tr))[k]) for tr in traces for k in latch[tr.name]]
+    return float(np.median(at)) if np.std(at) > LINE_MIN_BAR else None
+
+
+def _solve(a: np.ndarray, d: np.ndarray, cols) -> np.ndarray:
+    """Least-squares ``θ`` (on ``cols``, the thresholds first; 0 elsewhere) with
+    ``a θ ≈ −d``, ridge on the laws' columns."""
+    cols = list(cols)
     sub = a[:, cols]
     n = sub.shape[1]
     scale = np.sqrt(np.sum(sub**2, axis=0)) + 1e-12
@@ -128,7 +196,7 @@ def _solve(a: np.ndarray, d: np.ndarray, cols: slice) -> np.ndarray:
     return theta
 
 
-def _loo_rms(a: np.ndarray, d: np.ndarray, cols: slice) -> float:
+def _loo_rms(a: np.ndarray, d: np.ndarray, cols) -> float:
     """RMS (mA) of each experiment's offsets as predicted from the others' solve."""
     res = []
     for e in range(a.shape[0] // 2):
@@ -143,14 +211,38 @@ def _rms(d: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(d))))
 
 
-def _system(model, params, traces, free, settings, info):
+def _fitted_jacobian(model, params, used, latch, free, settings, d0, staged) -> np.ndarray:
+    """d(latch-on, latch-off offset, mA) / d(threshold, bar) of the model at ``params``:
+    finite differences over ``used`` (median over the experiments; two simulations of
+    them). The staged start's Jacobian was taken on its own, cruder model (session 58: on
+    stribeck_supply s0 it gave the latch-on 51 mA per bar of the latch-off threshold, the
+    fitted model 8); ``staged`` is kept when a perturbed model does not snap."""
+    law = _latch_law(model, free)
+    x0 = _thresholds_of(law, params)
+    jac = np.zeros((2, 2))
+    for j in range(2):
+        p, clipped = _with_thresholds(law, params, *(x0 + _FD_BAR * np.eye(2)[j]), settings.bounds)
+        d = None if clipped else snap_offsets_each(model, p, used, latch, settings.substeps)
+        if d is None:
+            return staged
+        jac[:, j] = np.median(d - d0, axis=0) / _FD_BAR
+    return jac
+
+
+def _system(model, params, traces, free, settings, info, fitted=False):
     """The stage's linear system at ``params``, or a reason (str) why there is none.
 
-    Returns ``(band_model, start, used, latch, d0, a)``: the model with the law (at 0),
-    its parameters, the quasi-static experiments with a measured snap and their indices,
-    the offsets (mA, latch-on and -off per experiment) and the design matrix."""
-    if LAW in model.effect_names:
-        return "the model names latch_dither_band"
+    With ``settings.latch_band == "line"`` the line law's columns are offered and, on the
+    ``fitted`` model, the thresholds' Jacobian is the model's own (finite differences), not
+    the staged start's.
+
+    Returns ``(start, used, latch, d0, a, p_ref)``: the parameters, the quasi-static
+    experiments with a measured snap and their indices, the offsets (mA, latch-on and -off
+    per experiment), the design matrix (the thresholds, the band law's five columns and,
+    when the line pressure varies at the snaps, the line law's two) and the line law's
+    reference pressure (bar; None without its columns)."""
+    if LAW in model.effect_names or LINE_LAW in model.effect_names:
+        return f"the model names {LAW} or {LINE_LAW}"
     if _latch_law(model, free) is None or info is None or info.latch_jacobian is None:
         return "latch not matched"
     qs = quasi_static_traces(traces)
@@ -158,31 +250,63 @@ def _system(model, params, traces, free, settings, info):
     used = [tr for tr in qs if tr.name in latch]
     if len(used) < BAND_MIN_EXPERIMENTS:
         return f"{len(used)} quasi-static experiments with a snap (< {BAND_MIN_EXPERIMENTS})"
-    band_model, start = _with_law(model, params, LAW, {})
-    d0 = snap_offsets_each(band_model, start, used, latch, settings.substeps)
+    d0 = snap_offsets_each(model, params, used, latch, settings.substeps)
     if d0 is None:
         return "the model does not snap on every quasi-static experiment"
-    a = band_design(used, latch, np.asarray(info.latch_jacobian, float))
-    return band_model, start, used, latch, d0.ravel(), a
+    jac = np.asarray(info.latch_jacobian, float)
+    line = settings.latch_band == "line"
+    if line and fitted:
+        jac = _fitted_jacobian(model, params, used, latch, free, settings, d0, jac)
+    a = band_design(used, latch, jac)
+    p_ref = _line_reference(used, latch) if line else None
+    if p_ref is not None:
+        a = np.hstack([a, line_design(used, latch, jac, p_ref)])
+    return params, used, latch, d0.ravel(), a, p_ref
 
 
-def _asks(d0: np.ndarray, a: np.ndarray) -> tuple[bool, dict[str, float], str]:
-    """The adoption test: ``(asked, record, comparison text)``."""
-    thresholds_only = _loo_rms(a, d0, slice(0, 2))
-    with_law = _loo_rms(a, d0, slice(0, 7))
+#: The structures the stage chooses from: the laws each adds to the thresholds.
+_STRUCTURES = ((LAW,), (LINE_LAW,), (LAW, LINE_LAW))
+
+
+def _columns(laws: tuple[str, ...]) -> tuple[int, ...]:
+    return _THR + tuple(c for law in laws for c in _GROUPS[law])
+
+
+def _asks(d0: np.ndarray, a: np.ndarray) -> tuple[tuple[str, ...], dict[str, float], str]:
+    """The adoption test: ``(laws, record, comparison text)``; ``laws`` empty when none.
+
+    Each structure's snap offsets are predicted leave-one-experiment-out. A structure is
+    eligible when its offsets are below :data:`BAND_GAIN` times those of every structure it
+    contains (the thresholds alone; with both laws, also each law alone); the eligible one
+    with the lowest offsets is adopted, provided the thresholds alone leave more than
+    :data:`BAND_MIN_MA`."""
+    loo = {(): _loo_rms(a, d0, _THR)}
+    for laws in _STRUCTURES:
+        if all(_GROUPS[law][-1] < a.shape[1] for law in laws):
+            loo[laws] = _loo_rms(a, d0, _columns(laws))
+    eligible = [
+        laws
+        for laws in loo
+        if laws and all(loo[laws] < BAND_GAIN * v for sub, v in loo.items() if set(sub) < set(laws))
+    ]
+    chosen = min(eligible, key=loo.__getitem__) if eligible else ()
+    if loo[()] <= BAND_MIN_MA:
+        chosen = ()
     record = {
         "experiments": float(len(d0) // 2),
         "offsets_rms_mA": _rms(d0),
-        "loo_thresholds_mA": thresholds_only,
-        "loo_law_mA": with_law,
+        "loo_thresholds_mA": loo[()],
+        "loo_law_mA": loo[(LAW,)],
     }
-    asked = thresholds_only > BAND_MIN_MA and with_law < BAND_GAIN * thresholds_only
+    if (LINE_LAW,) in loo:
+        record["loo_line_mA"] = loo[(LINE_LAW,)]
+        record["loo_law_line_mA"] = loo[(LAW, LINE_LAW)]
+    parts = [f"{v:.1f} mA with {' + '.join(k)}" for k, v in loo.items() if k]
     text = (
-        f"leave-one-experiment-out latch-snap offsets {with_law:.1f} mA with the law, "
-        f"{thresholds_only:.1f} mA with the thresholds alone, on {len(d0) // 2} quasi-static "
-        "experiments"
+        f"leave-one-experiment-out latch-snap offsets {', '.join(parts)}, "
+        f"{loo[()]:.1f} mA with the thresholds alone, on {len(d0) // 2} quasi-static experiments"
     )
-    return asked, record, text
+    return chosen, record, text
 
 
 @quiet_design_checks  # its probes are not the user's values
@@ -200,12 +324,12 @@ def band_asked(
     system = _system(model, params, traces, free, settings, info)
     if isinstance(system, str):
         return False
-    *_, d0, a = system
-    asked, record, text = _asks(d0, a)
+    *_, d0, a, _ = system
+    laws, record, text = _asks(d0, a)
+    asked = bool(laws)
     info.latch_band.update({f"staged_{k}": v for k, v in record.items()})
-    info.notes.append(
-        f"latch band at the staged start: {'time kept for it' if asked else 'not asked'} ({text})"
-    )
+    kept = "time kept for it" if asked or settings.latch_band == "line" else "not asked"
+    info.notes.append(f"latch band at the staged start: {kept} ({text})")
     return asked
 
 
@@ -247,47 +371,58 @@ def latch_band_structure(
     if budget_s <= 0:
         info.notes.append("latch band: no time left in the fit's limit; not estimated")
         return model, params
-    system = _system(model, params, traces, free, settings, info)
+    system = _system(model, params, traces, free, settings, info, fitted=True)
     if isinstance(system, str):
         info.notes.append(f"latch band: {system}; not estimated")
         return model, params
-    band_model, start, used, latch, d0, a = system
-    asked, record, comparison = _asks(d0, a)
+    start, used, latch, d0, a, p_ref = system
+    laws, record, comparison = _asks(d0, a)
     info.latch_band.update(record)
-    if not asked:
+    if not laws:
         info.notes.append(f"latch band: not added ({comparison})")
         return model, params
     law = _latch_law(model, free)
     x0 = _thresholds_of(law, start)
-    names = LatchDitherBand.FIT
-    bounds = {n: settings.bounds.get(n, (start.spec(n).lower, start.spec(n).upper)) for n in names}
+    cols = _columns(laws)
+    new_model = model.with_effects(*laws)
+    # the result's standard errors need its sensitivity code: compiled on the other core
+    # while the rounds simulate (cold, it would add ~6 s after them)
+    compile_sensitivities_for(
+        new_model, traces, settings.substeps, settings.drive, len(free), background=True
+    )
+    specs = new_model.default_params()
+    names = [n for lw in laws for n in (LatchDitherBand if lw == LAW else LatchLineThreshold).FIT]
+    bounds = {n: settings.bounds.get(n, (specs.spec(n).lower, specs.spec(n).upper)) for n in names}
+    held = {"llt_p_ref": p_ref} if LINE_LAW in laws else {}
+    kept = {n: start[n] for n in start}
+    base = new_model.params(**kept, **held)
 
     def at(theta):
-        p, _ = _with_thresholds(law, start, *(x0 + theta[:2]), settings.bounds)
+        p, _ = _with_thresholds(law, base, *(x0 + theta[:2]), settings.bounds)
         law_values = {
-            n: float(np.clip(start[n] + v, *bounds[n]))
-            for n, v in zip(names, theta[2:], strict=True)
+            n: float(np.clip(v, *bounds[n])) for n, v in zip(names, theta[2:], strict=True)
         }
         return p.replace(**law_values)
 
-    best = (_rms(d0), start, d0)
-    theta = _solve(a, d0, slice(0, 7))
+    best = (_rms(d0), base, d0)
+    theta = _solve(a, d0, cols)[list(cols)]
     rounds = 0
     while rounds <= _BAND_ROUNDS and time.perf_counter() - t0 < budget_s:
         rounds += 1
         p = at(theta)
-        d = snap_offsets_each(band_model, p, used, latch, settings.substeps)
+        d = snap_offsets_each(new_model, p, used, latch, settings.substeps)
         if d is None or _rms(d.ravel()) >= best[0]:
             break
         best = (_rms(d.ravel()), p, d.ravel())
-        theta = theta + _solve(a, best[2], slice(0, 7))
+        theta = theta + _solve(a, best[2], cols)[list(cols)]
     info.latch_band.update({"offsets_after_mA": best[0], "simulations": float(rounds + 1)})
-    if best[1] is start:
+    if best[1] is base:
         info.notes.append(f"latch band: no step lowered the snap offsets ({comparison})")
         return model, params
+    added = ", ".join(laws)
     info.notes.append(
-        "structure: latch_dither_band after the solver (the latch band moves with the "
-        f"dither; held at the snaps' values); {comparison}; offsets "
-        f"{record['offsets_rms_mA']:.1f} → {best[0]:.1f} mA RMS"
+        f"structure: {added} after the solver (the latch switch currents move with the "
+        f"dither{' and the line pressure' if LINE_LAW in laws else ''}; held at the snaps' "
+        f"values); {comparison}; offsets {record['offsets_rms_mA']:.1f} → {best[0]:.1f} mA RMS"
     )
-    return band_model, best[1]
+    return new_model, best[1]

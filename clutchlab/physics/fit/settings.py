@@ -159,7 +159,7 @@ class FitSettings:
         all 8 datasets (BENCHMARKS, "a latch that switches the clutch port"); before, with
         ``reg_pilot_lag`` alone, ``auto`` raised it on some (sessions 20 and 34), and was
         off by default.
-    latch_band : {"auto", "off"}
+    latch_band : {"auto", "off", "line"}
         ``auto`` (default): when the quasi-static training experiments' latch snaps move
         with the dither amplitude and frequency more than the latch thresholds alone can
         follow (leave-one-experiment-out, on the staged start's model and again on the
@@ -167,6 +167,10 @@ class FitSettings:
         ``latch_dither_band`` law after the solver, held at the values the snaps give
         with the thresholds matched, and keeps it only when it lowers the training RMS
         (logged either way); the solver then leaves it ``BAND_RESERVE_S`` of its time.
+        ``line``: the same, with ``latch_line_threshold`` (switch currents that follow the
+        logged line pressure) offered beside and with the band law, the test made with the
+        fitted model's own threshold Jacobian, and the solver's time always reserved for
+        it (opt-in: lower held-back error on a line-referenced latch, session 58).
         ``off``: never. Needs the staged start; not with ``free``.
     static_max_iter : int
         Iteration limit of the staged start's static stage.
@@ -222,7 +226,7 @@ class FitSettings:
     staged_start: bool = True
     latch_law: Literal["auto", "datasheet"] = "auto"
     regulator_lag: Literal["auto", "off"] = "auto"
-    latch_band: Literal["auto", "off"] = "auto"
+    latch_band: Literal["auto", "off", "line"] = "auto"
     static_max_iter: int = 15
     static_time_fraction: float = 0.2
     strict: bool = False
@@ -321,8 +325,8 @@ class FitSettings:
             problems.append(f"latch_law {self.latch_law!r} is not auto or datasheet")
         if self.regulator_lag not in ("auto", "off"):
             problems.append(f"regulator_lag {self.regulator_lag!r} is not auto or off")
-        if self.latch_band not in ("auto", "off"):
-            problems.append(f"latch_band {self.latch_band!r} is not auto or off")
+        if self.latch_band not in ("auto", "off", "line"):
+            problems.append(f"latch_band {self.latch_band!r} is not auto, off or line")
         if problems:
             raise FitError("invalid fit settings: " + "; ".join(problems))
 
