@@ -11,14 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from latch_support import switch_currents
 
-from clutchlab.data import dither_period_mean, dither_period_samples
 from clutchlab.physics import CircuitModel, simulate
 from clutchlab.physics.effects import FLEXIBLE_LAWS
 from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
-from clutchlab.validation.latch import latch_currents
-from clutchlab.validation.protocol import ExperimentReference
-from clutchlab.validation.settings import AnalysisSettings
 
 RAMPS = (RampProfile("fast", 2.5, 0.5),)
 MODEL = CircuitModel().with_effects("latch_dither_band")
@@ -33,11 +30,7 @@ def stand_traces():
 
 def _switch_currents(trace, **values) -> tuple[float, float]:
     """Latch-on and latch-off currents (mA) of the law's model at ``values``."""
-    pressure = simulate(MODEL, MODEL.params(**values), trace).pressure_bar
-    ref = ExperimentReference.of(trace, AnalysisSettings())
-    mean = dither_period_mean(pressure, dither_period_samples(trace))
-    lc = latch_currents(ref.current_mA, mean, ref.direction, ref.line_bar)
-    return lc.on_mA, lc.off_mA
+    return switch_currents(MODEL, trace, **values)
 
 
 def test_a_positive_amplitude_term_widens_the_band_more_at_a_larger_dither(stand_traces):

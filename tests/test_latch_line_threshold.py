@@ -15,8 +15,8 @@ import warnings
 
 import numpy as np
 import pytest
+from latch_support import switch_currents
 
-from clutchlab.data import dither_period_mean, dither_period_samples
 from clutchlab.errors import FitWarning
 from clutchlab.physics import CircuitModel, simulate
 from clutchlab.physics.effects import FLEXIBLE_LAWS, LatchLineThreshold
@@ -36,9 +36,6 @@ from clutchlab.physics.fit.staged import (
     staged_start,
 )
 from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
-from clutchlab.validation.latch import latch_currents
-from clutchlab.validation.protocol import ExperimentReference
-from clutchlab.validation.settings import AnalysisSettings
 
 LAW = "latch_line_threshold"
 MODEL = CircuitModel().with_effects(LAW)
@@ -59,11 +56,8 @@ def _with_line(trace, line_bar: float):
 
 
 def _switch_currents(trace, **values) -> tuple[float, float]:
-    pressure = simulate(MODEL, MODEL.params(**values), trace).pressure_bar
-    ref = ExperimentReference.of(trace, AnalysisSettings())
-    mean = dither_period_mean(pressure, dither_period_samples(trace))
-    lc = latch_currents(ref.current_mA, mean, ref.direction, ref.line_bar)
-    return lc.on_mA, lc.off_mA
+    """Latch-on and latch-off currents (mA) of the law's model at ``values``."""
+    return switch_currents(MODEL, trace, **values)
 
 
 def test_higher_line_moves_the_snap_and_the_release_later_by_their_own_slopes(fast_trace):

@@ -38,8 +38,9 @@ line``), and offered only when the training data log a line pressure that varies
 staged start's is taken on a cruder model: on stribeck_supply s0 it gave the latch-on 51 mA per
 bar of the latch-off threshold, the fitted model 8) and the solver always leaves the stage its
 time (the staged start's test can miss what the fitted model's snaps show). Measured in
-session 58 (BENCHMARKS): held-back error −57 % and −35 % on a line-referenced latch, +2.2 % on
-a dwell latch; so not the default.
+session 58 (BENCHMARKS): held-back error −35 to −64 % on a line-referenced latch (three
+seeds), 0.0 to +0.34 % on five rows of other circuits, +2.2 % on one dwell latch; so not the
+default.
 """
 
 from __future__ import annotations
