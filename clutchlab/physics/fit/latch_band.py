@@ -63,6 +63,7 @@ from .staged import (
     _measured_latches,
     _period_mean,
     _thresholds_of,
+    _with_law,
     _with_thresholds,
     quasi_static_traces,
     snap_offsets_each,
@@ -107,6 +108,7 @@ LINE_LAW = LatchLineThreshold.name
 LINE_MIN_BAR = 0.02
 #: Columns of the stage's system: the two thresholds, the band law's five, the line law's two.
 _THR = (0, 1)
+_LAWS = {LAW: LatchDitherBand, LINE_LAW: LatchLineThreshold}
 _GROUPS = {LAW: (2, 3, 4, 5, 6), LINE_LAW: (7, 8)}
 
 
@@ -385,18 +387,15 @@ def latch_band_structure(
     law = _latch_law(model, free)
     x0 = _thresholds_of(law, start)
     cols = _columns(laws)
-    new_model = model.with_effects(*laws)
+    held = {"llt_p_ref": p_ref} if LINE_LAW in laws else {}
+    new_model, base = _with_law(model, start, ", ".join(laws), held)
     # the result's standard errors need its sensitivity code: compiled on the other core
     # while the rounds simulate (cold, it would add ~6 s after them)
     compile_sensitivities_for(
         new_model, traces, settings.substeps, settings.drive, len(free), background=True
     )
-    specs = new_model.default_params()
-    names = [n for lw in laws for n in (LatchDitherBand if lw == LAW else LatchLineThreshold).FIT]
-    bounds = {n: settings.bounds.get(n, (specs.spec(n).lower, specs.spec(n).upper)) for n in names}
-    held = {"llt_p_ref": p_ref} if LINE_LAW in laws else {}
-    kept = {n: start[n] for n in start}
-    base = new_model.params(**kept, **held)
+    names = [n for lw in laws for n in _LAWS[lw].FIT]
+    bounds = {n: settings.bounds.get(n, (base.spec(n).lower, base.spec(n).upper)) for n in names}
 
     def at(theta):
         p, _ = _with_thresholds(law, base, *(x0 + theta[:2]), settings.bounds)
