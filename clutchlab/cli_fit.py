@@ -294,14 +294,14 @@ def register(sub) -> None:
     )
     p.add_argument(
         "--latch-band",
-        choices=("auto", "off", "line"),
+        choices=("auto", "band", "off"),
         default="auto",
         help="auto (default): when the slow training ramps' latch snaps move with the dither "
-        "amplitude and frequency more than the latch thresholds can follow "
-        "(leave-one-experiment-out, logged), add the latch_dither_band law after the solver, "
-        "held at the snaps' values, kept only when it lowers the training RMSE; line: the "
-        "same, also offering latch_line_threshold (switch currents that follow the logged "
-        "line pressure; opt-in); off: never",
+        "amplitude and frequency, or with the logged line pressure, more than the latch "
+        "thresholds can follow (leave-one-experiment-out, logged), add latch_dither_band "
+        "and / or latch_line_threshold after the solver, held at the snaps' values, kept "
+        "only when they lower the training RMSE; band: the dither band law only (the default "
+        "before session 59); off: never",
     )
     p.add_argument(
         "--strict",

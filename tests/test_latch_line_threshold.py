@@ -126,7 +126,7 @@ def test_line_columns_are_the_threshold_columns_times_the_line_at_the_snap(line_
         np.testing.assert_allclose(a[row + 1], jac[1] * (line[off] - 17.5))
 
 
-def _stage(traces, latch_band="line"):
+def _stage(traces, latch_band="auto"):
     model = CircuitModel()
     settings = FitSettings(progress=False, regulator_lag="off", latch_band=latch_band)
     free = resolve_free(model, settings)
@@ -154,10 +154,9 @@ def test_the_stage_adds_the_line_law_where_the_snaps_follow_line(line_latch):
     assert "latch_line_threshold after the solver" in info.summary()
 
 
-def test_the_default_latch_band_does_not_offer_it(line_latch):
-    """Opt-in: on held-back rows it lowered a line-referenced latch's error by 35-57 % but
-    raised a dwell latch's by 2.2 % (session 58), so ``auto`` stays the band law alone."""
-    chosen, _, info = _stage(line_latch, "auto")
+def test_latch_band_band_does_not_offer_it(line_latch):
+    """``band``: the dither band law alone (the default before session 59)."""
+    chosen, _, info = _stage(line_latch, "band")
     assert "loo_line_mA" not in info.latch_band, info.summary()
     assert LAW not in chosen.effect_names
 
@@ -178,10 +177,8 @@ def test_clutchlabs_own_latch_does_not_ask_for_it(stand_slow):
     assert LAW not in chosen.effect_names, info.summary()
 
 
-def test_a_line_fit_keeps_the_law_only_when_it_lowers_the_training_rms(line_latch, tmp_path):
-    settings = FitSettings(
-        progress=False, train_ramps=("slow",), latch_band="line", max_iter=6, refine_max_iter=1
-    )
+def test_a_fit_keeps_the_law_only_when_it_lowers_the_training_rms(line_latch, tmp_path):
+    settings = FitSettings(progress=False, train_ramps=("slow",), max_iter=6, refine_max_iter=1)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FitWarning)  # a fit stopped at a limit is fine here
         fitter = PhysicsFitter(settings=settings).fit(line_latch)

@@ -485,11 +485,11 @@ class LatchLineThreshold(Effect):
     exactly today's model; without a logged line pressure the line is the nominal one and
     the law does nothing.
 
-    A fit with ``FitSettings.latch_band = "line"`` (``fit-physics --latch-band line``,
-    opt-in) adds it after its solver, with :class:`LatchDitherBand` or alone, where the
-    quasi-static snaps ask for it (:mod:`~clutchlab.physics.fit.latch_band`): ``p_ref`` is
-    then held at the median line pressure at the snaps and ``r_on``, ``r_off`` at the values
-    the snaps give (:attr:`WARM_ONLY`).
+    A fit (``FitSettings.latch_band = "auto"``, the default) adds it after its solver,
+    with :class:`LatchDitherBand` or alone, where the quasi-static snaps ask for it
+    (:mod:`~clutchlab.physics.fit.latch_band`): ``p_ref`` is then held at the median line
+    pressure at the snaps and ``r_on``, ``r_off`` at the values the snaps give
+    (:attr:`WARM_ONLY`).
     """
 
     name = "latch_line_threshold"

@@ -374,12 +374,10 @@ class PhysicsFitter:
                     model, start, traces, free, settings, self.staged_, match_s
                 )
             if settings.latch_band != "off" and settings.free is None:
-                # the staged start's own snaps decide whether the fit keeps time for the
-                # latch band after the solver (latch_band.py); with the line law offered
-                # ("line") the time is always kept: the staged start's cruder model can
-                # hide what the fitted one's snaps show (session 58, stribeck_supply)
-                asked = band_asked(model, start, traces, free, settings, self.staged_)
-                if asked or settings.latch_band == "line":
+                # whether the fit keeps time for the latch band after the solver: the
+                # staged start's own snaps ask for it, or the line law is offered
+                # (latch_band.py)
+                if band_asked(model, start, traces, free, settings, self.staged_):
                     band_reserve_s = BAND_RESERVE_S
         history: list[float] = []
         bar = tqdm(

@@ -159,19 +159,17 @@ class FitSettings:
         all 8 datasets (BENCHMARKS, "a latch that switches the clutch port"); before, with
         ``reg_pilot_lag`` alone, ``auto`` raised it on some (sessions 20 and 34), and was
         off by default.
-    latch_band : {"auto", "off", "line"}
+    latch_band : {"auto", "band", "off"}
         ``auto`` (default): when the quasi-static training experiments' latch snaps move
-        with the dither amplitude and frequency more than the latch thresholds alone can
-        follow (leave-one-experiment-out, on the staged start's model and again on the
-        fitted one; :mod:`~clutchlab.physics.fit.latch_band`), the fit adds the
-        ``latch_dither_band`` law after the solver, held at the values the snaps give
-        with the thresholds matched, and keeps it only when it lowers the training RMS
-        (logged either way); the solver then leaves it ``BAND_RESERVE_S`` of its time.
-        ``line``: the same, with ``latch_line_threshold`` (switch currents that follow the
-        logged line pressure) offered beside and with the band law, the test made with the
-        fitted model's own threshold Jacobian, and the solver's time always reserved for
-        it (opt-in: lower held-back error on a line-referenced latch, session 58).
-        ``off``: never. Needs the staged start; not with ``free``.
+        with the dither amplitude and frequency, or with the logged line pressure, more
+        than the latch thresholds alone can follow (leave-one-experiment-out, on the
+        staged start's model and again on the fitted one;
+        :mod:`~clutchlab.physics.fit.latch_band`), the fit adds ``latch_dither_band``
+        and / or ``latch_line_threshold`` after the solver, held at the values the snaps
+        give with the thresholds matched, and keeps them only when they lower the training
+        RMS (logged either way); the solver leaves the stage ``BAND_RESERVE_S`` of its
+        time. ``band``: the dither band law only (the default before session 59). ``off``:
+        never. Needs the staged start; not with ``free``.
     static_max_iter : int
         Iteration limit of the staged start's static stage.
     static_time_fraction : float
@@ -226,7 +224,7 @@ class FitSettings:
     staged_start: bool = True
     latch_law: Literal["auto", "datasheet"] = "auto"
     regulator_lag: Literal["auto", "off"] = "auto"
-    latch_band: Literal["auto", "off", "line"] = "auto"
+    latch_band: Literal["auto", "band", "off"] = "auto"
     static_max_iter: int = 15
     static_time_fraction: float = 0.2
     strict: bool = False
@@ -325,8 +323,8 @@ class FitSettings:
             problems.append(f"latch_law {self.latch_law!r} is not auto or datasheet")
         if self.regulator_lag not in ("auto", "off"):
             problems.append(f"regulator_lag {self.regulator_lag!r} is not auto or off")
-        if self.latch_band not in ("auto", "off", "line"):
-            problems.append(f"latch_band {self.latch_band!r} is not auto, off or line")
+        if self.latch_band not in ("auto", "band", "off"):
+            problems.append(f"latch_band {self.latch_band!r} is not auto, band or off")
         if problems:
             raise FitError("invalid fit settings: " + "; ".join(problems))
 
