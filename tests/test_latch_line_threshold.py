@@ -142,6 +142,8 @@ def test_the_stage_adds_the_line_law_where_the_snaps_follow_line(line_latch):
     assert "loo_line_mA" in band, info.summary()
     assert LAW in chosen.effect_names, info.summary()
     assert band["offsets_after_mA"] < band["offsets_rms_mA"], band
+    # the fitted model's Jacobian (two simulations) counted with the start's and a round's
+    assert band["jacobian_simulations"] == 2.0 and band["simulations"] >= 4.0, band
     # p_ref held at the median line pressure at the snaps; the slopes read off the data
     qs = quasi_static_traces(line_latch)
     latch = _measured_latches(qs)

@@ -216,12 +216,15 @@ def _rms(d: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(d))))
 
 
-def _fitted_jacobian(model, params, used, latch, free, settings, d0, staged) -> np.ndarray:
+def _fitted_jacobian(
+    model, params, used, latch, free, settings, d0, staged
+) -> tuple[np.ndarray, int]:
     """d(latch-on, latch-off offset, mA) / d(threshold, bar) of the model at ``params``:
-    finite differences over ``used`` (median over the experiments; two simulations of
-    them). The staged start's Jacobian was taken on its own, cruder model (session 58: on
-    stribeck_supply s0 it gave the latch-on 51 mA per bar of the latch-off threshold, the
-    fitted model 8); ``staged`` is kept when a perturbed model does not snap."""
+    finite differences over ``used`` (median over the experiments), and the simulations of
+    them it took (two, fewer when one fails). The staged start's Jacobian was taken on its
+    own, cruder model (session 58: on stribeck_supply s0 it gave the latch-on 51 mA per bar
+    of the latch-off threshold, the fitted model 8); ``staged`` is kept when a perturbed
+    model does not snap."""
     law = _latch_law(model, free)
     x0 = _thresholds_of(law, params)
     jac = np.zeros((2, 2))
@@ -229,9 +232,9 @@ def _fitted_jacobian(model, params, used, latch, free, settings, d0, staged) -> 
         p, clipped = _with_thresholds(law, params, *(x0 + _FD_BAR * np.eye(2)[j]), settings.bounds)
         d = None if clipped else snap_offsets_each(model, p, used, latch, settings.substeps)
         if d is None:
-            return staged
+            return staged, j + (not clipped)
         jac[:, j] = np.median(d - d0, axis=0) / _FD_BAR
-    return jac
+    return jac, 2
 
 
 def _system(model, params, traces, free, settings, info, fitted=False):
@@ -263,7 +266,8 @@ def _system(model, params, traces, free, settings, info, fitted=False):
     if p_ref is None:
         return params, used, latch, d0.ravel(), band_design(used, latch, jac), None
     if fitted:
-        jac = _fitted_jacobian(model, params, used, latch, free, settings, d0, jac)
+        jac, runs = _fitted_jacobian(model, params, used, latch, free, settings, d0, jac)
+        info.latch_band["jacobian_simulations"] = float(runs)
     a = np.hstack([band_design(used, latch, jac), line_design(used, latch, jac, p_ref)])
     return params, used, latch, d0.ravel(), a, p_ref
 
@@ -426,7 +430,9 @@ def latch_band_structure(
             break
         best = (_rms(d.ravel()), p, d.ravel())
         theta = theta + _solve(a, best[2], cols)[list(cols)]
-    info.latch_band.update({"offsets_after_mA": best[0], "simulations": float(rounds + 1)})
+    # the offsets at the start, the Jacobian's (line law offered) and the rounds'
+    simulations = 1 + info.latch_band.get("jacobian_simulations", 0.0) + rounds
+    info.latch_band.update({"offsets_after_mA": best[0], "simulations": simulations})
     if best[1] is base:
         info.notes.append(f"latch band: no step lowered the snap offsets ({comparison})")
         return model, params
