@@ -304,7 +304,7 @@ def _never_latched_note(model, train) -> str | None:
     """
     import numpy as np
 
-    from .data import dither_period_mean, dither_period_samples
+    from .data import LINE_PRESSURE_BAR, dither_period_mean, dither_period_samples
 
     est = getattr(model, "residual_", None) or model
     if getattr(est, "latch_model_", None) != "none" or getattr(est, "single_state_", None) != 0:
@@ -319,7 +319,9 @@ def _never_latched_note(model, train) -> str | None:
         )
         closest = min(closest, float(np.min(gap)))
     line = (
-        "line pressure not logged in every experiment, 17.7 bar assumed there; " if assumed else ""
+        f"line pressure not logged in every experiment, {LINE_PRESSURE_BAR:g} bar assumed there; "
+        if assumed
+        else ""
     )
     return (
         f"no training sample was labelled latched: the clutch pressure came within "

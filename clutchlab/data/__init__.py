@@ -43,7 +43,7 @@ from .output import OWNED_NAME, check_output, owned_files, write_file_atomic, wr
 from .ramps import order_ramps, ramp_rate_mA_s, ramps_fastest_first
 from .reading import check_log, read_log
 from .report import LoadReport
-from .signals import CANONICAL_ORDER, SIGNALS, SignalSpec, unit_of
+from .signals import CANONICAL_ORDER, LINE_PRESSURE_BAR, SIGNALS, SignalSpec, unit_of
 from .timebase import Timing
 from .trace import Trace
 from .units import convert_units, parse_unit
@@ -52,6 +52,7 @@ from .validate import validate_trace
 __all__ = [
     "CANONICAL_ORDER",
     "FORMATS",
+    "LINE_PRESSURE_BAR",
     "MODEL_FILE_KINDS",
     "OWNED_NAME",
     "SIGNALS",

@@ -15,10 +15,16 @@ from ..errors import DataError
 __all__ = [
     "CANONICAL_ORDER",
     "CURRENT_SIGNALS",
+    "LINE_PRESSURE_BAR",
     "SIGNALS",
     "SignalSpec",
     "unit_of",
 ]
+
+
+#: Nominal line (supply) pressure (bar, gauge; DESIGN §4): assumed where a trace does not log
+#: ``line_pressure_bar``, and the reference of every default that needs a line pressure.
+LINE_PRESSURE_BAR = 17.7
 
 
 @dataclass(frozen=True)
@@ -100,7 +106,14 @@ _SPECS = (
         "measured clutch pressure, gauge",
         *_PRESSURE_RANGE,
     ),
-    SignalSpec("line_pressure_bar", "bar", False, 17.7, "measured line pressure", *_PRESSURE_RANGE),
+    SignalSpec(
+        "line_pressure_bar",
+        "bar",
+        False,
+        LINE_PRESSURE_BAR,
+        "measured line pressure",
+        *_PRESSURE_RANGE,
+    ),
     SignalSpec(
         "prime_pressure_bar",
         "bar",

@@ -16,7 +16,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..data import Trace
+from ..data import LINE_PRESSURE_BAR, Trace
 from ..errors import DataError
 from .inputs import WAVEFORMS
 
@@ -102,7 +102,7 @@ def drive_trace(
     dither_amp_mA: ArrayLike = 0.0,
     dither_freq_Hz: ArrayLike = 0.0,
     dither_waveform: str = "sine",
-    line_pressure_bar: ArrayLike = 17.7,
+    line_pressure_bar: ArrayLike = LINE_PRESSURE_BAR,
     prime_pressure_bar: ArrayLike = 0.5,
     oil_temp_C: ArrayLike = 40.0,
     name: str = "profile",

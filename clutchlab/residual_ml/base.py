@@ -24,7 +24,7 @@ from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.exceptions import NotFittedError
 from sklearn.utils.validation import validate_data
 
-from ..data import Trace, as_traces, dither_period_samples
+from ..data import LINE_PRESSURE_BAR, Trace, as_traces, dither_period_samples
 from ..errors import DataError
 from ._threads import single_thread
 from .features import FEATURES, FeatureBuilder, target_pressure
@@ -192,7 +192,7 @@ class TraceEstimator(RegressorMixin, BaseEstimator):
     def _array_block(self, X: np.ndarray, y: np.ndarray) -> Block:
         """Block of array input: threshold labels (line pressure 17.7 bar, no events)."""
         rule = self._rule()
-        lab = (17.7 - y <= rule.margin_bar).astype(np.int8)
+        lab = (LINE_PRESSURE_BAR - y <= rule.margin_bar).astype(np.int8)
         return Block("arrays", X, y, np.ones(y.size), lab, lab.copy())
 
     # -- sklearn contract --------------------------------------------------------------------

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..data import LINE_PRESSURE_BAR
 from .settings import AnalysisSettings
 
 __all__ = [
@@ -140,7 +141,7 @@ def hysteresis_curve(
     current_mA: ArrayLike,
     pressure_bar: ArrayLike,
     direction: ArrayLike,
-    line_bar: ArrayLike | float = 17.7,
+    line_bar: ArrayLike | float = LINE_PRESSURE_BAR,
     settings: AnalysisSettings | None = None,
     bins: tuple[int, int] | None = None,
 ) -> HysteresisCurve:

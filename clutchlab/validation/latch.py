@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..data import first_crossing
+from ..data import LINE_PRESSURE_BAR, first_crossing
 from .hysteresis import FALLING, RISING, branch_arrays
 from .settings import AnalysisSettings
 
@@ -73,7 +73,7 @@ def latch_currents(
     current_mA: ArrayLike,
     pressure_bar: ArrayLike,
     direction: ArrayLike,
-    line_bar: ArrayLike | float = 17.7,
+    line_bar: ArrayLike | float = LINE_PRESSURE_BAR,
     settings: AnalysisSettings | None = None,
 ) -> LatchCurrents:
     """Latch-on and latch-off currents of a clutch pressure trace.

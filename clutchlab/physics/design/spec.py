@@ -16,6 +16,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any, Literal
 
+from ...data import LINE_PRESSURE_BAR
 from ...errors import ModelError
 from ..model import CircuitModel
 from ..parameters import ParameterSet
@@ -159,7 +160,7 @@ class ScenarioSpec:
     dither_shape: str = "B"
     dither_waveform: str = "sine"
     step: StepSpec | None = field(default_factory=StepSpec)
-    line_pressure_bar: float = 17.7
+    line_pressure_bar: float = LINE_PRESSURE_BAR
     prime_pressure_bar: float = 0.5
     oil_temp_C: float = 40.0
 

@@ -39,6 +39,7 @@ import math
 import casadi as ca
 import numpy as np
 
+from ...data import LINE_PRESSURE_BAR
 from ..assembly import Assembly, StateSpec
 from ..components.base import param
 from ..components.latch import LatchValve, latch_thresholds
@@ -376,7 +377,6 @@ class LatchPilotLag(Effect):
 
 #: Default reference line pressure (bar) of :class:`LatchLineThreshold` (the stand's nominal
 #: line pressure; a fit holds the training data's median).
-_LINE_REF_BAR = 17.7
 
 #: Reference dither frequency (Hz) of :class:`LatchDitherBand`'s frequency terms.
 BAND_F_REF_HZ = 50.0
@@ -501,7 +501,9 @@ class LatchLineThreshold(Effect):
     PARAMETERS = (
         param("llt", "r_on", "-", 0.0, -3.0, 3.0, "latch-on threshold per bar of line", "linear"),
         param("llt", "r_off", "-", 0.0, -3.0, 3.0, "latch-off threshold per bar of line", "linear"),
-        param("llt", "p_ref", "bar", _LINE_REF_BAR, 1.0, 100.0, "line pressure of the thresholds"),
+        param(
+            "llt", "p_ref", "bar", LINE_PRESSURE_BAR, 1.0, 100.0, "line pressure of the thresholds"
+        ),
     )
     # signed slopes: fitted parameters, not one-sided strengths; p_ref is held
     STRENGTH = ()

@@ -45,7 +45,13 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ...data import Trace, dither_period_mean, dither_period_samples, ramp_rate_mA_s
+from ...data import (
+    LINE_PRESSURE_BAR,
+    Trace,
+    dither_period_mean,
+    dither_period_samples,
+    ramp_rate_mA_s,
+)
 from ...errors import FitError, FitWarning
 from ..model import CircuitModel
 from ..parameters import ParameterSet, quiet_design_checks
@@ -87,7 +93,6 @@ STATIC_PARAMETERS: tuple[str, ...] = (
 )
 
 #: Line pressure (bar) assumed when a trace does not log it (DESIGN §3).
-_LINE_DEFAULT_BAR = 17.7
 #: A latched clutch is within this of line pressure (bar).
 _LATCH_MARGIN_BAR = 1.0
 #: The static stage ends this long before the latch snaps (s).
@@ -225,7 +230,7 @@ def ramp_rate(trace: Trace) -> float:
 def _line(trace: Trace, n: int) -> np.ndarray:
     if trace.has("line_pressure_bar"):
         return _period_mean(trace, trace.get("line_pressure_bar"))
-    return np.full(n, _LINE_DEFAULT_BAR)
+    return np.full(n, LINE_PRESSURE_BAR)
 
 
 def regulated_band(trace: Trace, pressure: np.ndarray | None = None) -> tuple[float, float] | None:

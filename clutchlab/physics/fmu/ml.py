@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from ...data import LINE_PRESSURE_BAR
 from ...data.demodulate import NO_DITHER_DIDT_HZ
 from ...errors import ModelError
 from .physics import FMU_INPUTS, input_range
@@ -532,7 +533,7 @@ def _inputs(
     if switch_line:
         line += "; the latch switch currents move with it"
     spec = FMU_INPUTS["command"] + (
-        ("line_pressure_bar", "bar", line, 17.7),
+        ("line_pressure_bar", "bar", line, LINE_PRESSURE_BAR),
         ("prime_pressure_bar", "bar", "prime pressure (not used by this model)", 0.5),
         ("oil_temp_C", "°C", "oil temperature (not used by this model)", 40.0),
     )

@@ -13,7 +13,7 @@ import math
 
 import casadi as ca
 
-from ...data import SIGNALS
+from ...data import LINE_PRESSURE_BAR, SIGNALS
 from ...errors import ModelError
 from ..assembly import MODEL_INPUTS
 from ..integrator import sample_step_function
@@ -60,7 +60,7 @@ FMU_INPUTS: dict[str, tuple[tuple[str, str, str, float], ...]] = {
     ),
 }
 _COMMON_INPUTS = (
-    ("line_pressure_bar", "bar", "line (supply) pressure, gauge", 17.7),
+    ("line_pressure_bar", "bar", "line (supply) pressure, gauge", LINE_PRESSURE_BAR),
     ("prime_pressure_bar", "bar", "prime / exhaust backfill pressure, gauge", 0.5),
     ("oil_temp_C", "°C", "oil temperature", 40.0),
 )

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...data import LINE_PRESSURE_BAR
 from ...data.validate import MIN_SAMPLES_PER_DITHER_PERIOD
 from .scenarios import DITHER_SHAPES, DitherSetting, RampProfile, dither_amplitude
 
@@ -145,7 +146,7 @@ def bench_drive(
     t = np.arange(0.0, ramp.duration_s + 0.5 * dt, dt)
     n = len(t)
     i_nom = ramp.current(t)
-    line = wander(rng, n, dt, 17.7, 0.12, 3.0, 0.3)
+    line = wander(rng, n, dt, LINE_PRESSURE_BAR, 0.12, 3.0, 0.3)
     prime = wander(rng, n, dt, 0.5, 0.04, 2.0, 0.1)
     if temperature == "levels":
         base = TEMPERATURE_LEVELS[index % len(TEMPERATURE_LEVELS)]

@@ -15,7 +15,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ...data import Trace, dither_period_mean, dither_period_samples, nominal_current, nominal_didt
+from ...data import (
+    LINE_PRESSURE_BAR,
+    Trace,
+    dither_period_mean,
+    dither_period_samples,
+    nominal_current,
+    nominal_didt,
+)
 from ...physics import CircuitModel
 from ...physics.fit import FitProblem, FitSettings
 from ...physics.fit.problem import snap_mask
@@ -228,7 +235,7 @@ def _signals_at(trace: Trace, rows: np.ndarray, target: np.ndarray) -> dict[str,
         "dpdt_bar_s": np.gradient(target, t)[rows],
     }
     defaults = {
-        "line_pressure_bar": 17.7,
+        "line_pressure_bar": LINE_PRESSURE_BAR,
         "oil_temp_C": 40.0,
         "dither_amp_mA": 0.0,
         "dither_freq_Hz": 0.0,
