@@ -221,12 +221,11 @@ def test_latch_snaps_are_matched_on_a_circuit_that_is_not_ours(zoo_small, law):
     assert moved and moved <= latch
 
 
-def test_latch_snap_matching_recovers_a_known_latch():
-    """Data from clutchlab's own model with a stiffer, weaker latch spring: started from the
-    datasheet latch, the matching finds spring values that snap where the data do."""
+@pytest.fixture(scope="module")
+def known_latch():
+    """Data from clutchlab's own model with a stiffer, weaker latch spring."""
     from clutchlab.physics.stand import StandConfig, run_stand
 
-    model = CircuitModel()
     cfg = StandConfig(
         builtin_effects=False,
         settings=(DitherSetting(50.0, "A"),),
@@ -234,7 +233,14 @@ def test_latch_snap_matching_recovers_a_known_latch():
         seed=3,
         overrides={"latch_F0": 27.0, "latch_k": 3.0},
     )
-    data = list(run_stand(cfg, progress=False).dataset)
+    return list(run_stand(cfg, progress=False).dataset)
+
+
+def test_latch_snap_matching_recovers_a_known_latch(known_latch):
+    """Data from clutchlab's own model with a stiffer, weaker latch spring: started from the
+    datasheet latch, the matching finds spring values that snap where the data do."""
+    model = CircuitModel()
+    data = known_latch
     settings = FitSettings(progress=False)
     free = resolve_free(model, settings)
     info = StagedStart(static_experiments=[data[1].name])  # the datasheet curve is the truth
@@ -243,6 +249,31 @@ def test_latch_snap_matching_recovers_a_known_latch():
     err = np.abs(_snap_currents(model, matched, slow) - _measured_currents(slow))
     assert err.max() <= 2.0, (err, info.latch_match_mA)
     assert abs(info.latch_match_mA["on_before"]) > 5.0
+
+
+@pytest.mark.parametrize("halvings", [0, 4])
+def test_a_step_onto_a_bound_is_halved_not_the_end(known_latch, monkeypatch, halvings):
+    """With the spring rate bounded at 2.22 N/mm the first Newton step (to 2.25) is clipped.
+    Stopping there (the matching before session 59, ``halvings=0``) leaves the snaps where
+    they were; halving the step moves them most of the way (the data's own spring rate,
+    2.3 N/mm when matched unbounded, is out of bounds)."""
+    from clutchlab.physics.fit import staged
+
+    monkeypatch.setattr(staged, "_MATCH_HALVINGS", halvings)
+    model = CircuitModel()
+    settings = FitSettings(progress=False, bounds={"latch_k": (0.2, 2.22)})
+    free = resolve_free(model, settings)
+    info = StagedStart(static_experiments=[known_latch[1].name])
+    matched = match_latch_snaps(model, model.default_params(), known_latch, free, settings, info)
+    rec = info.latch_match_mA
+    before = max(abs(rec["on_before"]), abs(rec["off_before"]))
+    after = max(abs(rec["on_after"]), abs(rec["off_after"]))
+    assert before > 10.0, rec
+    if halvings:
+        assert after < 0.5 * before, rec
+        assert 2.0 < matched["latch_k"] < 2.22
+    else:
+        assert after == before and matched["latch_k"] == 2.0, rec  # nothing matched
 
 
 def test_latch_snap_matching_leaves_a_fixed_latch_and_a_model_without_snaps(zoo_small):
