@@ -178,6 +178,10 @@ def test_the_staged_check_agrees_with_the_stage_on_the_same_model(which, request
         assert ("latch_dither_band" in chosen.effect_names) == (which == "zoo")
         assert "latch_line_threshold" not in chosen.effect_names
         values[latch_band] = dict(params)
+        if latch_band == "auto":  # the note gives the line law's numbers, then the band's
+            note = info.notes[-1]  # the stage's (added or not)
+            assert "mA with latch_line_threshold" in note, note
+            assert "the band law alone, with the staged start's Jacobian" in note, note
     # the line law not chosen: auto's stage is band's exactly (the staged start's Jacobian)
     assert values["auto"] == values["band"]
 

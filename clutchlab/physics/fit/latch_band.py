@@ -392,8 +392,11 @@ def latch_band_structure(
         # the staged start's Jacobian as without a line pressure (with the fitted model's,
         # a dwell latch's held-back error rose 2.2 %; session 58, L1)
         a = band_design(used, latch, np.asarray(info.latch_jacobian, float))
-        laws, band_record, comparison = _asks(d0, a)
+        laws, band_record, band_text = _asks(d0, a)
         record = {**record, **{f"band_{k}": v for k, v in band_record.items()}}
+        comparison = (
+            f"{comparison}; the band law alone, with the staged start's Jacobian: {band_text}"
+        )
         p_ref = None
     info.latch_band.update(record)
     if not laws:
