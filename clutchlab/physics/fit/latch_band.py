@@ -244,9 +244,9 @@ def _system(model, params, traces, free, settings, info, fitted=False):
     line law's columns are offered and, on the ``fitted`` model, the thresholds' Jacobian is
     the model's own (finite differences), not the staged start's.
 
-    Returns ``(start, used, latch, d0, a, p_ref)``: the parameters, the quasi-static
-    experiments with a measured snap and their indices, the offsets (mA, latch-on and -off
-    per experiment), the design matrix (the thresholds, the band law's five columns and,
+    Returns ``(used, latch, d0, a, p_ref)``: the quasi-static experiments with a measured
+    snap and their indices, the offsets (mA, latch-on and -off per experiment), the design
+    matrix (the thresholds, the band law's five columns and,
     when the line pressure varies at the snaps, the line law's two) and the line law's
     reference pressure (bar; None without its columns)."""
     if LAW in model.effect_names or LINE_LAW in model.effect_names:
@@ -264,12 +264,12 @@ def _system(model, params, traces, free, settings, info, fitted=False):
     jac = np.asarray(info.latch_jacobian, float)
     p_ref = _line_reference(used, latch) if settings.latch_band == "auto" else None
     if p_ref is None:
-        return params, used, latch, d0.ravel(), band_design(used, latch, jac), None
+        return used, latch, d0.ravel(), band_design(used, latch, jac), None
     if fitted:
         jac, runs = _fitted_jacobian(model, params, used, latch, free, settings, d0, jac)
         info.latch_band["jacobian_simulations"] = float(runs)
     a = np.hstack([band_design(used, latch, jac), line_design(used, latch, jac, p_ref)])
-    return params, used, latch, d0.ravel(), a, p_ref
+    return used, latch, d0.ravel(), a, p_ref
 
 
 #: The structures the stage chooses from: the laws each adds to the thresholds.
@@ -385,7 +385,7 @@ def latch_band_structure(
     if isinstance(system, str):
         info.notes.append(f"latch band: {system}; not estimated")
         return model, params
-    start, used, latch, d0, a, p_ref = system
+    used, latch, d0, a, p_ref = system
     laws, record, comparison = _asks(d0, a)
     if p_ref is not None and LINE_LAW not in laws:
         # the line law offered, not chosen: the band law alone, tested and estimated with
@@ -403,10 +403,10 @@ def latch_band_structure(
         info.notes.append(f"latch band: not added ({comparison})")
         return model, params
     law = _latch_law(model, free)
-    x0 = _thresholds_of(law, start)
+    x0 = _thresholds_of(law, params)
     cols = _columns(laws)
     held = {"llt_p_ref": p_ref} if LINE_LAW in laws else {}
-    new_model, base = _with_law(model, start, ", ".join(laws), held)
+    new_model, base = _with_law(model, params, ", ".join(laws), held)
     # the result's standard errors need its sensitivity code: compiled on the other core
     # while the rounds simulate (cold, it would add ~6 s after them)
     compile_sensitivities_for(
