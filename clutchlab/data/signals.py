@@ -22,7 +22,7 @@ __all__ = [
 ]
 
 
-#: Nominal line (supply) pressure (bar, gauge; DESIGN §4): assumed where a trace does not log
+#: Nominal line (supply) pressure (bar, gauge; DESIGN §3): assumed where a trace does not log
 #: ``line_pressure_bar``, and the reference of every default that needs a line pressure.
 LINE_PRESSURE_BAR = 17.7
 

@@ -375,9 +375,6 @@ class LatchPilotLag(Effect):
         _pilot_lag(asm, "p_latch_pilot", spec, "llag")
 
 
-#: Default reference line pressure (bar) of :class:`LatchLineThreshold` (the stand's nominal
-#: line pressure; a fit holds the training data's median).
-
 #: Reference dither frequency (Hz) of :class:`LatchDitherBand`'s frequency terms.
 BAND_F_REF_HZ = 50.0
 #: Dither amplitude (mA) per unit of :class:`LatchDitherBand`'s amplitude terms.
