@@ -241,3 +241,27 @@ def test_the_fit_keeps_the_band_only_when_it_lowers_the_training_rms(zoo_fits, z
     auto.save(tmp_path / "fit.json")
     again = PhysicsFitter.load(tmp_path / "fit.json")
     np.testing.assert_allclose(again.predict(zoo_band[0]), auto.predict(zoo_band[0]))
+
+
+@pytest.mark.parametrize(("spread_mA", "adopted"), [(4.0, True), (1.5, False)])
+def test_a_line_dependence_of_a_few_mA_is_adopted_and_noise_is_not(spread_mA, adopted):
+    """The adoption test on a linearized system whose latch-on / latch-off offsets follow
+    the line pressure at the snaps. stribeck_supply's fitted models leave the thresholds
+    alone 4.1-5.3 mA (held-back seeds 4-8, session 60); at 5 mA the gate flipped with the
+    wall clock. Offsets of ~1.5 mA (the stand, preisach_accumulator) are left alone."""
+    from clutchlab.physics.fit.latch_band import LINE_LAW, _asks
+
+    rng = np.random.default_rng(0)
+    n = 9
+    jac = np.array([[80.0, 8.0], [10.0, 70.0]])  # mA per bar of each threshold
+    line = rng.normal(0.0, 0.2, n)  # bar, line pressure above its reference at each snap
+    a_thr = np.tile(jac, (n, 1))
+    a_line = np.vstack([jac * dl for dl in line])  # (2n, 2)
+    a = np.hstack([a_thr, np.zeros((2 * n, 5)), a_line])
+    # the snaps follow the line pressure, 0.25 / 0.2 bar of threshold per bar of line
+    d0 = a_line @ np.array([-0.25, -0.2])
+    d0 = spread_mA * d0 / np.sqrt(np.mean(d0**2)) + rng.normal(0.0, 0.3, 2 * n)
+    laws, record, _ = _asks(d0, a)
+    assert (record["loo_thresholds_mA"] > BAND_MIN_MA) is adopted
+    assert record["loo_line_mA"] < BAND_GAIN * record["loo_thresholds_mA"]
+    assert (LINE_LAW in laws) is adopted
