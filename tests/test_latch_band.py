@@ -248,7 +248,7 @@ def test_a_line_dependence_of_a_few_mA_is_adopted_and_noise_is_not(spread_mA, ad
     """The adoption test on a linearized system whose latch-on / latch-off offsets follow
     the line pressure at the snaps. stribeck_supply's fitted models leave the thresholds
     alone 4.1-5.3 mA (held-back seeds 4-8, session 60); at 5 mA the gate flipped with the
-    wall clock. Offsets of ~1.5 mA (the stand, preisach_accumulator) are left alone."""
+    wall clock. Offsets of 1.5 mA (the order of preisach_accumulator's) are left alone."""
     from clutchlab.physics.fit.latch_band import LINE_LAW, _asks
 
     rng = np.random.default_rng(0)

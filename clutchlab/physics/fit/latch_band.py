@@ -87,12 +87,13 @@ __all__ = [
 #: fraction of the thresholds' alone.
 BAND_GAIN = 0.7
 #: ... and the thresholds alone leave more than this (mA, RMS over latch-on and latch-off).
-#: After the solver the thresholds alone leave 0.3-1.8 mA on the stand, preisach_accumulator
-#: and saturating_lugre, 9-24 mA on quadratic_play's dwell latch and 4.1-8.6 mA on
-#: stribeck_supply's line-referenced one (sessions 59-60, held-back datasets): the gate sits
-#: between the first group and the others. At 5 mA (sessions 56-59) it fell inside stribeck_supply's
-#: spread, where two fits of the same data that differed by one wall-clock-limited solver
-#: iteration read 4.9 and 5.1 mA and took opposite decisions (session 60, G1).
+#: After the solver the thresholds alone leave 0.3-0.5 mA on the stand, 0.6-1.4 on
+#: preisach_accumulator, 1.4-9.1 on saturating_lugre, 4.1-8.6 on stribeck_supply's
+#: line-referenced latch and 9-24 on quadratic_play's dwell latch (held-back datasets,
+#: sessions 59-60). At 5 mA (sessions 56-59) the gate lay inside stribeck_supply's spread:
+#: two fits of the same data that differed by one wall-clock-limited solver iteration read
+#: 4.9 and 5.1 mA and took opposite decisions (session 60, G1). At 3 mA the nearest rows
+#: are saturating_lugre's 2.6-2.7 mA, where a law would take off at most 1.4 mA.
 BAND_MIN_MA = 3.0
 #: Quasi-static experiments with a measured snap needed (the law has five parameters).
 BAND_MIN_EXPERIMENTS = 5
