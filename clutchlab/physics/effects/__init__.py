@@ -17,10 +17,12 @@ from .flexible import (
     LatchLineSelect,
     LatchLineThreshold,
     LatchPilotLag,
+    LatchRateBand,
     MonotoneForceCorrection,
     PlayHysteresis,
     RegulatorPilotLag,
     dither_band_terms,
+    rate_band_terms,
 )
 from .friction import DitherFrictionReduction, StribeckFriction
 from .hydraulic import (
@@ -49,6 +51,7 @@ __all__ = [
     "LatchLineSelect",
     "LatchLineThreshold",
     "LatchPilotLag",
+    "LatchRateBand",
     "LatchThresholdDrift",
     "MagneticHysteresis",
     "MonotoneForceCorrection",
@@ -66,6 +69,7 @@ __all__ = [
     "effect_table",
     "make_effect",
     "missing_effect",
+    "rate_band_terms",
 ]
 
 #: The flexible component laws (identity at their defaults; no stand uses them).
@@ -79,6 +83,7 @@ FLEXIBLE_LAWS: dict[str, type[Effect]] = {
         RegulatorPilotLag,
         LatchPilotLag,
         LatchDitherBand,
+        LatchRateBand,
         LatchLineThreshold,
     )
 }

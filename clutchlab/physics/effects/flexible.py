@@ -28,6 +28,8 @@ as the training data ask. All forms are smooth (``tanh`` / logistic; no ``if_els
   narrows with the dither amplitude and frequency (a latch that needs its pilot beyond a
   threshold for a dwell time, or that filters the dither, switches where the model's
   crest-tripping latch does not).
+- :class:`LatchRateBand` (``latch_rate_band``): a latch band that changes with the ramp
+  rate, by an amount that depends on the dither (a dwell latch).
 - :class:`LatchLineThreshold` (``latch_line_threshold``): latch thresholds that move with
   line pressure (a latch valve balanced against line rather than a spring alone).
 """
@@ -54,10 +56,12 @@ __all__ = [
     "LatchLineSelect",
     "LatchLineThreshold",
     "LatchPilotLag",
+    "LatchRateBand",
     "MonotoneForceCorrection",
     "PlayHysteresis",
     "RegulatorPilotLag",
     "dither_band_terms",
+    "rate_band_terms",
     "switched_on",
 ]
 
@@ -384,6 +388,12 @@ BAND_A_REF_MA = 100.0
 BAND_A_ON_MA = 10.0
 
 
+def _octaves(freq_Hz, log):
+    """``log₂(√(f² + 1) / 50 Hz)``: the dither frequency in octaves from the reference
+    (smooth, ≥ 1 Hz without dither)."""
+    return log((freq_Hz**2 + 1.0) ** 0.5 / BAND_F_REF_HZ) / math.log(2.0)
+
+
 def dither_band_terms(amp_mA, freq_Hz, log=np.log) -> tuple:
     """The five terms of :class:`LatchDitherBand`'s half-width, one per parameter.
 
@@ -403,10 +413,44 @@ def dither_band_terms(amp_mA, freq_Hz, log=np.log) -> tuple:
     tuple
         The five terms (per unit of their parameter, bar).
     """
-    v = log((freq_Hz**2 + 1.0) ** 0.5 / BAND_F_REF_HZ) / math.log(2.0)
+    v = _octaves(freq_Hz, log)
     gate = amp_mA / (amp_mA + BAND_A_ON_MA)
     scale = amp_mA / BAND_A_REF_MA
     return (gate * v, gate * v * v, scale, scale * v, scale * v * v)
+
+
+#: Ramp rate (mA/s) per unit of :class:`LatchRateBand`'s terms.
+RATE_REF_MA_S = 1000.0
+#: Time constant (s) of the filter of the commanded current whose output gives
+#: :class:`LatchRateBand` the ramp rate (settled within ~0.15 s of a ramp's start).
+RATE_FILTER_S = 0.05
+#: Rate (mA/s) below which the smooth ``|R|`` of :class:`LatchRateBand` rounds off.
+_RATE_ROUND_MA_S = 1.0
+
+
+def rate_band_terms(amp_mA, freq_Hz, rate_mA_s, log=np.log, sqrt=np.sqrt) -> tuple:
+    """The three terms of :class:`LatchRateBand`'s half-width, one per parameter.
+
+    ``w = r₀ s + q₀ s a/100 + q₁ s a/100 · v`` with ``s = |R| / 1000 mA/s``, ``R`` the
+    commanded current's ramp rate (mA/s; ``|R|`` smooth), ``a`` the dither amplitude (mA)
+    and ``v`` the dither frequency in octaves from 50 Hz (as :func:`dither_band_terms`); in
+    the order of ``LatchRateBand.FIT``.
+
+    Parameters
+    ----------
+    amp_mA, freq_Hz, rate_mA_s : float, ndarray or CasADi expression
+        Dither amplitude (mA), dither frequency (Hz) and ramp rate (mA/s).
+    log, sqrt : callable
+        Natural logarithm and square root for the argument type (NumPy or CasADi).
+
+    Returns
+    -------
+    tuple
+        The three terms (per unit of their parameter, bar).
+    """
+    s = sqrt(rate_mA_s**2 + _RATE_ROUND_MA_S**2) / RATE_REF_MA_S
+    sa = s * amp_mA / BAND_A_REF_MA
+    return (s, sa, sa * _octaves(freq_Hz, log))
 
 
 class LatchDitherBand(Effect):
@@ -461,6 +505,68 @@ class LatchDitherBand(Effect):
     def apply(self, asm: Assembly) -> None:
         def pilot(a, prev):
             terms = dither_band_terms(a.u["dither_amp_mA"], a.u["dither_freq_Hz"], ca.log)
+            w = sum(a.p(n) * t for n, t in zip(self.FIT, terms, strict=True))
+            return prev + (2.0 * a.x("latch") - 1.0) * w
+
+        asm.wrap("p_latch_pilot", pilot)
+
+
+class LatchRateBand(Effect):
+    """A latch hysteresis band that changes with the ramp rate, by an amount that depends on
+    the dither.
+
+    The latch valve sees ``p_l = p_a + (2λ − 1) w`` with ``λ`` its opening and the
+    half-width change (bar)
+
+    ``w = (|R| / 1000 mA/s)(r₀ + (a / 100 mA)(q₀ + q₁ v))``, ``v = log₂(f / 50 Hz)``,
+
+    ``R`` the ramp rate of the commanded current (mA/s), taken from a 50 ms filter of the
+    command (a state), ``a`` the logged dither amplitude (mA) and ``f`` its frequency (Hz).
+    :class:`LatchDitherBand` moves the switch currents with the dither by the same amount at
+    every ramp rate. A latch that needs its pilot beyond a threshold for a dwell time does
+    not: the dwell delays both switches by the distance the current ramps in it (``r₀``),
+    and on a fast ramp the pilot's mean climbs through the dither's reach within the dwell,
+    so the dither moves the switch currents less than on a slow ramp (``q₀``, ``q₁``; the
+    zoo's quadratic_play: the slow ramps' snaps matched, the fast ramps' late by ~0.1-0.15
+    mA per mA of dither at 440 mA/s, half that at 220 mA/s). ``w > 0`` widens the band.
+    All three parameters at 0 (the default) is exactly today's model; without a commanded
+    current (``current_cmd_mA``) the law does nothing, without dither only ``r₀`` acts.
+
+    The default fit adds it after its solver and the latch band stage where the faster
+    training ramps' snaps ask for it, held at the values they give
+    (:mod:`~clutchlab.physics.fit.latch_rate`).
+    """
+
+    name = "latch_rate_band"
+    description = "latch band that changes with the ramp rate, by an amount set by the dither"
+    signature = (
+        "latch snap and release currents on the fast ramps off by amounts that grow with "
+        "the ramp rate and the dither amplitude while the slow ramps' are matched"
+    )
+    PARAMETERS = (
+        param("lrb", "r0", "bar", 0.0, -5.0, 5.0, "half-width per 1 A/s of ramp", "linear"),
+        param("lrb", "q0", "bar", 0.0, -5.0, 5.0, "same, per 100 mA of dither", "linear"),
+        param("lrb", "q1", "bar", 0.0, -5.0, 5.0, "same, per octave of dither", "linear"),
+    )
+    # signed: fitted parameters, not one-sided strengths
+    STRENGTH = ()
+    #: Added to a fit already made only (as :class:`LatchDitherBand`).
+    WARM_ONLY = True
+    FIT = ("lrb_r0", "lrb_q0", "lrb_q1")
+
+    def apply(self, asm: Assembly) -> None:
+        spec = StateSpec("i_rate", "A", 0.0, "commanded current, 50 ms filter", self.name)
+        filtered = asm.state(spec)
+
+        def rate_mA_s(a):
+            return (a.u["current_nom_mA"] * 1e-3 - filtered) / RATE_FILTER_S * 1e3
+
+        asm.define(f"der:{spec.name}", lambda a: rate_mA_s(a) * 1e-3, "A/s")
+
+        def pilot(a, prev):
+            terms = rate_band_terms(
+                a.u["dither_amp_mA"], a.u["dither_freq_Hz"], rate_mA_s(a), ca.log, ca.sqrt
+            )
             w = sum(a.p(n) * t for n, t in zip(self.FIT, terms, strict=True))
             return prev + (2.0 * a.x("latch") - 1.0) * w
 

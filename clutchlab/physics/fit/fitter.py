@@ -27,6 +27,7 @@ from ..parameters import ParameterSet, quiet_design_checks
 from ..settings import SimulationSettings
 from ..simulate import simulate
 from .latch_band import BAND_FINISH_S, BAND_RESERVE_S, band_asked, latch_band_structure
+from .latch_rate import latch_rate_structure
 from .nlp import COST_PLATEAU, ITERATION_LIMIT, WALL_TIME_LIMIT, solve_ipopt
 from .problem import FitProblem
 from .rate import at_fit_rate
@@ -655,36 +656,48 @@ class PhysicsFitter:
         )
 
     def _with_latch_band(self, result, problem, traces, settings, t_start) -> FitResult:
-        """The fit's result with the latch band stage after the solver (``latch_band.py``):
-        ``latch_dither_band`` held at the values the quasi-static snaps give, the latch
-        thresholds matched with it; kept only when its training RMS (over experiments) is
-        lower than the fit's. Runs within the time the solver left it."""
-        model, fitted = result.model(), result.params()
-        budget = settings.time_limit_s - (time.perf_counter() - t_start) - BAND_FINISH_S
-        band_model, params = latch_band_structure(
-            model, fitted, traces, tuple(result.free), settings, self.staged_, budget
+        """The fit's result with the latch stages after the solver: the latch band stage
+        (``latch_band.py``: ``latch_dither_band`` held at the values the quasi-static snaps
+        give, the latch thresholds matched with it), then the latch rate stage
+        (``latch_rate.py``: ``latch_rate_band`` at the values the faster ramps' snaps give);
+        each kept only when its training RMS (over experiments) is lower than without it.
+        Runs within the time the solver left it."""
+        model, params = result.model(), result.params()
+        per_exp, before = result.per_experiment, training_rms(result.per_experiment)
+        kept = False
+        stages = (
+            ("latch band", "", latch_band_structure),
+            ("latch rate band", "rate_", latch_rate_structure),
         )
-        if band_model is model:
-            return result
-        per_exp = _per_experiment_metrics(
-            band_model, [params] * len(traces), traces, settings.workers
-        )
-        before, after = training_rms(result.per_experiment), training_rms(per_exp)
-        self.staged_.latch_band.update(
-            {"training_rms_before_bar": before, "training_rms_after_bar": after}
-        )
-        if not after < before:
-            self.staged_.notes.append(
-                f"latch band not kept: training RMS {after:.4f} bar with it, {before:.4f} without"
+        for what, key, stage in stages:
+            budget = settings.time_limit_s - (time.perf_counter() - t_start) - BAND_FINISH_S
+            new_model, new_params = stage(
+                model, params, traces, tuple(result.free), settings, self.staged_, budget
             )
+            if new_model is model:
+                continue
+            new_exp = _per_experiment_metrics(
+                new_model, [new_params] * len(traces), traces, settings.workers
+            )
+            after = training_rms(new_exp)
+            self.staged_.latch_band.update(
+                {f"{key}training_rms_before_bar": before, f"{key}training_rms_after_bar": after}
+            )
+            if not after < before:
+                self.staged_.notes.append(
+                    f"{what} not kept: training RMS {after:.4f} bar with it, {before:.4f} without"
+                )
+                continue
+            self.staged_.notes.append(f"{what} kept: training RMS {before:.4f} → {after:.4f} bar")
+            model, params, per_exp, before, kept = new_model, new_params, new_exp, after, True
+        if not kept:
             return result
-        self.staged_.notes.append(f"latch band kept: training RMS {before:.4f} → {after:.4f} bar")
-        # (no per-experiment parameters here: the stage needs the staged start, which
+        # (no per-experiment parameters here: the stages need the staged start, which
         # does not run with them)
-        unc = _uncertainty_at(band_model, traces, tuple(problem.shared), settings, params)
+        unc = _uncertainty_at(model, traces, tuple(problem.shared), settings, params)
         return replace(
             result,
-            **_model_fields(band_model, params, unc, dict(unc.std_errors)),
+            **_model_fields(model, params, unc, dict(unc.std_errors)),
             per_experiment=per_exp,
             wall_s=time.perf_counter() - t_start,
             uncertainty_note=unc.note,

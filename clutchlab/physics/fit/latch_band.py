@@ -192,15 +192,15 @@ def _line_reference(traces: list[Trace], latch: dict[str, tuple[int, int]]) -> f
     return float(np.median(at)) if np.std(at) > LINE_MIN_BAR else None
 
 
-def _solve(a: np.ndarray, d: np.ndarray, cols) -> np.ndarray:
-    """Least-squares ``θ`` (on ``cols``, the thresholds first; 0 elsewhere) with
-    ``a θ ≈ −d``, ridge on the laws' columns."""
+def _solve(a: np.ndarray, d: np.ndarray, cols, held: int = 2) -> np.ndarray:
+    """Least-squares ``θ`` (on ``cols``; 0 elsewhere) with ``a θ ≈ −d``, ridge on the laws'
+    columns (all of ``cols`` but the first ``held``: the thresholds)."""
     cols = list(cols)
     sub = a[:, cols]
     n = sub.shape[1]
     scale = np.sqrt(np.sum(sub**2, axis=0)) + 1e-12
     reg = np.zeros(n)
-    reg[2:] = _BAND_RIDGE
+    reg[held:] = _BAND_RIDGE
     lhs = np.vstack([sub / scale, np.diag(reg)])
     rhs = np.concatenate([-d, np.zeros(n)])
     theta = np.zeros(a.shape[1])
@@ -208,13 +208,13 @@ def _solve(a: np.ndarray, d: np.ndarray, cols) -> np.ndarray:
     return theta
 
 
-def _loo_rms(a: np.ndarray, d: np.ndarray, cols) -> float:
+def _loo_rms(a: np.ndarray, d: np.ndarray, cols, held: int = 2) -> float:
     """RMS (mA) of each experiment's offsets as predicted from the others' solve."""
     res = []
     for e in range(a.shape[0] // 2):
         keep = np.ones(a.shape[0], bool)
         keep[2 * e : 2 * e + 2] = False
-        theta = _solve(a[keep], d[keep], cols)
+        theta = _solve(a[keep], d[keep], cols, held)
         res.append(d[~keep] + a[~keep] @ theta)
     return float(np.sqrt(np.mean(np.square(res))))
 
@@ -324,6 +324,29 @@ def _asks(d0: np.ndarray, a: np.ndarray) -> tuple[tuple[str, ...], dict[str, flo
     return chosen, record, text
 
 
+def chord_rounds(model, base, at, a, d0, cols, used, latch, settings, deadline, held=2):
+    """The stage's solve and its chord rounds: ``θ`` from the linear system ``a θ ≈ −d``,
+    then, while a simulation of ``used`` lowers the snap offsets' RMS (mA) and before
+    ``deadline`` (``time.perf_counter()``, s), ``θ`` moved by the system's solve of the
+    offsets left (the Jacobian kept); at most :data:`_BAND_ROUNDS` + 1 simulations.
+
+    Returns ``((rms, params, offsets), simulations)``: the best (``params`` is ``base`` when
+    no step lowered the offsets ``d0``) and the simulations made. ``at(θ)`` gives the
+    parameters of ``θ`` (on ``cols``, the first ``held`` of them the thresholds)."""
+    best = (_rms(d0), base, d0)
+    theta = _solve(a, d0, cols, held)[list(cols)]
+    rounds = 0
+    while rounds <= _BAND_ROUNDS and time.perf_counter() < deadline:
+        rounds += 1
+        p = at(theta)
+        d = snap_offsets_each(model, p, used, latch, settings.substeps)
+        if d is None or _rms(d.ravel()) >= best[0]:
+            break
+        best = (_rms(d.ravel()), p, d.ravel())
+        theta = theta + _solve(a, best[2], cols, held)[list(cols)]
+    return best, rounds
+
+
 @quiet_design_checks  # its probes are not the user's values
 def band_asked(
     model: CircuitModel,
@@ -429,17 +452,9 @@ def latch_band_structure(
         }
         return p.replace(**law_values)
 
-    best = (_rms(d0), base, d0)
-    theta = _solve(a, d0, cols)[list(cols)]
-    rounds = 0
-    while rounds <= _BAND_ROUNDS and time.perf_counter() - t0 < budget_s:
-        rounds += 1
-        p = at(theta)
-        d = snap_offsets_each(new_model, p, used, latch, settings.substeps)
-        if d is None or _rms(d.ravel()) >= best[0]:
-            break
-        best = (_rms(d.ravel()), p, d.ravel())
-        theta = theta + _solve(a, best[2], cols)[list(cols)]
+    best, rounds = chord_rounds(
+        new_model, base, at, a, d0, cols, used, latch, settings, t0 + budget_s
+    )
     # the offsets at the start, the Jacobian's (line law offered) and the rounds'
     simulations = 1 + info.latch_band.get("jacobian_simulations", 0.0) + rounds
     info.latch_band.update({"offsets_after_mA": best[0], "simulations": simulations})

@@ -1,0 +1,206 @@
+"""The latch rate stage of the fit: ``latch_rate_band`` from the faster ramps' snaps.
+
+The latch band stage (:mod:`~clutchlab.physics.fit.latch_band`) matches the model's latch
+switch currents to the quasi-static (slowest) training ramps' snaps, with a dither shift
+that is the same at every ramp rate. A latch that needs its pilot beyond a threshold for a
+dwell time is moved less by the dither on a fast ramp than on a slow one: on the zoo's
+quadratic_play the slow snaps were matched within ~1.5 mA while the fast ramps' snaps came
+late by ~0.1-0.15 mA per mA of dither amplitude at 440 mA/s, half that at 220 mA/s, and
+~0 with a 40 mA dither (session 60-61 diagnosis). This stage runs after the band stage, on
+the training experiments that are not quasi-static: their latch-on and latch-off currents
+minus the measured ones (mA) are linear, through the staged start's latch-matching
+Jacobian (mA per bar of threshold), in the three parameters of
+:class:`~clutchlab.physics.effects.flexible.LatchRateBand` (the thresholds and every other
+value held: the slow snaps set them). One least-squares solve, then chord rounds (a
+simulation of those experiments each), the best kept.
+
+The law is added only where the data ask for it: its offsets predicted
+leave-one-experiment-out must be below :data:`~clutchlab.physics.fit.latch_band.BAND_GAIN`
+times the offsets without it, and those must exceed
+:data:`~clutchlab.physics.fit.latch_band.BAND_MIN_MA` (RMS) — the band stage's test. The
+fitter keeps it only when it lowers the training RMS. It runs only where the fit keeps time
+for the band stage (:func:`~clutchlab.physics.fit.latch_band.band_asked`). Training
+experiments only.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from ...data import Trace
+from ..effects.flexible import LatchRateBand, rate_band_terms
+from ..model import CircuitModel
+from ..parameters import ParameterSet, quiet_design_checks
+from .latch_band import (
+    BAND_GAIN,
+    BAND_MIN_EXPERIMENTS,
+    BAND_MIN_MA,
+    _loo_rms,
+    _rms,
+    chord_rounds,
+)
+from .sensitivity import compile_sensitivities_for
+from .settings import FitSettings
+from .staged import (
+    StagedStart,
+    _current,
+    _latch_law,
+    _measured_latches,
+    _period_mean,
+    _with_law,
+    quasi_static_traces,
+    snap_offsets_each,
+)
+
+__all__ = ["latch_rate_structure", "rate_design"]
+
+LAW = LatchRateBand.name
+_COLS = (0, 1, 2)
+
+
+def rate_design(
+    traces: list[Trace], latch: dict[str, tuple[int, int]], jacobian: np.ndarray
+) -> np.ndarray:
+    """The linearized snap offsets' design matrix for ``latch_rate_band``: ``Δd = A q``.
+
+    Rows: latch-on and latch-off of each trace (in that order, trace by trace); columns:
+    the law's three parameters (bar), each term taken at the dither amplitude, dither
+    frequency and ramp rate (of the dither-period mean command, mA/s) of the snap.
+
+    Parameters
+    ----------
+    traces : list of Trace
+        Experiments with a measured snap (``latch``).
+    latch : dict of str to (int, int)
+        Measured latch-on / latch-off sample indices by experiment name.
+    jacobian : ndarray, shape (2, 2)
+        d(latch-on, latch-off offset, mA) / d(latch-on, latch-off threshold, bar).
+
+    Returns
+    -------
+    ndarray, shape (2 n, 3)
+        mA per bar.
+    """
+    rows = []
+    for tr in traces:
+        amp = _period_mean(tr, _signal(tr, "dither_amp_mA"))
+        freq = float(np.nanmedian(_signal(tr, "dither_freq_Hz")))
+        rate = np.gradient(_period_mean(tr, _current(tr)), tr.time_s)
+        for branch, k in enumerate(latch[tr.name]):
+            terms = np.array(rate_band_terms(float(amp[k]), freq, float(rate[k])))
+            # the law moves latch-on by +w and latch-off by -w
+            rows.append(jacobian[branch, 0] * terms - jacobian[branch, 1] * terms)
+    return np.asarray(rows)
+
+
+def _signal(trace: Trace, name: str) -> np.ndarray:
+    """Signal ``name``, else the trace's metadata value of it, else 0 (as the model's
+    inputs)."""
+    if trace.has(name):
+        return np.asarray(trace.get(name), float)
+    return np.full(len(trace), float(trace.meta.get(name, 0.0)))
+
+
+def _system(model, params, traces, free, settings, info):
+    """``(used, latch, d0, a)`` at ``params`` — the faster experiments with a measured snap,
+    their indices, their offsets (mA) and the design matrix — or a reason (str)."""
+    if LAW in model.effect_names:
+        return f"the model names {LAW}"
+    if _latch_law(model, free) is None or info is None or info.latch_jacobian is None:
+        return "latch not matched"
+    slow = {tr.name for tr in quasi_static_traces(traces)}
+    fast = [tr for tr in traces if tr.name not in slow]
+    latch = _measured_latches(fast)
+    used = [tr for tr in fast if tr.name in latch]
+    if len(used) < BAND_MIN_EXPERIMENTS:
+        return f"{len(used)} faster experiments with a snap (< {BAND_MIN_EXPERIMENTS})"
+    d0 = snap_offsets_each(model, params, used, latch, settings.substeps)
+    if d0 is None:
+        return "the model does not snap on every faster experiment"
+    a = rate_design(used, latch, np.asarray(info.latch_jacobian, float))
+    return used, latch, d0.ravel(), a
+
+
+@quiet_design_checks  # its probes are not the user's values
+def latch_rate_structure(
+    model: CircuitModel,
+    params: ParameterSet,
+    traces: list[Trace],
+    free: tuple[str, ...],
+    settings: FitSettings,
+    info: StagedStart,
+    budget_s: float = math.inf,
+) -> tuple[CircuitModel, ParameterSet]:
+    """Add ``latch_rate_band`` where the faster ramps' snaps ask for it, at their values.
+
+    Parameters
+    ----------
+    model, params : CircuitModel, ParameterSet
+        Structure and values after the solver and the latch band stage.
+    traces : list of Trace
+        Training experiments (those that are not quasi-static, with a measured snap, are
+        used).
+    free : tuple of str
+        The fit's free parameters; nothing is done unless the two latch parameters are free.
+    settings : FitSettings
+        Integrator substeps.
+    info : StagedStart
+        Record of the staged start (``latch_jacobian``); ``latch_band`` (keys prefixed
+        ``rate_``) and ``notes`` are filled in.
+    budget_s : float
+        Wall time (s) after which no further simulation starts.
+
+    Returns
+    -------
+    (CircuitModel, ParameterSet)
+        The model with the law and its values, or ``(model, params)`` unchanged.
+    """
+    t0 = time.perf_counter()
+    if budget_s <= 0:
+        info.notes.append("latch rate band: no time left in the fit's limit; not estimated")
+        return model, params
+    system = _system(model, params, traces, free, settings, info)
+    if isinstance(system, str):
+        info.notes.append(f"latch rate band: {system}; not estimated")
+        return model, params
+    used, latch, d0, a = system
+    without, loo = _rms(d0), _loo_rms(a, d0, _COLS, held=0)
+    info.latch_band.update(
+        {"rate_experiments": float(len(used)), "rate_offsets_rms_mA": without, "rate_loo_mA": loo}
+    )
+    comparison = (
+        f"leave-one-experiment-out latch-snap offsets {loo:.1f} mA with {LAW}, {without:.1f} "
+        f"mA without, on {len(used)} faster experiments"
+    )
+    if not (without > BAND_MIN_MA and loo < BAND_GAIN * without):
+        info.notes.append(f"latch rate band: not added ({comparison})")
+        return model, params
+    new_model, base = _with_law(model, params, LAW, {})
+    compile_sensitivities_for(
+        new_model, traces, settings.substeps, settings.drive, len(free), background=True
+    )
+    bounds = {
+        n: settings.bounds.get(n, (base.spec(n).lower, base.spec(n).upper))
+        for n in LatchRateBand.FIT
+    }
+
+    def at(theta):
+        values = zip(LatchRateBand.FIT, theta, strict=True)
+        return base.replace(**{n: float(np.clip(v, *bounds[n])) for n, v in values})
+
+    best, rounds = chord_rounds(
+        new_model, base, at, a, d0, _COLS, used, latch, settings, t0 + budget_s, held=0
+    )
+    info.latch_band.update({"rate_offsets_after_mA": best[0], "rate_simulations": 1.0 + rounds})
+    if best[1] is base:
+        info.notes.append(f"latch rate band: no step lowered the snap offsets ({comparison})")
+        return model, params
+    info.notes.append(
+        f"structure: {LAW} after the latch band stage (the faster ramps' switch currents "
+        f"move with the dither by another amount than the slow ramps'; held at their "
+        f"values); {comparison}; offsets {without:.1f} → {best[0]:.1f} mA RMS"
+    )
+    return new_model, best[1]

@@ -1,0 +1,184 @@
+"""The ``latch_rate_band`` law and the fit's latch rate stage.
+
+A latch that must see its pilot beyond a threshold for a dwell time is moved less by the
+dither on a fast ramp than on a slow one (the zoo's quadratic_play): with the band matched on
+the slow ramps, the model's fast snaps come late by an amount that grows with the dither
+amplitude and the ramp rate. The law takes part of the band's dither shift back in
+proportion to the ramp rate; the stage reads its two parameters off the faster training
+ramps' snaps and adds it only where leave-one-experiment-out says they ask for it. Identity
+at its defaults and smoothness are checked for every flexible law in
+``test_structure_laws``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from latch_support import switch_currents
+
+from clutchlab.physics import CircuitModel, simulate
+from clutchlab.physics.effects import FLEXIBLE_LAWS, LatchRateBand, rate_band_terms
+from clutchlab.physics.fit import FitSettings
+from clutchlab.physics.fit.fitter import resolve_free
+from clutchlab.physics.fit.latch_band import BAND_GAIN, BAND_MIN_MA
+from clutchlab.physics.fit.latch_rate import latch_rate_structure, rate_design
+from clutchlab.physics.fit.staged import (
+    _measured_latches,
+    match_latch_snaps,
+    quasi_static_traces,
+    snap_offsets_each,
+    staged_start,
+)
+from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
+
+LAW = "latch_rate_band"
+MODEL = CircuitModel().with_effects(LAW)
+SETTINGS = tuple(DitherSetting(f, s) for f in (30.0, 50.0, 70.0) for s in ("A", "B", "C"))
+RAMPS = (RampProfile("fast", 2.5, 0.5), RampProfile("slow", 12.0, 0.5))
+
+
+@pytest.fixture(scope="module")
+def fast_slow():
+    """clutchlab's own circuit, a fast (2.5 s) and a slow (12 s) ramp, B dither (~200 mA)."""
+    settings = (DitherSetting(50.0, "B"), DitherSetting(50.0, "C"))
+    cfg = StandConfig(settings=settings, ramps=RAMPS)
+    return {t.name: t for t in run_stand(cfg, False).dataset}
+
+
+def test_terms_grow_with_amplitude_and_rate_and_vanish_without_dither():
+    amp = np.array([0.0, 100.0, 200.0, 200.0])
+    rate = np.array([400.0, 400.0, 400.0, -800.0])
+    terms = np.array(rate_band_terms(amp, np.full(4, 50.0), rate))
+    assert terms.shape == (len(LatchRateBand.FIT), 4)
+    # |R| / 1000 mA/s, whatever the dither; its sign does not matter
+    np.testing.assert_allclose(terms[0], [0.4, 0.4, 0.4, 0.8], rtol=1e-5)
+    np.testing.assert_allclose(terms[1:, 0], 0.0)  # no dither: the dither terms vanish
+    # × a / 100 mA; at the reference frequency no frequency term
+    np.testing.assert_allclose(terms[1, 1:], [0.4, 0.8, 1.6], rtol=1e-5)
+    np.testing.assert_allclose(terms[2, 1:], 0.0, atol=1e-3)
+    v = math.log2(math.sqrt(30.0**2 + 1.0) / 50.0)
+    t30 = rate_band_terms(100.0, 30.0, 400.0)
+    assert t30[2] == pytest.approx(t30[1] * v)
+
+
+def test_a_negative_rate_term_advances_a_fast_snap_far_more_than_a_slow_one(fast_slow):
+    moved = {}
+    for ramp in ("fast", "slow"):
+        tr = fast_slow[f"{ramp}_50Hz_B"]
+        on0, _ = switch_currents(MODEL, tr)
+        on1, _ = switch_currents(MODEL, tr, lrb_q0=-0.5)
+        assert on1 < on0, (ramp, on0, on1)  # the snap comes earlier
+        moved[ramp] = on0 - on1
+    # the fast ramp's rate is ~5× the slow one's
+    assert moved["fast"] > 5.0 and moved["fast"] > 3.0 * moved["slow"], moved
+
+
+def test_its_rate_state_follows_the_commanded_ramp(fast_slow):
+    tr = fast_slow["fast_50Hz_C"]
+    res = simulate(MODEL, MODEL.params(), tr)
+    filtered = res.states[:, res.state_names.index("i_rate")] * 1e3  # mA
+    cmd = tr.get("current_cmd_mA")
+    rate = np.gradient(cmd, tr.time_s)
+    # mid-ramp (the rate steady over the filter's 50 ms): the filter lags the ramp by R τ
+    mid = np.flatnonzero(np.abs(rate - np.median(rate[rate > 10])) < 1e-6 * np.abs(rate).max())
+    mid = mid[(tr.time_s[mid] > tr.time_s[mid[0]] + 0.3) & (tr.time_s[mid] < tr.time_s[mid[-1]])]
+    assert len(mid) > 10
+    np.testing.assert_allclose((cmd - filtered)[mid] / 0.05, rate[mid], rtol=0.02)
+
+
+def test_without_dither_only_the_rate_term_acts(fast_slow):
+    tr = fast_slow["fast_50Hz_B"]
+    signals = dict(tr.signals)
+    signals["dither_amp_mA"] = np.zeros(len(tr))
+    plain = type(tr)(tr.name, signals, meta=dict(tr.meta))
+    base = simulate(MODEL, MODEL.params(), plain).pressure_bar
+    moved = simulate(MODEL, MODEL.params(lrb_q0=2.0, lrb_q1=-1.0), plain).pressure_bar
+    np.testing.assert_allclose(moved, base, atol=1e-9)
+    on0, _ = switch_currents(MODEL, plain)
+    on1, _ = switch_currents(MODEL, plain, lrb_r0=0.5)
+    assert on1 > on0 + 5.0, (on0, on1)  # a dwell: the snap comes later
+
+
+def test_it_is_added_to_a_fit_already_made_only():
+    from clutchlab.physics.fit.structure import STRUCTURES
+    from clutchlab.validation.discover.alternatives import alternatives_for
+
+    cls = FLEXIBLE_LAWS[LAW]
+    assert cls.WARM_ONLY and not cls.HELD_SWITCH
+    assert cls.fit_parameters() == ("lrb_r0", "lrb_q0", "lrb_q1")
+    assert all(LAW not in laws for laws in STRUCTURES.values())
+    assert LAW not in [a.law for a in alternatives_for(CircuitModel(), ("vfs_K_m",), 9)]
+
+
+def test_design_scales_with_amplitude_and_rate_at_each_snap(fast_slow):
+    traces = list(fast_slow.values())
+    latch = _measured_latches(traces)
+    used = [tr for tr in traces if tr.name in latch]
+    assert len(used) == 4
+    jac = np.array([[20.0, 1.0], [2.0, 15.0]])
+    a = rate_design(used, latch, jac)
+    assert a.shape == (8, 3)
+    # latch-on rows: (J_on,on − J_on,off) × (|R|/1000)(a/100); the fast ramp's ~5× the slow
+    on = {tr.name: a[2 * k, 1] / (jac[0, 0] - jac[0, 1]) for k, tr in enumerate(used)}
+    assert on["fast_50Hz_B"] > 3.0 * on["slow_50Hz_B"] > 0
+    assert on["fast_50Hz_B"] > 3.0 * on["fast_50Hz_C"] > 0  # ~200 mA against 40 mA dither
+
+
+@pytest.fixture(scope="module")
+def own_runs():
+    """The stand's 18 experiments (fast and slow, nine dither settings) with the clutch
+    pressure of clutchlab's own model: without the law, and with it."""
+    traces = list(run_stand(StandConfig(settings=SETTINGS, ramps=RAMPS), False).dataset)
+    plain = CircuitModel()
+    truth = plain.default_params()
+    with_law = MODEL.params(**truth.values, **TRUE_LAW)
+    out = {}
+    for name, model, params in (("plain", plain, truth), ("law", MODEL, with_law)):
+        out[name] = [
+            tr.with_signals(clutch_pressure_bar=simulate(model, params, tr).pressure_bar)
+            for tr in traces
+        ]
+    return out
+
+
+#: The law in the data of ``own_runs["law"]``: the band widens with the ramp rate (a dwell)
+#: and narrows with the dither the faster the ramp.
+TRUE_LAW = {"lrb_r0": 0.3, "lrb_q0": -0.4}
+
+
+@pytest.mark.parametrize("which", ["plain", "law"])
+def test_law_is_added_only_where_the_fast_snaps_ask(which, own_runs):
+    traces = own_runs[which]
+    model = CircuitModel()
+    settings = FitSettings(progress=False, regulator_lag="off")
+    free = resolve_free(model, settings)
+    _, info = staged_start(model, traces, settings, model.default_params(), free, 20.0)
+    match_latch_snaps(model, model.default_params(), traces, free, settings, info)
+    assert info.latch_jacobian is not None, info.summary()
+    # the model that made the data, less the law: the slow snaps are its own
+    start = model.default_params()
+    chosen, params = latch_rate_structure(model, start, traces, free, settings, info)
+    band = info.latch_band
+    added = LAW in chosen.effect_names
+    ask = band["rate_offsets_rms_mA"] > BAND_MIN_MA and (
+        band["rate_loo_mA"] < BAND_GAIN * band["rate_offsets_rms_mA"]
+    )
+    assert added == ask, info.summary()
+    assert added == (which == "law"), info.summary()
+    assert band["rate_experiments"] == 9.0
+    if added:
+        assert band["rate_offsets_after_mA"] < 0.3 * band["rate_offsets_rms_mA"], band
+        assert "structure: latch_rate_band" in info.summary()
+        # the slow snaps (which set the thresholds and the band) are barely moved
+        slow = quasi_static_traces(traces)
+        latch = _measured_latches(slow)
+        used = [tr for tr in slow if tr.name in latch]
+        before = snap_offsets_each(model, start, used, latch, settings.substeps)
+        after = snap_offsets_each(chosen, params, used, latch, settings.substeps)
+        assert np.sqrt(np.mean(np.square(after - before))) < 3.0, (before, after)
+    else:
+        assert band["rate_offsets_rms_mA"] < 1.0, band  # the model's own snaps
+        assert chosen is model and params is start
+        assert "latch rate band: not added" in info.summary()
