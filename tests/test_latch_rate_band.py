@@ -148,17 +148,33 @@ def own_runs():
 TRUE_LAW = {"lrb_r0": 0.3, "lrb_q0": -0.4}
 
 
+def _matched(traces, band=True):
+    """The stage's inputs on ``traces``: the model that made the data less the rate law
+    (with a dither band at zero: the law changes a band), its values, free parameters,
+    settings and a staged start's record (its latch-matching Jacobian)."""
+    plain = CircuitModel()
+    settings = FitSettings(progress=False, regulator_lag="off")
+    free = resolve_free(plain, settings)
+    _, info = staged_start(plain, traces, settings, plain.default_params(), free, 20.0)
+    match_latch_snaps(plain, plain.default_params(), traces, free, settings, info)
+    assert info.latch_jacobian is not None, info.summary()
+    model = plain.with_effects("latch_dither_band") if band else plain
+    return model, model.default_params(), free, settings, info
+
+
+def test_without_a_dither_band_the_law_is_not_offered(own_runs):
+    """Offered without a band, its rate term fitted the fast snaps as a delay that did not
+    carry over to other ramp rates (held-back stribeck_supply s4, saturating_lugre s2)."""
+    model, start, free, settings, info = _matched(own_runs["law"], band=False)
+    chosen, params = latch_rate_structure(model, start, own_runs["law"], free, settings, info)
+    assert chosen is model and params is start
+    assert "no latch_dither_band in the model" in info.summary(), info.summary()
+
+
 @pytest.mark.parametrize("which", ["plain", "law"])
 def test_law_is_added_only_where_the_fast_snaps_ask(which, own_runs):
     traces = own_runs[which]
-    model = CircuitModel()
-    settings = FitSettings(progress=False, regulator_lag="off")
-    free = resolve_free(model, settings)
-    _, info = staged_start(model, traces, settings, model.default_params(), free, 20.0)
-    match_latch_snaps(model, model.default_params(), traces, free, settings, info)
-    assert info.latch_jacobian is not None, info.summary()
-    # the model that made the data, less the law: the slow snaps are its own
-    start = model.default_params()
+    model, start, free, settings, info = _matched(traces)
     chosen, params = latch_rate_structure(model, start, traces, free, settings, info)
     band = info.latch_band
     added = LAW in chosen.effect_names
@@ -192,13 +208,8 @@ def test_law_is_not_added_when_the_simulations_do_not_confirm_the_linear_test(
     simulated where 2.2 was predicted, and the law raised the held-back error; session 61)."""
     import clutchlab.physics.fit.latch_rate as stage
 
+    model, start, free, settings, info = _matched(own_runs["law"])
     traces = own_runs["law"]
-    model = CircuitModel()
-    settings = FitSettings(progress=False, regulator_lag="off")
-    free = resolve_free(model, settings)
-    _, info = staged_start(model, traces, settings, model.default_params(), free, 20.0)
-    match_latch_snaps(model, model.default_params(), traces, free, settings, info)
-    start = model.default_params()
     real = stage.chord_rounds
 
     def short(new_model, base, at, a, d0, *args, **kwargs):
