@@ -17,10 +17,13 @@ simulation of those experiments each), the best kept.
 The law is added only where the data ask for it: its offsets predicted
 leave-one-experiment-out must be below :data:`~clutchlab.physics.fit.latch_band.BAND_GAIN`
 times the offsets without it, and those must exceed
-:data:`~clutchlab.physics.fit.latch_band.BAND_MIN_MA` (RMS) — the band stage's test — and
-the simulated offsets at the values kept must be below ``BAND_GAIN`` times those without it
-too (on held-back saturating_lugre s2 the linear test promised 3.8 → 2.2 mA, the simulations
-gave 3.4, and the law kept raised the held-back error 3 %; session 61). The fitter keeps it
+:data:`~clutchlab.physics.fit.latch_band.BAND_MIN_MA` (RMS) — the band stage's test; the
+simulated offsets at the values kept must be below ``BAND_GAIN`` times those without it too
+(on held-back saturating_lugre s2 the linear test promised 3.8 → 2.2 mA, the simulations
+gave 3.4, and the law kept raised the held-back error 3 %); and its dither term ``q₀`` must
+not be positive (a dither shift that grows with the ramp rate is not a dwell latch: on
+held-back preisach_accumulator s5, ``q₀`` = +0.15 bar, the law raised the held-back error
+15 %; where it helped, ``q₀`` was −0.08 to −0.40 bar; session 61). The fitter keeps it
 only when it lowers the training RMS. It runs only where the fit keeps time
 for the band stage (:func:`~clutchlab.physics.fit.latch_band.band_asked`), and only on a
 model with ``latch_dither_band`` (the law changes that band with the ramp rate; offered
@@ -216,6 +219,14 @@ def latch_rate_structure(
         info.notes.append(
             f"latch rate band: not added (the simulated offsets {without:.1f} → {best[0]:.1f} "
             f"mA RMS fall short of {BAND_GAIN} × without; {comparison})"
+        )
+        return model, params
+    if best[1]["lrb_q0"] > 0.0:
+        # a dither shift that grows with the ramp rate is not the dwell latch the law
+        # stands for (held-back preisach_accumulator s5: q0 +0.15 bar, +15 %; session 61)
+        info.notes.append(
+            f"latch rate band: not added (its dither term q0 = {best[1]['lrb_q0']:+.3f} bar "
+            f"would widen the dither's shift with the ramp rate; {comparison})"
         )
         return model, params
     info.notes.append(
