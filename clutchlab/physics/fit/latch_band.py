@@ -79,6 +79,8 @@ __all__ = [
     "LINE_MIN_BAR",
     "band_asked",
     "band_design",
+    "band_law_rows",
+    "chord_rounds",
     "latch_band_structure",
     "line_design",
 ]
@@ -143,15 +145,30 @@ def band_design(
     ndarray, shape (2 n, 7)
         mA per bar.
     """
-    rows = []
-    for tr in traces:
+
+    def terms_of(tr):
         amp = _period_mean(tr, tr.get("dither_amp_mA"))
         freq = float(np.nanmedian(tr.get("dither_freq_Hz")))
+        return lambda k: dither_band_terms(float(amp[k]), freq)
+
+    thresholds = np.vstack([jacobian for _ in traces])
+    return np.hstack([thresholds, band_law_rows(traces, latch, jacobian, terms_of)])
+
+
+def band_law_rows(traces: list[Trace], latch, jacobian: np.ndarray, terms_of) -> np.ndarray:
+    """Columns of a law that widens the latch band by ``w = Σ pᵢ tᵢ`` (latch-on +w,
+    latch-off −w) in the linearized snap offsets, rows as :func:`band_design`'s.
+
+    ``terms_of(trace)`` gives a function of the snap's sample index returning the terms
+    ``tᵢ``; each row is ``(J[b, on] − J[b, off]) tᵢ`` for branch ``b`` (mA per bar).
+    """
+    rows = []
+    for tr in traces:
+        terms_at = terms_of(tr)
         for branch, k in enumerate(latch[tr.name]):
-            terms = np.array(dither_band_terms(float(amp[k]), freq))
+            terms = np.array(terms_at(k))
             # the law moves latch-on by +w and latch-off by -w
-            law = jacobian[branch, 0] * terms - jacobian[branch, 1] * terms
-            rows.append(np.concatenate([jacobian[branch], law]))
+            rows.append(jacobian[branch, 0] * terms - jacobian[branch, 1] * terms)
     return np.asarray(rows)
 
 

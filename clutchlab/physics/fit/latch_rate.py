@@ -49,6 +49,7 @@ from .latch_band import (
     BAND_MIN_MA,
     _loo_rms,
     _rms,
+    band_law_rows,
     chord_rounds,
 )
 from .sensitivity import compile_sensitivities_for
@@ -82,28 +83,23 @@ def rate_design(
 
     Parameters
     ----------
-    traces : list of Trace
-        Experiments with a measured snap (``latch``).
-    latch : dict of str to (int, int)
-        Measured latch-on / latch-off sample indices by experiment name.
-    jacobian : ndarray, shape (2, 2)
-        d(latch-on, latch-off offset, mA) / d(latch-on, latch-off threshold, bar).
+    traces, latch, jacobian
+        As :func:`~clutchlab.physics.fit.latch_band.band_design`'s: the experiments with a
+        measured snap, its sample indices by name, and d(offset, mA) / d(threshold, bar).
 
     Returns
     -------
     ndarray, shape (2 n, 3)
         mA per bar.
     """
-    rows = []
-    for tr in traces:
+
+    def terms_of(tr):
         amp = _period_mean(tr, _signal(tr, "dither_amp_mA"))
         freq = float(np.nanmedian(_signal(tr, "dither_freq_Hz")))
         rate = np.gradient(_period_mean(tr, _current(tr)), tr.time_s)
-        for branch, k in enumerate(latch[tr.name]):
-            terms = np.array(rate_band_terms(float(amp[k]), freq, float(rate[k])))
-            # the law moves latch-on by +w and latch-off by -w
-            rows.append(jacobian[branch, 0] * terms - jacobian[branch, 1] * terms)
-    return np.asarray(rows)
+        return lambda k: rate_band_terms(float(amp[k]), freq, float(rate[k]))
+
+    return band_law_rows(traces, latch, jacobian, terms_of)
 
 
 def _signal(trace: Trace, name: str) -> np.ndarray:
