@@ -220,3 +220,23 @@ def test_law_is_not_added_when_the_simulations_do_not_confirm_the_linear_test(
     chosen, params = latch_rate_structure(model, start, traces, free, settings, info)
     assert chosen is model and params is start
     assert "fall short of 0.7 × without" in info.summary(), info.summary()
+
+
+def test_law_is_not_added_when_its_dither_term_would_widen_the_shift(own_runs, monkeypatch):
+    """The law stands for a dwell latch, whose dither shift shrinks with the ramp rate
+    (q₀ ≤ 0); held at q₀ = +0.15 bar on held-back preisach_accumulator s5 it raised the
+    held-back error 15 % (session 61)."""
+    import clutchlab.physics.fit.latch_rate as stage
+
+    model, start, free, settings, info = _matched(own_runs["law"])
+    traces = own_runs["law"]
+    real = stage.chord_rounds
+
+    def widening(new_model, base, at, a, d0, *args, **kwargs):
+        (rms, params, d), rounds = real(new_model, base, at, a, d0, *args, **kwargs)
+        return (rms, params.replace(lrb_q0=0.15), d), rounds
+
+    monkeypatch.setattr(stage, "chord_rounds", widening)
+    chosen, params = latch_rate_structure(model, start, traces, free, settings, info)
+    assert chosen is model and params is start
+    assert "q0 = +0.150 bar would widen" in info.summary(), info.summary()
