@@ -300,8 +300,10 @@ def register(sub) -> None:
         "amplitude and frequency, or with the logged line pressure, more than the latch "
         "thresholds can follow (leave-one-experiment-out, logged), add latch_dither_band "
         "and / or latch_line_threshold after the solver, held at the snaps' values, kept "
-        "only when they lower the training RMSE; band: the dither band law only (the default "
-        "before session 59); off: never",
+        "only when they lower the training RMSE; with latch_dither_band added, the faster "
+        "ramps' snaps are tested the same way for latch_rate_band (the band changing with "
+        "the ramp rate); band: the dither band law only (the default before session 59); "
+        "off: never",
     )
     p.add_argument(
         "--strict",

@@ -168,8 +168,11 @@ class FitSettings:
         and / or ``latch_line_threshold`` after the solver, held at the values the snaps
         give with the thresholds matched, and keeps them only when they lower the training
         RMS (logged either way); the solver leaves the stage ``BAND_RESERVE_S`` of its
-        time. ``band``: the dither band law only (the default before session 59). ``off``:
-        never. Needs the staged start; not with ``free``.
+        time. Where ``latch_dither_band`` is added, the latch rate stage then tests the
+        faster training ramps' snaps the same way and may add ``latch_rate_band``
+        (:mod:`~clutchlab.physics.fit.latch_rate`). ``band``: the dither band law only (the
+        default before session 59; the rate stage still runs). ``off``: never. Needs the
+        staged start; not with ``free``.
     static_max_iter : int
         Iteration limit of the staged start's static stage.
     static_time_fraction : float
