@@ -240,3 +240,17 @@ def test_law_is_not_added_when_its_dither_term_would_widen_the_shift(own_runs, m
     chosen, params = latch_rate_structure(model, start, traces, free, settings, info)
     assert chosen is model and params is start
     assert "q0 = +0.150 bar would widen" in info.summary(), info.summary()
+
+
+def test_without_a_commanded_current_the_law_is_not_estimated(own_runs):
+    """The law's rate is the commanded current's (a filter state): without
+    ``current_cmd_mA`` the model's law does nothing, so the snaps cannot estimate it."""
+    model, start, free, settings, info = _matched(own_runs["law"])
+    traces = []
+    for tr in own_runs["law"]:
+        signals = {k: v for k, v in tr.signals.items() if k != "current_cmd_mA"}
+        traces.append(type(tr)(tr.name, signals, meta=dict(tr.meta)))
+    assert all(tr.has("current_mA") for tr in traces)
+    chosen, params = latch_rate_structure(model, start, traces, free, settings, info)
+    assert chosen is model and params is start
+    assert "log no commanded current" in info.summary(), info.summary()

@@ -41,6 +41,7 @@ import numpy as np
 
 from ...data import Trace
 from ..effects.flexible import LatchDitherBand, LatchRateBand, rate_band_terms
+from ..inputs import _signal_or_meta
 from ..model import CircuitModel
 from ..parameters import ParameterSet, quiet_design_checks
 from .latch_band import (
@@ -56,7 +57,6 @@ from .sensitivity import compile_sensitivities_for
 from .settings import FitSettings
 from .staged import (
     StagedStart,
-    _current,
     _latch_law,
     _measured_latches,
     _period_mean,
@@ -96,18 +96,17 @@ def rate_design(
     def terms_of(tr):
         amp = _period_mean(tr, _signal(tr, "dither_amp_mA"))
         freq = float(np.nanmedian(_signal(tr, "dither_freq_Hz")))
-        rate = np.gradient(_period_mean(tr, _current(tr)), tr.time_s)
+        rate = np.gradient(_period_mean(tr, tr.get("current_cmd_mA")), tr.time_s)
         return lambda k: rate_band_terms(float(amp[k]), freq, float(rate[k]))
 
     return band_law_rows(traces, latch, jacobian, terms_of)
 
 
 def _signal(trace: Trace, name: str) -> np.ndarray:
-    """Signal ``name``, else the trace's metadata value of it, else 0 (as the model's
-    inputs)."""
-    if trace.has(name):
-        return np.asarray(trace.get(name), float)
-    return np.full(len(trace), float(trace.meta.get(name, 0.0)))
+    """Signal ``name``, else the trace's metadata value of it, else 0 — as the model's
+    inputs take it (:mod:`~clutchlab.physics.inputs`; a bad metadata value is reported
+    there, when the experiment is simulated)."""
+    return _signal_or_meta(trace, name, 0.0, [])
 
 
 def _system(model, params, traces, free, settings, info):
@@ -124,6 +123,10 @@ def _system(model, params, traces, free, settings, info):
         return "latch not matched"
     slow = {tr.name for tr in quasi_static_traces(traces)}
     fast = [tr for tr in traces if tr.name not in slow]
+    if not all(tr.has("current_cmd_mA") for tr in fast):
+        # the law's rate is the commanded current's (its filter state); without a command
+        # the model's law does nothing, so the snaps cannot estimate it
+        return "the faster experiments log no commanded current (current_cmd_mA)"
     latch = _measured_latches(fast)
     used = [tr for tr in fast if tr.name in latch]
     if len(used) < BAND_MIN_EXPERIMENTS:
