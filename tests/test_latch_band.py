@@ -10,6 +10,7 @@ thresholds alone cannot follow them.
 from __future__ import annotations
 
 import math
+import time
 import warnings
 from types import SimpleNamespace
 
@@ -241,6 +242,33 @@ def test_the_fit_keeps_the_band_only_when_it_lowers_the_training_rms(zoo_fits, z
     auto.save(tmp_path / "fit.json")
     again = PhysicsFitter.load(tmp_path / "fit.json")
     np.testing.assert_allclose(again.predict(zoo_band[0]), auto.predict(zoo_band[0]))
+
+
+def test_the_stages_time_counts_in_the_fits_when_they_keep_nothing(zoo_band, monkeypatch):
+    """The result's wall time is the whole fit's, the latch stages' included, also when
+    they keep nothing (it was taken before them: the scorecard's walls read ~8 s short)."""
+    import clutchlab.physics.fit.fitter as fitter_module
+
+    ended = []
+
+    def slow_and_empty(model, params, *args, **kwargs):
+        time.sleep(2.0)
+        ended.append(time.perf_counter())
+        return model, params
+
+    monkeypatch.setattr(fitter_module, "latch_band_structure", slow_and_empty)
+    settings = FitSettings(
+        progress=False, train_ramps=("slow",), max_iter=2, refine_max_iter=1, latch_band="band"
+    )
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FitWarning)
+        fitter = PhysicsFitter(settings=settings).fit(zoo_band)
+    assert len(ended) == 1, fitter.staged_.summary()  # the stage ran, once
+    assert "latch_dither_band" not in fitter.result_.effects
+    # taken before the stage it would be at least its 2 s short of the stage's end
+    assert fitter.result_.wall_s > ended[0] - t0 - 1.0
+    assert fitter.result_.wall_s <= time.perf_counter() - t0
 
 
 @pytest.mark.parametrize(("spread_mA", "adopted"), [(4.0, True), (1.5, False)])

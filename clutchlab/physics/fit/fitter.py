@@ -690,8 +690,8 @@ class PhysicsFitter:
                 continue
             self.staged_.notes.append(f"{what} kept: training RMS {before:.4f} → {after:.4f} bar")
             model, params, per_exp, before, kept = new_model, new_params, new_exp, after, True
-        if not kept:
-            return result
+        if not kept:  # the stages' time is the fit's all the same
+            return replace(result, wall_s=time.perf_counter() - t_start)
         # (no per-experiment parameters here: the stages need the staged start, which
         # does not run with them)
         unc = _uncertainty_at(model, traces, tuple(problem.shared), settings, params)
