@@ -302,8 +302,8 @@ def register(sub) -> None:
         "and / or latch_line_threshold after the solver, held at the snaps' values, kept "
         "only when they lower the training RMSE; with latch_dither_band added, the faster "
         "ramps' snaps are tested the same way for latch_rate_band (the band changing with "
-        "the ramp rate); band: the dither band law only (the default before session 59); "
-        "off: never",
+        "the ramp rate); band: the dither band law only (the default before session 59; the "
+        "rate stage still runs); off: never",
     )
     p.add_argument(
         "--strict",
