@@ -55,6 +55,7 @@ __all__ = [
     "LatchDitherBand",
     "LatchLineSelect",
     "LatchLineThreshold",
+    "LatchOnLag",
     "LatchPilotLag",
     "LatchRateBand",
     "MonotoneForceCorrection",
@@ -377,6 +378,40 @@ class LatchPilotLag(Effect):
     def apply(self, asm: Assembly) -> None:
         spec = StateSpec("p_llag", "bar", 0.5, "lagged latch pilot pressure", self.name)
         _pilot_lag(asm, "p_latch_pilot", spec, "llag")
+
+
+class LatchOnLag(Effect):
+    """A first-order lag of the latch pilot that acts while the latch is closed only.
+
+    The latch sees ``p_l = p_a + w (1 − λ)(q − p_a)`` with ``τ dq/dt = p_a − q`` and ``λ``
+    its opening: the latch-on is delayed as by :class:`LatchPilotLag`, the release is not
+    (open, the latch sees ``p_a``). A latch that trips on a lagging pressure after a dwell,
+    and releases on its own spring, does that. ``w = 0`` (the default) is exactly today's
+    model; the fit's latch lag stage holds ``w = 1`` and sets ``τ``.
+    """
+
+    name = "latch_on_lag"
+    description = "first-order lag of the latch pilot while the latch is closed (latch-on only)"
+    signature = (
+        "latch snap lags the current more at fast ramps than the model's; the release does "
+        "not; regulated branch and latched plateau unaffected"
+    )
+    PARAMETERS = (
+        param("lolag", "w", "-", 0.0, 0.0, 1.0, "weight of the lagged latch-on pilot", "linear"),
+        param("lolag", "tau", "ms", 20.0, 1.0, 1000.0, "time constant of the latch-on lag"),
+    )
+    STRENGTH = ("lolag_w",)
+    FIT = ("lolag_tau",)
+    HELD_SWITCH = True
+    WARM_ONLY = True
+
+    def apply(self, asm: Assembly) -> None:
+        q = asm.state(StateSpec("p_lolag", "bar", 0.5, "lagged latch-on pilot", self.name))
+        asm.define("der:p_lolag", lambda a: (a.x("p_a") - q) / a.p("lolag_tau"), "Pa/s")
+        asm.wrap(
+            "p_latch_pilot",
+            lambda a, prev: prev + a.p("lolag_w") * (1.0 - a.x("latch")) * (q - prev),
+        )
 
 
 #: Reference dither frequency (Hz) of :class:`LatchDitherBand`'s frequency terms.

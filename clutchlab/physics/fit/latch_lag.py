@@ -32,7 +32,7 @@ import time
 import numpy as np
 
 from ...data import Trace
-from ..effects.flexible import LatchDitherBand, LatchPilotLag, LatchRateBand
+from ..effects.flexible import LatchDitherBand, LatchOnLag, LatchPilotLag, LatchRateBand
 from ..model import CircuitModel
 from ..parameters import ParameterSet, quiet_design_checks
 from .latch_band import (
@@ -66,9 +66,9 @@ __all__ = [
     "latch_lag_structure",
 ]
 
-LAW = LatchPilotLag.name
+LAW = LatchOnLag.name
 #: Laws whose stages already match the latch to the snaps: the stage does not run after them.
-_MATCHED_BY = (LatchDitherBand.name, LatchRateBand.name, LAW)
+_MATCHED_BY = (LatchDitherBand.name, LatchRateBand.name, LatchPilotLag.name, LAW)
 #: The law is added when its leave-one-experiment-out offsets, and then its simulated ones,
 #: are below this fraction of the thresholds' alone (of those now). A one-parameter law: the
 #: latch band stage's :data:`~clutchlab.physics.fit.latch_band.BAND_GAIN` (0.7) was set for a
@@ -117,7 +117,7 @@ def lag_design(
             raise KeyError(f"no measured snap of {tr.name!r}")
         rate = ramp_rate(tr)
         rows.append([*jac[0], 1e-3 * rate])
-        rows.append([*jac[1], -1e-3 * rate])
+        rows.append([*jac[1], 0.0])  # the latch-on lag leaves the release alone
     return np.asarray(rows)
 
 
@@ -217,16 +217,16 @@ def latch_lag_structure(
         return model, params
     law = _latch_law(model, free)
     x0 = _thresholds_of(law, params)
-    new_model, base = _with_law(model, params, LAW, {"llag_w": 1.0, "llag_tau": 1.0})
+    new_model, base = _with_law(model, params, LAW, {"lolag_w": 1.0, "lolag_tau": 1.0})
     compile_sensitivities_for(
         new_model, traces, settings.substeps, settings.drive, len(free), background=True
     )
-    spec = base.spec("llag_tau")
-    lo, hi = settings.bounds.get("llag_tau", (spec.lower, spec.upper))
+    spec = base.spec("lolag_tau")
+    lo, hi = settings.bounds.get("lolag_tau", (spec.lower, spec.upper))
 
     def at(theta):
         p, _ = _with_thresholds(law, base, *(x0 + theta[:2]), settings.bounds)
-        return p.replace(llag_tau=float(np.clip(theta[2], lo, hi)))
+        return p.replace(lolag_tau=float(np.clip(theta[2], lo, hi)))
 
     best, rounds = chord_rounds(
         new_model, base, at, a, d0, _LAG, used, latch, settings, deadline, scale=scale
@@ -238,11 +238,11 @@ def latch_lag_structure(
             f"weighted, not below {LAG_GAIN} × now; {comparison})"
         )
         return model, params
-    info.latch_band["lag_tau_ms"] = best[1]["llag_tau"]
+    info.latch_band["lag_tau_ms"] = best[1]["lolag_tau"]
     info.notes.append(
         f"structure: {LAW} after the solver (the fast ramps' snaps lag the current more than "
         f"the slow ones' allow; the thresholds re-matched with it; held at the snaps' "
         f"values); {comparison}; offsets {without:.1f} → {best[0]:.1f} mA RMS (weighted), "
-        f"τ {best[1]['llag_tau']:.0f} ms"
+        f"τ {best[1]['lolag_tau']:.0f} ms"
     )
     return new_model, best[1]
