@@ -381,37 +381,46 @@ class LatchPilotLag(Effect):
 
 
 class LatchOnLag(Effect):
-    """A first-order lag of the latch pilot that acts while the latch is closed only.
+    """The latch-on delayed in proportion to the rising command's rate; the release not.
 
-    The latch sees ``p_l = p_a + w (1 − λ)(q − p_a)`` with ``τ dq/dt = p_a − q`` and ``λ``
-    its opening: the latch-on is delayed as by :class:`LatchPilotLag`, the release is not
-    (open, the latch sees ``p_a``). A latch that trips on a lagging pressure after a dwell,
-    and releases on its own spring, does that. ``w = 0`` (the default) is exactly today's
-    model; the fit's latch lag stage holds ``w = 1`` and sets ``τ``.
+    While the latch is closed its pilot is seen ``(1 − λ) r max(R, 0) / 1000 mA/s`` lower
+    (bar), ``R`` the commanded current's ramp rate (mA/s, a 50 ms filter state, as
+    :class:`LatchRateBand`) and ``λ`` the latch opening: on a rising ramp the snap comes
+    later by about ``τ R`` (a lag ``τ`` of the latch's trip), on a falling ramp nothing
+    moves. ``r`` depends on no pressure, so the law adds no loop through the pilot (a pilot
+    blended with its own lag by ``1 − λ`` made the latch chatter; session 62). ``r = 0``
+    (the default) is exactly today's model.
     """
 
     name = "latch_on_lag"
-    description = "first-order lag of the latch pilot while the latch is closed (latch-on only)"
+    description = "latch-on delayed in proportion to the rising command's rate (release not)"
     signature = (
         "latch snap lags the current more at fast ramps than the model's; the release does "
         "not; regulated branch and latched plateau unaffected"
     )
     PARAMETERS = (
-        param("lolag", "w", "-", 0.0, 0.0, 1.0, "weight of the lagged latch-on pilot", "linear"),
-        param("lolag", "tau", "ms", 20.0, 1.0, 1000.0, "time constant of the latch-on lag"),
+        param(
+            "lolag", "r", "bar", 0.0, 0.0, 5.0, "pilot offset per 1 A/s of rising ramp", "linear"
+        ),
     )
-    STRENGTH = ("lolag_w",)
-    FIT = ("lolag_tau",)
-    HELD_SWITCH = True
+    STRENGTH = ()
+    FIT = ("lolag_r",)
     WARM_ONLY = True
 
     def apply(self, asm: Assembly) -> None:
-        q = asm.state(StateSpec("p_lolag", "bar", 0.5, "lagged latch-on pilot", self.name))
-        asm.define("der:p_lolag", lambda a: (a.x("p_a") - q) / a.p("lolag_tau"), "Pa/s")
-        asm.wrap(
-            "p_latch_pilot",
-            lambda a, prev: prev + a.p("lolag_w") * (1.0 - a.x("latch")) * (q - prev),
-        )
+        spec = StateSpec("i_rate_on", "A", 0.0, "commanded current, 50 ms filter", self.name)
+        filtered = asm.state(spec)
+
+        def rate_mA_s(a):
+            return (a.u["current_nom_mA"] * 1e-3 - filtered) / RATE_FILTER_S * 1e3
+
+        asm.define(f"der:{spec.name}", lambda a: rate_mA_s(a) * 1e-3, "A/s")
+
+        def pilot(a, prev):
+            rising = 0.5 * (rate_mA_s(a) + ca.sqrt(rate_mA_s(a) ** 2 + 1.0)) / 1000.0
+            return prev - a.p("lolag_r") * rising
+
+        asm.wrap("p_latch_pilot", pilot)
 
 
 #: Reference dither frequency (Hz) of :class:`LatchDitherBand`'s frequency terms.

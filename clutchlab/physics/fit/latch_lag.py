@@ -116,8 +116,10 @@ def lag_design(
         if tr.name not in latch:
             raise KeyError(f"no measured snap of {tr.name!r}")
         rate = ramp_rate(tr)
-        rows.append([*jac[0], 1e-3 * rate])
-        rows.append([*jac[1], 0.0])  # the latch-on lag leaves the release alone
+        # the law raises the latch-on threshold by r R / 1000 (bar) while the command rises;
+        # at the latch-off the command falls: nothing
+        rows.append([*jac[0], jac[0, 0] * 1e-3 * rate])
+        rows.append([*jac[1], 0.0])
     return np.asarray(rows)
 
 
@@ -212,21 +214,21 @@ def latch_lag_structure(
         f"(τ {tau:.0f} ms), {loo_thr:.1f} mA with the thresholds alone, {without:.1f} mA now "
         f"(weighted), on {len(used)} slow and fast experiments"
     )
-    if not (without_mA > BAND_MIN_MA and loo_lag < LAG_GAIN * loo_thr and tau >= LAG_MIN_MS):
+    if not (without_mA > BAND_MIN_MA and loo_lag < LAG_GAIN * loo_thr and tau > 0.0):
         info.notes.append(f"latch lag: not added ({comparison})")
         return model, params
     law = _latch_law(model, free)
     x0 = _thresholds_of(law, params)
-    new_model, base = _with_law(model, params, LAW, {"lolag_w": 1.0, "lolag_tau": 1.0})
+    new_model, base = _with_law(model, params, LAW, {})
     compile_sensitivities_for(
         new_model, traces, settings.substeps, settings.drive, len(free), background=True
     )
-    spec = base.spec("lolag_tau")
-    lo, hi = settings.bounds.get("lolag_tau", (spec.lower, spec.upper))
+    spec = base.spec("lolag_r")
+    lo, hi = settings.bounds.get("lolag_r", (spec.lower, spec.upper))
 
     def at(theta):
         p, _ = _with_thresholds(law, base, *(x0 + theta[:2]), settings.bounds)
-        return p.replace(lolag_tau=float(np.clip(theta[2], lo, hi)))
+        return p.replace(lolag_r=float(np.clip(theta[2], lo, hi)))
 
     best, rounds = chord_rounds(
         new_model, base, at, a, d0, _LAG, used, latch, settings, deadline, scale=scale
@@ -238,11 +240,11 @@ def latch_lag_structure(
             f"weighted, not below {LAG_GAIN} × now; {comparison})"
         )
         return model, params
-    info.latch_band["lag_tau_ms"] = best[1]["lolag_tau"]
+    info.latch_band["lag_tau_ms"] = best[1]["lolag_r"]
     info.notes.append(
         f"structure: {LAW} after the solver (the fast ramps' snaps lag the current more than "
         f"the slow ones' allow; the thresholds re-matched with it; held at the snaps' "
         f"values); {comparison}; offsets {without:.1f} → {best[0]:.1f} mA RMS (weighted), "
-        f"τ {best[1]['lolag_tau']:.0f} ms"
+        f"τ {best[1]['lolag_r']:.3f} bar per A/s"
     )
     return new_model, best[1]
