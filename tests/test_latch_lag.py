@@ -1,18 +1,23 @@
-"""The fit's latch lag stage: ``latch_pilot_lag`` from the slow and fast ramps' snaps.
+"""The ``latch_on_lag`` law and the fit's latch lag stage.
 
-With one lag for the regulated branch's pilot and the latch's, a circuit whose latch snaps
-later behind a fast ramp than that lag allows leaves the solver trading the slow snaps
-against the fast ones (the zoo's preisach_accumulator seed 1: slow snaps 4-6 mA late, fast
-ones 8-32 mA early). The stage reads the latch pilot's lag and the two thresholds off both
-rates' snaps and adds the law only where leave-one-experiment-out says they ask for it.
+A latch that trips on a lagging pressure snaps later behind a fast rising ramp than the
+model's latch, and releases on its own spring: with one pair of thresholds the solver trades
+the slow ramps' snaps against the fast ones' (the zoo's preisach_accumulator seed 1: slow
+snaps 4-6 mA late, fast ones 8-32 mA early). The law delays the latch-on in proportion to
+the rising command's rate and leaves the release alone; the stage reads it and the two
+thresholds off both rates' snaps and adds it only where leave-one-experiment-out says they
+ask for it. Identity at its default and smoothness are checked for every flexible law in
+``test_structure_laws``.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from latch_support import switch_currents
 
 from clutchlab.physics import CircuitModel, simulate
+from clutchlab.physics.effects import FLEXIBLE_LAWS
 from clutchlab.physics.fit import FitSettings
 from clutchlab.physics.fit.fitter import resolve_free
 from clutchlab.physics.fit.latch_band import BAND_MIN_MA
@@ -25,29 +30,31 @@ from clutchlab.physics.fit.latch_lag import (
 from clutchlab.physics.fit.staged import (
     _measured_latches,
     match_latch_snaps,
+    quasi_static_traces,
     ramp_rate,
+    snap_offsets_each,
     staged_start,
 )
 from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
 
-LAW = "latch_pilot_lag"
+LAW = "latch_on_lag"
+MODEL = CircuitModel().with_effects(LAW)
 SETTINGS = tuple(DitherSetting(f, s) for f in (30.0, 50.0, 70.0) for s in ("A", "B", "C"))
 RAMPS = (RampProfile("fast", 2.5, 0.5), RampProfile("slow", 12.0, 0.5))
-#: The latch pilot's lag in the data of ``own_runs["law"]`` (ms).
-TRUE_TAU_MS = 40.0
+#: The law in the data of ``own_runs["law"]`` (bar per A/s of rising ramp).
+TRUE_R = 0.6
 
 
 @pytest.fixture(scope="module")
 def own_runs():
     """The stand's 18 experiments (fast and slow, nine dither settings) with the clutch
-    pressure of clutchlab's own model: without a latch pilot lag, and with one."""
+    pressure of clutchlab's own model: without the law, and with it."""
     traces = list(run_stand(StandConfig(settings=SETTINGS, ramps=RAMPS), False).dataset)
     plain = CircuitModel()
     truth = plain.default_params()
-    lagged = plain.with_effects(LAW)
-    with_law = lagged.params(**truth.values, llag_w=1.0, llag_tau=TRUE_TAU_MS)
+    with_law = MODEL.params(**truth.values, lolag_r=TRUE_R)
     out = {}
-    for name, model, params in (("plain", plain, truth), ("law", lagged, with_law)):
+    for name, model, params in (("plain", plain, truth), ("law", MODEL, with_law)):
         out[name] = [
             tr.with_signals(clutch_pressure_bar=simulate(model, params, tr).pressure_bar)
             for tr in traces
@@ -55,8 +62,48 @@ def own_runs():
     return out
 
 
+def test_it_delays_the_latch_on_with_the_ramp_rate_and_leaves_the_release(own_runs):
+    moved = {}
+    traces = {tr.name: tr for tr in own_runs["plain"]}
+    for ramp in ("fast", "slow"):
+        tr = traces[f"{ramp}_50Hz_B"]
+        on0, off0 = switch_currents(MODEL, tr)
+        on1, off1 = switch_currents(MODEL, tr, lolag_r=0.5)
+        assert off1 == pytest.approx(off0, abs=0.5), (ramp, off0, off1)  # release: not moved
+        moved[ramp] = on1 - on0
+    # later on the rise, ~5x more on the fast ramp (its rate is ~5x the slow one's)
+    assert moved["fast"] > 10.0 and moved["fast"] > 3.0 * moved["slow"] > 0.0, moved
+
+
+def test_it_is_added_to_a_fit_already_made_only():
+    from clutchlab.physics.fit.structure import STRUCTURES
+    from clutchlab.validation.discover.alternatives import alternatives_for
+
+    cls = FLEXIBLE_LAWS[LAW]
+    assert cls.WARM_ONLY and not cls.HELD_SWITCH
+    assert cls.fit_parameters() == ("lolag_r",)
+    assert all(LAW not in laws for laws in STRUCTURES.values())
+    assert LAW not in [a.law for a in alternatives_for(CircuitModel(), ("vfs_K_m",), 9)]
+
+
+def test_design_moves_the_latch_on_with_the_ramp_rate_only(own_runs):
+    traces = own_runs["plain"]
+    latch = _measured_latches(traces)
+    used = [tr for tr in traces if tr.name in latch][:4]
+    jac = np.array([[20.0, 1.0], [2.0, 15.0]])
+    a = lag_design(used, latch, jac)
+    assert a.shape == (2 * len(used), 3)
+    np.testing.assert_allclose(a[0::2, :2], np.tile(jac[0], (len(used), 1)))
+    np.testing.assert_allclose(a[1::2, :2], np.tile(jac[1], (len(used), 1)))
+    rates = np.array([ramp_rate(tr) for tr in used])
+    np.testing.assert_allclose(a[0::2, 2], jac[0, 0] * 1e-3 * rates)  # the on threshold's
+    np.testing.assert_allclose(a[1::2, 2], 0.0)  # the release: not moved
+    with pytest.raises(KeyError, match="no measured snap"):
+        lag_design(used, {}, jac)
+
+
 def _matched(traces, effects=()):
-    """The stage's inputs on ``traces``: clutchlab's model without the lag (and with
+    """The stage's inputs on ``traces``: clutchlab's model without the law (and with
     ``effects``), its datasheet values, free parameters, settings and a staged start's
     record (its latch-matching Jacobian)."""
     plain = CircuitModel()
@@ -69,42 +116,26 @@ def _matched(traces, effects=()):
     return model, model.default_params(), free, settings, info
 
 
-def test_design_delays_the_latch_on_and_advances_the_latch_off_by_the_ramp_rate(own_runs):
-    traces = own_runs["plain"]
-    latch = _measured_latches(traces)
-    used = [tr for tr in traces if tr.name in latch][:4]
-    jac = np.array([[20.0, 1.0], [2.0, 15.0]])
-    a = lag_design(used, latch, jac)
-    assert a.shape == (2 * len(used), 3)
-    np.testing.assert_allclose(a[0::2, :2], np.tile(jac[0], (len(used), 1)))
-    np.testing.assert_allclose(a[1::2, :2], np.tile(jac[1], (len(used), 1)))
-    rates = np.array([ramp_rate(tr) for tr in used])
-    np.testing.assert_allclose(a[0::2, 2], 1e-3 * rates)  # mA per ms: later on the rise
-    np.testing.assert_allclose(a[1::2, 2], -1e-3 * rates)  # lower on the fall
-    with pytest.raises(KeyError, match="no measured snap"):
-        lag_design(used, {}, jac)
-
-
 @pytest.mark.parametrize("which", ["plain", "law"])
-def test_law_is_added_only_where_the_fast_snaps_lag_more(which, own_runs):
+def test_law_is_added_only_where_the_fast_snaps_ask(which, own_runs):
     traces = own_runs[which]
     model, start, free, settings, info = _matched(traces)
     chosen, params = latch_lag_structure(model, start, traces, free, settings, info)
     rec = info.latch_band
     added = LAW in chosen.effect_names
-    ask = (
-        rec["lag_offsets_rms_mA"] > BAND_MIN_MA
-        and rec["lag_loo_mA"] < LAG_GAIN * rec["lag_loo_thresholds_mA"]
-        and rec["lag_tau_linear_ms"] >= 2.0
-    )
     assert added == (which == "law"), info.summary()
     assert rec["lag_experiments"] == 12.0  # three slow, nine fast
     if added:
-        assert ask, rec
+        assert rec["lag_offsets_rms_mA"] > BAND_MIN_MA, rec
+        assert rec["lag_loo_mA"] < LAG_GAIN * rec["lag_loo_thresholds_mA"], rec
         assert rec["lag_offsets_after_mA"] < 0.3 * rec["lag_offsets_rms_mA"], rec
-        assert params["llag_w"] == 1.0
-        assert params["llag_tau"] == pytest.approx(TRUE_TAU_MS, rel=0.3)
-        assert "structure: latch_pilot_lag" in info.summary()
+        assert params["lolag_r"] == pytest.approx(TRUE_R, rel=0.3)
+        assert "structure: latch_on_lag" in info.summary()
+        # the slow snaps stay matched
+        slow = quasi_static_traces(traces)[:3]
+        latch = _measured_latches(slow)
+        after = snap_offsets_each(chosen, params, slow, latch, settings.substeps)
+        assert np.sqrt(np.mean(np.square(after))) < 3.0, after
     else:
         assert rec["lag_offsets_rms_mA"] < 1.0, rec  # the model's own snaps
         assert chosen is model and params is start
@@ -122,9 +153,8 @@ def test_not_run_after_a_stage_that_matched_the_latch(own_runs):
 def test_not_run_without_time_for_its_finish(own_runs):
     """The law's new state needs its sensitivity code compiled for the result (~9 s cold)."""
     model, start, free, settings, info = _matched(own_runs["law"])
+    traces = own_runs["law"]
     budget = LAG_FINISH_S - 1.0
-    chosen, params = latch_lag_structure(
-        model, start, own_runs["law"], free, settings, info, budget
-    )
+    chosen, params = latch_lag_structure(model, start, traces, free, settings, info, budget)
     assert chosen is model and params is start
     assert "latch lag: no time left" in info.summary()

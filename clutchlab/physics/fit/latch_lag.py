@@ -1,27 +1,28 @@
-"""The latch lag stage of the fit: ``latch_pilot_lag`` from the snaps of the slowest and the
+"""The latch lag stage of the fit: ``latch_on_lag`` from the snaps of the slowest and the
 fastest training ramps, the latch re-matched with it.
 
-With one lag for the regulated branch's pilot and the latch's, a circuit whose latch snaps
-later behind a fast ramp than that lag allows makes the solver trade the slow ramps' snaps
-against the fast ones': on the zoo's preisach_accumulator seed 1 the fitted model snapped on
-4-6 mA late on the slow ramps and 8-32 mA early on the fast ones (its latch lag 145 ms, the
-data's 192; session 62). The solver cannot fix it with the thresholds: they move every
-ramp's snaps alike, and the cost is flat between samples and steep at them.
+A latch that trips on a lagging pressure (the clutch's, after a dwell) snaps later behind a
+fast rising ramp than the model's pilot lets it, while it releases on its own: with one set
+of thresholds the solver then trades the slow ramps' snaps against the fast ones'. On the
+zoo's preisach_accumulator seed 1 the fitted model snapped on 4-6 mA late on the slow ramps
+and 8-32 mA early on the fast ones (its latch lag 145 ms, the data's 192), and the cost is
+flat between samples and steep at them, so the solver's thresholds stay there (session 62).
+A symmetric latch pilot lag (``latch_pilot_lag``) moved the latch-on where the data ask and
+delayed the release too: held-back error +0.8 and +6.3 % where it was added.
 
 On the quasi-static training experiments (at most :data:`LAG_MAX_SLOW`) and the fastest ones
 with a measured snap, the model's latch-on and latch-off current minus the measured one
 (mA) is linear in the two thresholds (the fitted model's finite-difference Jacobian on the
-slow experiments, mA per bar) and in the time constant ``τ`` of
-:class:`~clutchlab.physics.effects.flexible.LatchPilotLag`: a first-order lag of the latch
-pilot delays a snap on a ramp of rate ``İ`` by ``τ``, the latch-on by ``+τ İ``, the latch-off
-by ``−τ |İ|``. The slow rows are weighted so that the slow and the fast experiments count as
-in the training RMS (each experiment alike). The law is added where its
-leave-one-experiment-out offsets are below
-:data:`LAG_GAIN` times the thresholds' alone and ``τ`` is at least :data:`LAG_MIN_MS`; one
-least-squares solve, chord rounds (a simulation each), the best kept, and returned only when
-its simulated offsets are below ``LAG_GAIN`` times those
-without it, and those exceed :data:`~clutchlab.physics.fit.latch_band.BAND_MIN_MA` (mA,
-RMS). The fitter keeps it only when it lowers the training RMS. Training experiments only.
+slow experiments, mA per bar) and in the rate term ``r`` of
+:class:`~clutchlab.physics.effects.flexible.LatchOnLag` (the latch-on threshold raised by
+``r İ / 1000`` bar on a ramp rising at ``İ`` mA/s; the latch-off not moved). The slow rows
+are weighted so that the slow and the fast experiments count as in the training RMS (each
+experiment alike). The law is added where its leave-one-experiment-out offsets are below
+:data:`LAG_GAIN` times the thresholds' alone and ``r`` is positive; one least-squares solve,
+chord rounds (a simulation each), the best kept, and returned only when its simulated
+offsets are below ``LAG_GAIN`` times those without it, and those exceed
+:data:`~clutchlab.physics.fit.latch_band.BAND_MIN_MA` (mA, RMS). The fitter keeps it only
+when it lowers the training RMS. Training experiments only.
 """
 
 from __future__ import annotations
@@ -57,14 +58,7 @@ from .staged import (
     snap_offsets_each,
 )
 
-__all__ = [
-    "LAG_FINISH_S",
-    "LAG_GAIN",
-    "LAG_MAX_SLOW",
-    "LAG_MIN_MS",
-    "lag_design",
-    "latch_lag_structure",
-]
+__all__ = ["LAG_FINISH_S", "LAG_GAIN", "LAG_MAX_SLOW", "lag_design", "latch_lag_structure"]
 
 LAW = LatchOnLag.name
 #: Laws whose stages already match the latch to the snaps: the stage does not run after them.
@@ -72,12 +66,8 @@ _MATCHED_BY = (LatchDitherBand.name, LatchRateBand.name, LatchPilotLag.name, LAW
 #: The law is added when its leave-one-experiment-out offsets, and then its simulated ones,
 #: are below this fraction of the thresholds' alone (of those now). A one-parameter law: the
 #: latch band stage's :data:`~clutchlab.physics.fit.latch_band.BAND_GAIN` (0.7) was set for a
-#: five-parameter one. On preisach_accumulator s1 the fast snaps' spread over the dither
-#: settings (-7.5 to -32 mA) is not a lag's; the lag takes their common part (LOO 12.5 →
-#: 10.5 mA; session 62).
+#: five-parameter one (session 62; chosen on the training side of one scorecard dataset).
 LAG_GAIN = 0.9
-#: Shortest latch pilot lag (ms) the stage adds.
-LAG_MIN_MS = 2.0
 #: Quasi-static experiments the stage simulates (each is the longest of the training set).
 LAG_MAX_SLOW = 3
 #: Time (s) the stage leaves after its last simulation, besides the fitter's finish reserve:
@@ -92,7 +82,7 @@ _THR, _LAG = (0, 1), (0, 1, 2)
 def lag_design(
     traces: list[Trace], latch: dict[str, tuple[int, int]], jacobian: np.ndarray
 ) -> np.ndarray:
-    """The snap offsets' design matrix: ``Δd = A (Δp_on, Δp_off, τ)``.
+    """The snap offsets' design matrix: ``Δd = A (Δp_on, Δp_off, r)``.
 
     Parameters
     ----------
@@ -107,8 +97,8 @@ def lag_design(
     -------
     ndarray, shape (2 n, 3)
         Rows latch-on and latch-off of each trace; columns mA per bar (the thresholds) and
-        mA per ms (the lag: ``+10⁻³ İ`` on the latch-on, ``−10⁻³ İ`` on the latch-off, ``İ``
-        the trace's ramp rate, mA/s).
+        mA per (bar per A/s) (the law: the latch-on row's threshold column × ``İ / 1000``,
+        ``İ`` the trace's ramp rate, mA/s; 0 on the latch-off row).
     """
     jac = np.asarray(jacobian, float)
     rows = []
@@ -164,7 +154,7 @@ def latch_lag_structure(
     info: StagedStart,
     budget_s: float = math.inf,
 ) -> tuple[CircuitModel, ParameterSet]:
-    """Re-match the latch to the slow and fast snaps, with ``latch_pilot_lag`` if they ask.
+    """Add ``latch_on_lag`` where the slow and fast snaps ask for it, the latch re-matched.
 
     Parameters
     ----------
@@ -185,7 +175,7 @@ def latch_lag_structure(
     Returns
     -------
     (CircuitModel, ParameterSet)
-        The model (with the lag law when chosen) and the re-matched values, or
+        The model with the law and the values (its ``r`` and the re-matched thresholds), or
         ``(model, params)`` unchanged.
     """
     deadline = time.perf_counter() + budget_s - LAG_FINISH_S
@@ -198,7 +188,7 @@ def latch_lag_structure(
         return model, params
     used, latch, d0, scale, a = system
     loo_thr, loo_lag = _loo_rms(a, d0, _THR), _loo_rms(a, d0, _LAG)
-    tau = float(np.linalg.lstsq(a[:, list(_LAG)], -d0, rcond=None)[0][2])
+    r = float(np.linalg.lstsq(a[:, list(_LAG)], -d0, rcond=None)[0][2])
     without, without_mA = _rms(d0), _rms(d0 * scale)
     info.latch_band.update(
         {
@@ -206,15 +196,16 @@ def latch_lag_structure(
             "lag_offsets_rms_mA": without_mA,
             "lag_loo_thresholds_mA": loo_thr,
             "lag_loo_mA": loo_lag,
-            "lag_tau_linear_ms": tau,
+            "lag_r_linear_bar": r,
         }
     )
     comparison = (
         f"leave-one-experiment-out snap offsets {loo_lag:.1f} mA with {LAW} "
-        f"(τ {tau:.0f} ms), {loo_thr:.1f} mA with the thresholds alone, {without:.1f} mA now "
-        f"(weighted), on {len(used)} slow and fast experiments"
+        f"(r {r:.2f} bar per A/s), {loo_thr:.1f} mA with the thresholds alone, {without:.1f} mA "
+        f"now"
+        f" (weighted), on {len(used)} slow and fast experiments"
     )
-    if not (without_mA > BAND_MIN_MA and loo_lag < LAG_GAIN * loo_thr and tau > 0.0):
+    if not (without_mA > BAND_MIN_MA and loo_lag < LAG_GAIN * loo_thr and r > 0.0):
         info.notes.append(f"latch lag: not added ({comparison})")
         return model, params
     law = _latch_law(model, free)
@@ -240,11 +231,11 @@ def latch_lag_structure(
             f"weighted, not below {LAG_GAIN} × now; {comparison})"
         )
         return model, params
-    info.latch_band["lag_tau_ms"] = best[1]["lolag_r"]
+    info.latch_band["lag_r_bar"] = best[1]["lolag_r"]
     info.notes.append(
-        f"structure: {LAW} after the solver (the fast ramps' snaps lag the current more than "
-        f"the slow ones' allow; the thresholds re-matched with it; held at the snaps' "
+        f"structure: {LAW} after the solver (the fast ramps' latch-on lags the current more "
+        f"than the slow ones' allows; the thresholds re-matched with it; held at the snaps' "
         f"values); {comparison}; offsets {without:.1f} → {best[0]:.1f} mA RMS (weighted), "
-        f"τ {best[1]['lolag_r']:.3f} bar per A/s"
+        f"r {best[1]['lolag_r']:.3f} bar per A/s"
     )
     return new_model, best[1]
