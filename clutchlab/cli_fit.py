@@ -302,8 +302,10 @@ def register(sub) -> None:
         "and / or latch_line_threshold after the solver, held at the snaps' values, kept "
         "only when they lower the training RMSE; with latch_dither_band added, the faster "
         "ramps' snaps are tested the same way for latch_rate_band (the band changing with "
-        "the ramp rate); band: the dither band law only (the default before session 59; the "
-        "rate stage still runs); off: never",
+        "the ramp rate); where neither band law is added, the slow and fastest ramps' "
+        "latch-on snaps are tested the same way for latch_on_lag (the latch-on delayed "
+        "with the rising ramp rate, the release not); band: the dither band law only (the "
+        "default before session 59; the rate and latch-on stages still run); off: never",
     )
     p.add_argument(
         "--strict",

@@ -16,27 +16,22 @@ import math
 
 import numpy as np
 import pytest
-from latch_support import switch_currents
+from latch_support import OWN_RAMPS, matched_stage_inputs, own_model_runs, switch_currents
 
 from clutchlab.physics import CircuitModel, simulate
 from clutchlab.physics.effects import FLEXIBLE_LAWS, LatchRateBand, rate_band_terms
-from clutchlab.physics.fit import FitSettings
-from clutchlab.physics.fit.fitter import resolve_free
 from clutchlab.physics.fit.latch_band import BAND_GAIN, BAND_MIN_MA
 from clutchlab.physics.fit.latch_rate import latch_rate_structure, rate_design
 from clutchlab.physics.fit.staged import (
     _measured_latches,
-    match_latch_snaps,
     quasi_static_traces,
     snap_offsets_each,
-    staged_start,
 )
-from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
+from clutchlab.physics.stand import DitherSetting, StandConfig, run_stand
 
 LAW = "latch_rate_band"
 MODEL = CircuitModel().with_effects(LAW)
-SETTINGS = tuple(DitherSetting(f, s) for f in (30.0, 50.0, 70.0) for s in ("A", "B", "C"))
-RAMPS = (RampProfile("fast", 2.5, 0.5), RampProfile("slow", 12.0, 0.5))
+RAMPS = OWN_RAMPS
 
 
 @pytest.fixture(scope="module")
@@ -128,19 +123,9 @@ def test_design_scales_with_amplitude_and_rate_at_each_snap(fast_slow):
 
 @pytest.fixture(scope="module")
 def own_runs():
-    """The stand's 18 experiments (fast and slow, nine dither settings) with the clutch
-    pressure of clutchlab's own model: without the law, and with it."""
-    traces = list(run_stand(StandConfig(settings=SETTINGS, ramps=RAMPS), False).dataset)
-    plain = CircuitModel()
-    truth = plain.default_params()
-    with_law = MODEL.params(**truth.values, **TRUE_LAW)
-    out = {}
-    for name, model, params in (("plain", plain, truth), ("law", MODEL, with_law)):
-        out[name] = [
-            tr.with_signals(clutch_pressure_bar=simulate(model, params, tr).pressure_bar)
-            for tr in traces
-        ]
-    return out
+    """The stand's 18 experiments with the clutch pressure of clutchlab's own model: without
+    the law, and with it."""
+    return own_model_runs(MODEL, **TRUE_LAW)
 
 
 #: The law in the data of ``own_runs["law"]``: the band widens with the ramp rate (a dwell)
@@ -150,16 +135,8 @@ TRUE_LAW = {"lrb_r0": 0.3, "lrb_q0": -0.4}
 
 def _matched(traces, band=True):
     """The stage's inputs on ``traces``: the model that made the data less the rate law
-    (with a dither band at zero: the law changes a band), its values, free parameters,
-    settings and a staged start's record (its latch-matching Jacobian)."""
-    plain = CircuitModel()
-    settings = FitSettings(progress=False, regulator_lag="off")
-    free = resolve_free(plain, settings)
-    _, info = staged_start(plain, traces, settings, plain.default_params(), free, 20.0)
-    match_latch_snaps(plain, plain.default_params(), traces, free, settings, info)
-    assert info.latch_jacobian is not None, info.summary()
-    model = plain.with_effects("latch_dither_band") if band else plain
-    return model, model.default_params(), free, settings, info
+    (with a dither band at zero: the law changes a band)."""
+    return matched_stage_inputs(traces, ("latch_dither_band",) if band else ())
 
 
 def test_without_a_dither_band_the_law_is_not_offered(own_runs):

@@ -24,6 +24,8 @@ as the training data ask. All forms are smooth (``tanh`` / logistic; no ``if_els
   regulator alone.
 - :class:`LatchPilotLag` (``latch_pilot_lag``): a lag of the pilot pressure at the latch
   valve alone — with the regulator's, the two branches each have a lag of their own.
+- :class:`LatchOnLag` (``latch_on_lag``): the latch-on delayed in proportion to the rising
+  command's rate, the release not (a latch that trips on a lagging pressure).
 - :class:`LatchDitherBand` (``latch_dither_band``): a latch hysteresis band that widens or
   narrows with the dither amplitude and frequency (a latch that needs its pilot beyond a
   threshold for a dwell time, or that filters the dither, switches where the model's
@@ -55,6 +57,7 @@ __all__ = [
     "LatchDitherBand",
     "LatchLineSelect",
     "LatchLineThreshold",
+    "LatchOnLag",
     "LatchPilotLag",
     "LatchRateBand",
     "MonotoneForceCorrection",
@@ -379,6 +382,63 @@ class LatchPilotLag(Effect):
         _pilot_lag(asm, "p_latch_pilot", spec, "llag")
 
 
+def _command_rate(asm: Assembly, state: str, law: str):
+    """Add a 50 ms filter of the commanded current (state ``state``, A) for law ``law``;
+    returns ``rate(a)``: the command's ramp rate (mA/s) from it."""
+    spec = StateSpec(state, "A", 0.0, "commanded current, 50 ms filter", law)
+    filtered = asm.state(spec)
+
+    def rate_mA_s(a):
+        return (a.u["current_nom_mA"] * 1e-3 - filtered) / RATE_FILTER_S * 1e3
+
+    asm.define(f"der:{state}", lambda a: rate_mA_s(a) * 1e-3, "A/s")
+    return rate_mA_s
+
+
+class LatchOnLag(Effect):
+    """The latch-on delayed in proportion to the rising command's rate; the release not.
+
+    The latch valve sees its pilot ``r R⁺ / 1000 mA/s`` lower (bar), ``R⁺`` the rising part
+    of the commanded current's ramp rate (mA/s; a 50 ms filter state, as
+    :class:`LatchRateBand`, and a smooth ``max(R, 0)``): on a rising ramp the latch snaps
+    later by a current that grows with the rate (a latch that trips on a lagging pressure,
+    e.g. the clutch's after a dwell), on a falling ramp nothing moves (such a latch
+    releases on its own spring). ``r`` depends on no pressure and not on the latch's
+    opening: a pilot blended with its own lag by ``1 − λ`` made the latch chatter, and
+    :class:`LatchPilotLag` delays the release as much as the snap (held-back error +6 % on
+    a circuit whose release does not lag; session 62). ``r = 0`` (the default) is exactly
+    today's model; without a commanded current (``current_cmd_mA``) the law does nothing.
+
+    The default fit adds it after its solver and its latch band stages where the slow and
+    fast training ramps' snaps ask for it, held at the values they give
+    (:mod:`~clutchlab.physics.fit.latch_lag`).
+    """
+
+    name = "latch_on_lag"
+    description = "latch-on delayed in proportion to the rising command's rate (release not)"
+    signature = (
+        "latch snap lags the current more at fast ramps than the model's; the release does "
+        "not; regulated branch and latched plateau unaffected"
+    )
+    PARAMETERS = (
+        param(
+            "lolag", "r", "bar", 0.0, 0.0, 5.0, "pilot offset per 1 A/s of rising ramp", "linear"
+        ),
+    )
+    STRENGTH = ()
+    FIT = ("lolag_r",)
+    WARM_ONLY = True
+
+    def apply(self, asm: Assembly) -> None:
+        rate_mA_s = _command_rate(asm, "i_rate_on", self.name)
+
+        def pilot(a, prev):
+            rising = 0.5 * (rate_mA_s(a) + ca.sqrt(rate_mA_s(a) ** 2 + 1.0)) / 1000.0
+            return prev - a.p("lolag_r") * rising
+
+        asm.wrap("p_latch_pilot", pilot)
+
+
 #: Reference dither frequency (Hz) of :class:`LatchDitherBand`'s frequency terms.
 BAND_F_REF_HZ = 50.0
 #: Dither amplitude (mA) per unit of :class:`LatchDitherBand`'s amplitude terms.
@@ -555,13 +615,7 @@ class LatchRateBand(Effect):
     FIT = ("lrb_r0", "lrb_q0", "lrb_q1")
 
     def apply(self, asm: Assembly) -> None:
-        spec = StateSpec("i_rate", "A", 0.0, "commanded current, 50 ms filter", self.name)
-        filtered = asm.state(spec)
-
-        def rate_mA_s(a):
-            return (a.u["current_nom_mA"] * 1e-3 - filtered) / RATE_FILTER_S * 1e3
-
-        asm.define(f"der:{spec.name}", lambda a: rate_mA_s(a) * 1e-3, "A/s")
+        rate_mA_s = _command_rate(asm, "i_rate", self.name)
 
         def pilot(a, prev):
             terms = rate_band_terms(

@@ -27,6 +27,7 @@ from ..parameters import ParameterSet, quiet_design_checks
 from ..settings import SimulationSettings
 from ..simulate import simulate
 from .latch_band import BAND_FINISH_S, BAND_RESERVE_S, band_asked, latch_band_structure
+from .latch_lag import latch_lag_structure
 from .latch_rate import latch_rate_structure
 from .nlp import COST_PLATEAU, ITERATION_LIMIT, WALL_TIME_LIMIT, solve_ipopt
 from .problem import FitProblem
@@ -659,8 +660,10 @@ class PhysicsFitter:
         """The fit's result with the latch stages after the solver: the latch band stage
         (``latch_band.py``: ``latch_dither_band`` held at the values the quasi-static snaps
         give, the latch thresholds matched with it), then the latch rate stage
-        (``latch_rate.py``: ``latch_rate_band`` at the values the faster ramps' snaps give);
-        each kept only when its training RMS (over experiments) is lower than without it.
+        (``latch_rate.py``: ``latch_rate_band`` at the values the faster ramps' snaps give),
+        then the latch lag stage (``latch_lag.py``: the latch re-matched to the slow and fast
+        snaps, with ``latch_on_lag`` where they ask); each kept only when its training RMS
+        (over experiments) is lower than without it.
         Runs within the time the solver left it."""
         model, params = result.model(), result.params()
         per_exp, before = result.per_experiment, training_rms(result.per_experiment)
@@ -668,13 +671,14 @@ class PhysicsFitter:
         stages = (
             ("latch band", "", latch_band_structure),
             ("latch rate band", "rate_", latch_rate_structure),
+            ("latch lag", "lag_", latch_lag_structure),
         )
         for what, key, stage in stages:
             budget = settings.time_limit_s - (time.perf_counter() - t_start) - BAND_FINISH_S
             new_model, new_params = stage(
                 model, params, traces, tuple(result.free), settings, self.staged_, budget
             )
-            if new_model is model:
+            if new_model is model and new_params is params:
                 continue
             new_exp = _per_experiment_metrics(
                 new_model, [new_params] * len(traces), traces, settings.workers

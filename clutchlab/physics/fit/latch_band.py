@@ -341,15 +341,17 @@ def _asks(d0: np.ndarray, a: np.ndarray) -> tuple[tuple[str, ...], dict[str, flo
     return chosen, record, text
 
 
-def chord_rounds(model, base, at, a, d0, cols, used, latch, settings, deadline, held=2):
+def chord_rounds(model, base, at, a, d0, cols, used, latch, settings, deadline, held=2, scale=1.0):
     """The stage's solve and its chord rounds: ``θ`` from the linear system ``a θ ≈ −d``,
-    then, while a simulation of ``used`` lowers the snap offsets' RMS (mA) and before
+    then, while a simulation of ``used`` lowers the snap offsets' RMS and before
     ``deadline`` (``time.perf_counter()``, s), ``θ`` moved by the system's solve of the
     offsets left (the Jacobian kept); at most :data:`_BAND_ROUNDS` + 1 simulations.
 
     Returns ``((rms, params, offsets), simulations)``: the best (``params`` is ``base`` when
     no step lowered the offsets ``d0``) and the simulations made. ``at(θ)`` gives the
-    parameters of ``θ`` (on ``cols``, the first ``held`` of them the thresholds)."""
+    parameters of ``θ`` (on ``cols``, the first ``held`` of them the thresholds). The
+    offsets are the simulated ones (mA) divided by ``scale`` (a number, or one per row of
+    ``a``), as ``d0`` and ``a`` are."""
     best = (_rms(d0), base, d0)
     theta = _solve(a, d0, cols, held)[list(cols)]
     rounds = 0
@@ -357,9 +359,9 @@ def chord_rounds(model, base, at, a, d0, cols, used, latch, settings, deadline, 
         rounds += 1
         p = at(theta)
         d = snap_offsets_each(model, p, used, latch, settings.substeps)
-        if d is None or _rms(d.ravel()) >= best[0]:
+        if d is None or _rms(d.ravel() / scale) >= best[0]:
             break
-        best = (_rms(d.ravel()), p, d.ravel())
+        best = (_rms(d.ravel() / scale), p, d.ravel() / scale)
         theta = theta + _solve(a, best[2], cols, held)[list(cols)]
     return best, rounds
 

@@ -170,9 +170,11 @@ class FitSettings:
         RMS (logged either way); the solver leaves the stage ``BAND_RESERVE_S`` of its
         time. Where ``latch_dither_band`` is added, the latch rate stage then tests the
         faster training ramps' snaps the same way and may add ``latch_rate_band``
-        (:mod:`~clutchlab.physics.fit.latch_rate`). ``band``: the dither band law only (the
-        default before session 59; the rate stage still runs). ``off``: never. Needs the
-        staged start; not with ``free``.
+        (:mod:`~clutchlab.physics.fit.latch_rate`); where neither band law is added, the
+        latch lag stage tests the slow and fastest ramps' snaps for ``latch_on_lag``
+        (:mod:`~clutchlab.physics.fit.latch_lag`). ``band``: the dither band law only (the
+        default before session 59; the rate and latch lag stages still run). ``off``:
+        never. Needs the staged start; not with ``free``.
     static_max_iter : int
         Iteration limit of the staged start's static stage.
     static_time_fraction : float
