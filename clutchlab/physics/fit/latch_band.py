@@ -341,6 +341,25 @@ def _asks(d0: np.ndarray, a: np.ndarray) -> tuple[tuple[str, ...], dict[str, flo
     return chosen, record, text
 
 
+def with_law_compiling(
+    model: CircuitModel,
+    params: ParameterSet,
+    law: str,
+    held: dict[str, float],
+    traces: list[Trace],
+    free: tuple[str, ...],
+    settings: FitSettings,
+) -> tuple[CircuitModel, ParameterSet]:
+    """``model`` with the latch stage's law ``law`` (``params`` kept, ``held`` set), its
+    sensitivity code compiling on the other core meanwhile: the result's standard errors
+    need it, and cold it would add ~6-9 s after the stage's simulations."""
+    new_model, base = _with_law(model, params, law, held)
+    compile_sensitivities_for(
+        new_model, traces, settings.substeps, settings.drive, len(free), background=True
+    )
+    return new_model, base
+
+
 def chord_rounds(model, base, at, a, d0, cols, used, latch, settings, deadline, held=2, scale=1.0):
     """The stage's solve and its chord rounds: ``θ`` from the linear system ``a θ ≈ −d``,
     then, while a simulation of ``used`` lowers the snap offsets' RMS and before
@@ -455,11 +474,8 @@ def latch_band_structure(
     x0 = _thresholds_of(law, params)
     cols = _columns(laws)
     held = {"llt_p_ref": p_ref} if LINE_LAW in laws else {}
-    new_model, base = _with_law(model, params, ", ".join(laws), held)
-    # the result's standard errors need its sensitivity code: compiled on the other core
-    # while the rounds simulate (cold, it would add ~6 s after them)
-    compile_sensitivities_for(
-        new_model, traces, settings.substeps, settings.drive, len(free), background=True
+    new_model, base = with_law_compiling(
+        model, params, ", ".join(laws), held, traces, free, settings
     )
     names = [n for lw in laws for n in _LAWS[lw].FIT]
     bounds = {n: settings.bounds.get(n, (base.spec(n).lower, base.spec(n).upper)) for n in names}

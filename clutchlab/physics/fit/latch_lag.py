@@ -42,15 +42,14 @@ from .latch_band import (
     _loo_rms,
     _rms,
     chord_rounds,
+    with_law_compiling,
 )
-from .sensitivity import compile_sensitivities_for
 from .settings import FitSettings
 from .staged import (
     StagedStart,
     _latch_law,
     _measured_latches,
     _thresholds_of,
-    _with_law,
     _with_thresholds,
     fastest_traces,
     quasi_static_traces,
@@ -210,10 +209,7 @@ def latch_lag_structure(
         return model, params
     law = _latch_law(model, free)
     x0 = _thresholds_of(law, params)
-    new_model, base = _with_law(model, params, LAW, {})
-    compile_sensitivities_for(
-        new_model, traces, settings.substeps, settings.drive, len(free), background=True
-    )
+    new_model, base = with_law_compiling(model, params, LAW, {}, traces, free, settings)
     spec = base.spec("lolag_r")
     lo, hi = settings.bounds.get("lolag_r", (spec.lower, spec.upper))
 

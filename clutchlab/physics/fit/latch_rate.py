@@ -52,15 +52,14 @@ from .latch_band import (
     _rms,
     band_law_rows,
     chord_rounds,
+    with_law_compiling,
 )
-from .sensitivity import compile_sensitivities_for
 from .settings import FitSettings
 from .staged import (
     StagedStart,
     _latch_law,
     _measured_latches,
     _period_mean,
-    _with_law,
     quasi_static_traces,
     snap_offsets_each,
 )
@@ -192,10 +191,7 @@ def latch_rate_structure(
     if not (without > BAND_MIN_MA and loo < BAND_GAIN * without):
         info.notes.append(f"latch rate band: not added ({comparison})")
         return model, params
-    new_model, base = _with_law(model, params, LAW, {})
-    compile_sensitivities_for(
-        new_model, traces, settings.substeps, settings.drive, len(free), background=True
-    )
+    new_model, base = with_law_compiling(model, params, LAW, {}, traces, free, settings)
     bounds = {
         n: settings.bounds.get(n, (base.spec(n).lower, base.spec(n).upper))
         for n in LatchRateBand.FIT
