@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import copy
 import json
+from dataclasses import replace
 from types import SimpleNamespace
 
 import pytest
@@ -91,17 +92,57 @@ def test_the_subset_takes_every_ramp_and_is_all_data_within_the_budget(stand):
     assert prefit_subset(train, sum(len(t) for t in train)) == train
 
 
-def test_screening_refits_stop_by_ipopt_alone():
-    """The screening's refits keep IPOPT's stop and their short budget: no cost-plateau
-    stop, which the fit's pre-fit (same settings otherwise) has."""
+def test_screening_refits_stop_on_a_short_cost_plateau():
+    """The screening's refits stop when their cost moved less than the pre-fit's tolerance
+    over their last two iterations (the pre-fit's own plateau test spans more), or at
+    their short budget."""
     from clutchlab.physics.fit import prefit_settings
-    from clutchlab.validation.discover.screen import screen_settings
+    from clutchlab.validation.discover.screen import SCREEN_PLATEAU_ITER, screen_settings
 
     settings = _settings()
-    assert prefit_settings(settings.fit).plateau_iter > 0
     sub = screen_settings(settings)
-    assert sub.plateau_iter == 0
+    assert sub.plateau_iter == SCREEN_PLATEAU_ITER == 2
+    assert prefit_settings(settings.fit).plateau_iter > sub.plateau_iter
+    assert sub.prefit_obj_change_tol == settings.fit.prefit_obj_change_tol
     assert sub.max_iter == min(settings.fit.max_iter, settings.screen_max_iter)
+
+
+def test_a_staged_fit_keeps_its_pre_fit_optimum(stand):
+    """``PhysicsFitter.prefit_``: the pre-fit's subset, best iterate and status when the fit
+    was staged; None when the data fit in the pre-fit's budget (one stage)."""
+    train = _train(stand)
+    budget = _budget(stand)
+    fit = replace(_settings().fit, prefit_samples=budget)
+    fitter = PhysicsFitter(CircuitModel(), fit).fit(train)
+    pre = fitter.prefit_
+    assert pre is not None and pre.model.key == CircuitModel().key
+    assert pre.experiments == tuple(t.name for t in prefit_subset(train, budget))
+    assert set(fit.free) <= set(pre.params) and pre.status
+    one = PhysicsFitter(CircuitModel(), replace(fit, prefit_samples=0)).fit(train)
+    assert one.prefit_ is None
+
+
+def test_a_discovery_that_fits_its_baseline_takes_the_pre_fit_as_its_subset_reference(stand):
+    """Where the baseline fit's pre-fit ran on the screening subset, the subset reference is
+    the better of that optimum and the current fit (no continuation is fitted); a discovery
+    given its baseline continues the current fit there (``screened``, below)."""
+    budget = _budget(stand)
+    fit = replace(_settings().fit, prefit_samples=budget)
+    settings = _settings(fit=fit, screen_samples=budget, candidates=("supply_droop",))
+    res = discover(stand, settings=settings)
+    info = res.iterations[0].reference["screening"]
+    assert info["kind"] in (
+        "the current fit's own pre-fit on the subset",
+        "current fit on the subset (its pre-fit's optimum is not lower)",
+    ), info["kind"]
+    assert "iterations" not in info  # no continuation ran
+    assert info["rss_bar2"] <= info["rss_before_bar2"]
+    assert info["experiments"] == [t.name for t in prefit_subset(_train(stand), budget)]
+
+
+def test_a_discovery_given_its_baseline_continues_it_on_the_subset(screened):
+    info = screened.iterations[0].reference["screening"]
+    assert info["kind"].startswith("current fit") and info["iterations"] >= 1
 
 
 def test_screening_refits_on_the_subset_and_decides_on_every_training_experiment(screened):

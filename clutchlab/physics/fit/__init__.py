@@ -1,6 +1,6 @@
 """Multi-experiment fitting of the physics model (CasADi sensitivities + IPOPT)."""
 
-from .fitter import PhysicsFitter, check_savable, resolve_free
+from .fitter import PhysicsFitter, PrefitPoint, check_savable, resolve_free
 from .problem import FitProblem
 from .rate import FIT_RATE_MARGIN, SUGGESTED_FIT_RATE_HZ, at_fit_rate, faster_than_fit
 from .result import (
@@ -44,6 +44,7 @@ __all__ = [
     "FitSettings",
     "ParameterUncertainty",
     "PhysicsFitter",
+    "PrefitPoint",
     "SensitivityRun",
     "StructureSelection",
     "StructureSelector",

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, replace
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 from sklearn.exceptions import NotFittedError
@@ -44,7 +44,7 @@ from .staged import (
 )
 from .stages import prefit_settings, prefit_subset, refine_settings
 
-__all__ = ["PhysicsFitter", "check_savable", "resolve_free"]
+__all__ = ["PhysicsFitter", "PrefitPoint", "check_savable", "resolve_free"]
 
 _OK = ("Solve_Succeeded", "Solved_To_Acceptable_Level", COST_PLATEAU)
 #: Share of the time limit the solver stages may use; the rest is kept for the result (the
@@ -166,6 +166,28 @@ def check_savable(model: CircuitModel) -> None:
             "and loading it would build the base circuit, which predicts differently; save "
             "the values (fitter.params_.to_json(path)) and rebuild the model in code"
         )
+
+
+@dataclass(frozen=True)
+class PrefitPoint:
+    """Where a staged fit's pre-fit ended: its optimum on the pre-fit subset.
+
+    Attributes
+    ----------
+    model : CircuitModel
+        The model fitted (the structure of the refinement that followed).
+    experiments : tuple of str
+        Names of the subset's experiments, in pick order.
+    params : ParameterSet
+        The pre-fit's best iterate (engineering units).
+    status : str
+        The pre-fit's solver status.
+    """
+
+    model: CircuitModel
+    experiments: tuple[str, ...]
+    params: ParameterSet
+    status: str
 
 
 class PhysicsFitter:
@@ -343,6 +365,7 @@ class PhysicsFitter:
         free = resolve_free(model, settings)
         self._check_bounds(model, free, settings, start)
         self.staged_ = None
+        self.prefit_ = None
         band_reserve_s = 0.0  # solver time kept for the latch band stage
         datasheet = (model, start, free)  # what the staged start starts from
         if settings.staged_start and self.start is None and not settings.per_experiment:
@@ -450,6 +473,13 @@ class PhysicsFitter:
                 if best["z"] is not None:
                     z_par = best["z"][: problem.n_par]
                     kept = (problem, best)
+                    if stage == 0 and len(stages) > 1:
+                        self.prefit_ = PrefitPoint(
+                            model,
+                            tuple(t.name for t in stage_traces),
+                            problem.parameter_set(best["z"], 0),
+                            statuses[-1],
+                        )
                     stage_costs.append(
                         (history[h0] if len(history) > h0 else math.inf, best["cost"])
                     )

@@ -32,9 +32,10 @@ from tqdm.auto import tqdm
 
 from ...data import Dataset, Trace, dither_period_mean, dither_period_samples, pressure_metrics
 from ...errors import ClutchlabError, FitError, FitWarning, warn_at_caller
+from ...forkmap import default_workers, fork_map
 from ...physics import CircuitModel, SimulationSettings, simulate
 from ...physics.effects import EFFECTS
-from ...physics.fit import FitResult, at_fit_rate, resolve_free
+from ...physics.fit import FitResult, PrefitPoint, at_fit_rate, resolve_free
 from ...physics.parameters import ParameterSet, quiet_design_checks
 from .alternatives import alternatives_for, beats, broke_down, fit_alternative
 from .deadline import DiscoveryTimeLimit, check_budget, discovery_budget
@@ -59,29 +60,37 @@ def period_mean_metrics(
     params: ParameterSet,
     traces: list[Trace],
     sim: SimulationSettings | None = None,
+    workers: int | None = None,
 ) -> tuple[dict[str, float], dict[str, tuple[np.ndarray, np.ndarray]]]:
     """RMSE (bar) and fit % of the dither-period-mean pressure over ``traces`` (concatenated).
 
     ``sim``: the simulation settings (the defaults, as every scored ramp, when None).
+    ``workers``: forked processes simulating the traces (the same numbers with any
+    number; :func:`~clutchlab.forkmap.default_workers` when None).
     Returns the metrics and, per trace, ``(nominal current mA, residual bar)`` thinned
     for figures. NaN metrics for no traces.
     """
     if not traces:
         return {"rmse_bar": math.nan, "fit_pct": math.nan}, {}
-    meas, pred, curves = [], [], {}
-    for tr in traces:
+
+    def period_means(k: int) -> tuple[np.ndarray, np.ndarray]:
+        tr = traces[k]
         n = dither_period_samples(tr)
         y = dither_period_mean(tr.get("clutch_pressure_bar"), n)
-        yh = dither_period_mean(simulate(model, params, tr, sim).pressure_bar, n)
-        meas.append(y)
-        pred.append(yh)
+        return y, dither_period_mean(simulate(model, params, tr, sim).pressure_bar, n)
+
+    # longest first, so that the processes end together
+    order = sorted(range(len(traces)), key=lambda k: -len(traces[k]))
+    means = fork_map(period_means, len(traces), workers or default_workers(), order)
+    curves = {}
+    for tr, (y, yh) in zip(traces, means, strict=True):
         step = max(len(y) // _FIGURE_POINTS, 1)
         cur = tr.get("current_cmd_mA") if tr.has("current_cmd_mA") else tr.get("current_mA")
-        curves[tr.name] = (
-            dither_period_mean(cur, n)[::step],
-            (yh - y)[::step],
-        )
-    m = pressure_metrics(np.concatenate(meas), np.concatenate(pred))
+        n = dither_period_samples(tr)
+        curves[tr.name] = (dither_period_mean(cur, n)[::step], (yh - y)[::step])
+    m = pressure_metrics(
+        np.concatenate([y for y, _ in means]), np.concatenate([yh for _, yh in means])
+    )
     return {"rmse_bar": m["rmse_bar"], "fit_pct": m["fit_pct"]}, curves
 
 
@@ -110,8 +119,9 @@ def _state(
 ) -> ModelState:
     model, params = fit.model(), fit.params()
     res = residual_at(model, params, tuple(fit.free), train, settings, jacobian)
-    train_m, _ = period_mean_metrics(model, params, train)
-    test_m, curves = period_mean_metrics(model, params, test)
+    workers = settings.fit.workers
+    train_m, _ = period_mean_metrics(model, params, train, workers=workers)
+    test_m, curves = period_mean_metrics(model, params, test, workers=workers)
     return ModelState(fit, res, train_m, test_m, curves)
 
 
@@ -251,8 +261,13 @@ def _iteration(
     test: list[Trace],
     settings: DiscoverySettings,
     n_added: int,
+    prefit: PrefitPoint | None = None,
 ) -> IterationRecord:
-    """One turn: diagnose the residual, score the candidates, confirm, decide."""
+    """One turn: diagnose the residual, score the candidates, confirm, decide.
+
+    ``prefit``: the current fit's own pre-fit optimum (the baseline fit's, in the first
+    turn of a discovery that made it), the screening reference when it ran on the same
+    subset."""
     t_it = time.perf_counter()
     # the training residual's Jacobian (one sensitivity run on every training experiment)
     # is computed only where it is used: scoring without a screening stage, and the
@@ -306,6 +321,8 @@ def _iteration(
     # Long training data: the evidence is gathered on the pre-fit subset and only the
     # candidate chosen there is refitted on every training experiment (see .screen).
     screen = screening(current, train, settings)
+    if screen is not None:
+        screen.prefit = prefit
     if screen is None:
         evidence_traces, evidence = train, _with_jacobian(current, train, settings).residual
     else:
@@ -554,13 +571,21 @@ def discover(
         raise FitError(f"unknown candidate effect(s) {unknown}; known: {sorted(EFFECTS)}")
     if baseline is not None:
         _check_baseline(baseline, model, train)
+    prefit: list = []  # the baseline fit's pre-fit optimum, when this discovery fits it
     with discovery_budget(settings.time_limit_s, t_start):
         if baseline is None:
             what = model.effect_names or "the base model"
             _say(settings, f"fitting {what} on {len(train)} experiments")
             free0 = resolve_free(model, settings.fit)
             baseline = run_fit(
-                model, train, settings, free0, start, what="the baseline fit", budget_ok=True
+                model,
+                train,
+                settings,
+                free0,
+                start,
+                what="the baseline fit",
+                budget_ok=True,
+                prefit=prefit,
             )
         else:
             _say(settings, f"starting from the given fit ({baseline.status})")
@@ -568,7 +593,8 @@ def discover(
         baseline = current
         iterations: list[IterationRecord] = []
         for index in range(settings.max_effects + 1):
-            record = _iteration(index, current, pool, train, test, settings, len(iterations))
+            own = prefit[0] if prefit and not iterations else None
+            record = _iteration(index, current, pool, train, test, settings, len(iterations), own)
             iterations.append(record)
             if record.effect is None:
                 break

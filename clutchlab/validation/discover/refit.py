@@ -57,6 +57,7 @@ def run_fit(
     *,
     what: str = "a refit",
     budget_ok: bool = False,
+    prefit: list | None = None,
 ) -> FitResult:
     """Fit; a fit that stops short returns its best iterate (discovery's refits are short by
     design, so the FitWarning saying so is not shown; the status is in the result).
@@ -66,6 +67,9 @@ def run_fit(
     budget left, and a fit the budget stopped raises :class:`.DiscoveryTimeLimit` naming
     ``what`` — it is not judged against complete refits — unless ``budget_ok`` (the
     baseline fit, whose best iterate is the model whatever stopped it).
+
+    ``prefit``, a list, receives the fit's :class:`~clutchlab.physics.fit.PrefitPoint`
+    (its optimum on the pre-fit subset) when the fit was staged.
     """
     if not budget_ok:
         check_budget(what)
@@ -85,6 +89,8 @@ def run_fit(
         raise budget_spent(f"the end of {what}") from error
     if result is None:
         raise error
+    if prefit is not None and fitter.prefit_ is not None:
+        prefit.append(fitter.prefit_)
     return result
 
 

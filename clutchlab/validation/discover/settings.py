@@ -73,8 +73,9 @@ class DiscoverySettings:
         decision is taken (see the ``screen`` module). None: the fit's
         ``prefit_samples``; 0: no screening, every refit on all training experiments.
     screen_max_iter : int
-        Solver iterations of each screening refit on the subset (and of the current fit's
-        continuation there, which it is compared with: the same budget for both).
+        Most solver iterations of each screening refit on the subset (and of the current
+        fit's continuation there, which it is compared with: the same budget and the same
+        cost-plateau stop for both, see ``screen.SCREEN_PLATEAU_ITER``).
     alternatives : bool
         Claim an effect only when its refit predicts the left-out training experiments
         better than each flexible component law of at most its size, refitted the same
