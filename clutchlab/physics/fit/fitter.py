@@ -195,7 +195,9 @@ class PhysicsFitter:
 
     scikit-learn contract: ``__init__`` stores its arguments, :meth:`fit` validates
     and returns ``self``; learned state ends in ``_`` (``result_``, ``params_``,
-    ``model_``); :meth:`predict` before :meth:`fit` raises ``NotFittedError``.
+    ``model_``; ``staged_``, the staged start's record; ``prefit_``, the
+    :class:`PrefitPoint` of a fit staged into a pre-fit and a refinement, else None);
+    :meth:`predict` before :meth:`fit` raises ``NotFittedError``.
 
     Parameters
     ----------

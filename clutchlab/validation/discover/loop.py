@@ -320,9 +320,7 @@ def _iteration(
 
     # Long training data: the evidence is gathered on the pre-fit subset and only the
     # candidate chosen there is refitted on every training experiment (see .screen).
-    screen = screening(current, train, settings)
-    if screen is not None:
-        screen.prefit = prefit
+    screen = screening(current, train, settings, prefit)
     if screen is None:
         evidence_traces, evidence = train, _with_jacobian(current, train, settings).residual
     else:

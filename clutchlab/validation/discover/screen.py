@@ -188,10 +188,14 @@ def confirm_settings(fit: FitSettings) -> FitSettings:
 
 
 def screening(
-    current: ModelState, train: list[Trace], settings: DiscoverySettings
+    current: ModelState,
+    train: list[Trace],
+    settings: DiscoverySettings,
+    prefit: PrefitPoint | None = None,
 ) -> Screening | None:
     """The iteration's screening subset with the current model's residual on it, or None
-    when the training data fit in ``settings.screen_samples`` (no screening stage)."""
+    when the training data fit in ``settings.screen_samples`` (no screening stage).
+    ``prefit``: the current fit's own pre-fit optimum, if known (:attr:`Screening.prefit`)."""
     budget = settings.screen_samples
     if budget is None:
         budget = settings.fit.prefit_samples
@@ -200,7 +204,7 @@ def screening(
         return None
     fit = current.fit
     res = residual_at(current.model, current.params, tuple(fit.free), subset, settings)
-    return Screening(subset, res, len(train))
+    return Screening(subset, res, len(train), prefit=prefit)
 
 
 def screen_refit(
