@@ -254,3 +254,17 @@ def test_cli_discover_starts_from_a_fit_physics_json(
     assert main([*argv, "--physics-model", str(tmp_path / "other.json")]) != 0
     assert "other experiments" in capsys.readouterr().err
     assert not (tmp_path / "rep2").exists()
+
+
+def test_period_mean_metrics_are_the_same_on_forked_workers(stand, base_fit):
+    """The before / after metrics simulate their traces on forked workers: the same numbers
+    and figure curves as in one process."""
+    from clutchlab.validation.discover import period_mean_metrics
+
+    model, params = base_fit.model(), base_fit.params()
+    one = period_mean_metrics(model, params, list(stand), workers=1)
+    two = period_mean_metrics(model, params, list(stand), workers=2)
+    assert one[0] == two[0]
+    assert list(one[1]) == list(two[1]) == [t.name for t in stand]
+    for name, (cur, res) in one[1].items():
+        assert (cur == two[1][name][0]).all() and (res == two[1][name][1]).all()
