@@ -92,63 +92,50 @@ class Screening:
         t0 = time.perf_counter()
         res = self.residual
         info = {"rss_before_bar2": res.kept_rss}
-        if self._own_prefit(current):
-            return self._reference_at_prefit(current, settings, t0, info)
-        try:
-            fit = run_fit(
-                current.model,
-                self.traces,
-                settings,
-                tuple(current.fit.free),
-                current.params,
-                fit=screen_settings(settings),
-                what="the current fit's continuation on the screening subset",
-            )
-            again = residual_at(fit.model(), fit.params(), fit.free, self.traces, settings)
-        except _FAILURES as exc:
-            info["kind"] = f"current fit on the subset (its continuation failed: {exc})"
-        else:
-            info["status"] = fit.status
-            info["iterations"] = fit.iterations
-            if again.kept_rss < res.kept_rss:
-                res = again
-                info["kind"] = "current fit continued on the subset"
-            else:
-                info["kind"] = "current fit on the subset (its continuation did not improve it)"
-        return self._keep_reference(res, info, t0)
-
-    def _own_prefit(self, current: ModelState) -> bool:
-        """Whether :attr:`prefit` is the current model's fit on exactly this subset."""
-        pre = self.prefit
-        return (
-            pre is not None
-            and pre.model.key == current.model.key
-            and pre.experiments == tuple(t.name for t in self.traces)
-        )
-
-    def _reference_at_prefit(
-        self, current: ModelState, settings: DiscoverySettings, t0: float, info: dict
-    ) -> ResidualSet:
-        """The reference when the current fit's own pre-fit ran on this subset: its
-        optimum there (the current model fitted on the subset to convergence, where the
-        continuation would take it), or the current fit where that is lower."""
-        res = self.residual
-        pre = self.prefit
         free = tuple(current.fit.free)
-        try:
-            again = residual_at(current.model, pre.params, free, self.traces, settings)
-        except _FAILURES as exc:
-            info["kind"] = f"current fit on the subset (its pre-fit's optimum failed: {exc})"
+        if self._own_prefit(current):
+            pre = self.prefit
+            what = (
+                "its pre-fit's optimum",
+                "the current fit's own pre-fit on the subset",
+                "its pre-fit's optimum is not lower",
+            )
+
+            def candidate() -> tuple[ResidualSet, dict]:
+                again = residual_at(current.model, pre.params, free, self.traces, settings)
+                return again, {"status": pre.status}
+
         else:
-            info["status"] = pre.status
+            what = (
+                "its continuation",
+                "current fit continued on the subset",
+                "its continuation did not improve it",
+            )
+
+            def candidate() -> tuple[ResidualSet, dict]:
+                fit = run_fit(
+                    current.model,
+                    self.traces,
+                    settings,
+                    free,
+                    current.params,
+                    fit=screen_settings(settings),
+                    what="the current fit's continuation on the screening subset",
+                )
+                again = residual_at(fit.model(), fit.params(), fit.free, self.traces, settings)
+                return again, {"status": fit.status, "iterations": fit.iterations}
+
+        try:
+            again, extra = candidate()
+        except _FAILURES as exc:
+            info["kind"] = f"current fit on the subset ({what[0]} failed: {exc})"
+        else:
+            info |= extra
             if again.kept_rss < res.kept_rss:
                 res = again
-                info["kind"] = "the current fit's own pre-fit on the subset"
+                info["kind"] = what[1]
             else:
-                info["kind"] = "current fit on the subset (its pre-fit's optimum is not lower)"
-        return self._keep_reference(res, info, t0)
-
-    def _keep_reference(self, res: ResidualSet, info: dict, t0: float) -> ResidualSet:
+                info["kind"] = f"current fit on the subset ({what[2]})"
         self.reference = res
         self.info = info | {
             "subset": self.describe(),
@@ -158,6 +145,15 @@ class Screening:
             "wall_s": time.perf_counter() - t0,
         }
         return res
+
+    def _own_prefit(self, current: ModelState) -> bool:
+        """Whether :attr:`prefit` is the current model's fit on exactly this subset."""
+        pre = self.prefit
+        return (
+            pre is not None
+            and pre.model.key == current.model.key
+            and pre.experiments == tuple(t.name for t in self.traces)
+        )
 
 
 #: Iterations of a screening refit's cost-plateau test: it stops when its cost moved less
