@@ -10,8 +10,8 @@ baseline, that fit's pre-fit optimum on the same subset); a candidate that lower
 information criterion and the leave-one-experiment-out error on the subset is refined on
 every training experiment (the fit's refinement stage, from its subset optimum) and judged
 again there, against the current fit — the decision is always taken on all training
-experiments. When the training
-data fit in the budget the subset is all of them and there is no screening stage.
+experiments. When the training data fit in the budget the subset is all of them and there
+is no screening stage.
 """
 
 from __future__ import annotations
