@@ -1,6 +1,6 @@
 """Multi-experiment fitting of the physics model (CasADi sensitivities + IPOPT)."""
 
-from .fitter import PhysicsFitter, PrefitPoint, check_savable, resolve_free
+from .fitter import PhysicsFitter, PrefitPoint, check_savable, period_mean_pairs, resolve_free
 from .problem import FitProblem
 from .rate import FIT_RATE_MARGIN, SUGGESTED_FIT_RATE_HZ, at_fit_rate, faster_than_fit
 from .result import (
@@ -58,6 +58,7 @@ __all__ = [
     "identifiability",
     "latches_where_data_do_not",
     "parameter_uncertainty",
+    "period_mean_pairs",
     "prefit_settings",
     "prefit_subset",
     "refine_settings",

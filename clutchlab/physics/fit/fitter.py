@@ -44,7 +44,7 @@ from .staged import (
 )
 from .stages import prefit_settings, prefit_subset, refine_settings
 
-__all__ = ["PhysicsFitter", "PrefitPoint", "check_savable", "resolve_free"]
+__all__ = ["PhysicsFitter", "PrefitPoint", "check_savable", "period_mean_pairs", "resolve_free"]
 
 _OK = ("Solve_Succeeded", "Solved_To_Acceptable_Level", COST_PLATEAU)
 #: Share of the time limit the solver stages may use; the rest is kept for the result (the
@@ -123,26 +123,58 @@ def _stopped_by_time(best: dict) -> bool:
     return stats is not None and stats["return_status"] == WALL_TIME_LIMIT
 
 
+def period_mean_pairs(
+    model: CircuitModel,
+    params: list[ParameterSet],
+    traces: list[Trace],
+    workers: int,
+    sim: SimulationSettings | None = None,
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per trace, the measured and simulated dither-period-mean clutch pressure (bar).
+
+    Parameters
+    ----------
+    model : CircuitModel
+        Model structure.
+    params : list of ParameterSet
+        One parameter set per trace (engineering units).
+    traces : list of Trace
+        Experiments.
+    workers : int
+        Forked processes simulating the traces where the platform has fork (the same
+        numbers with any number), else this process.
+    sim : SimulationSettings, optional
+        Simulation settings; the defaults (as every scored ramp) when None.
+
+    Returns
+    -------
+    list of (numpy.ndarray, numpy.ndarray)
+        ``(measured, simulated)`` per trace, in the order of ``traces``.
+    """
+    sim = sim or SimulationSettings()
+
+    def pair(e: int) -> tuple[np.ndarray, np.ndarray]:
+        tr = traces[e]
+        n = dither_period_samples(tr)
+        pred = simulate(model, params[e], tr, sim).pressure_bar
+        return dither_period_mean(tr.get("clutch_pressure_bar"), n), dither_period_mean(pred, n)
+
+    # longest first, so that the processes end together
+    order = sorted(range(len(traces)), key=lambda e: -len(traces[e]))
+    return fork_map(pair, len(traces), workers, order)
+
+
 def _per_experiment_metrics(
     model: CircuitModel, params: list[ParameterSet], traces: list[Trace], workers: int
 ) -> dict[str, dict[str, float]]:
     """Each training experiment's RMSE (bar) and fit (%) of the fitted model, dither-period
     means, simulated on ``workers`` forked processes where the platform has fork (the fit's
     last seconds: ~5 s for the default training set on one core), else in this process."""
-
-    def metrics(e: int) -> dict[str, float]:
-        tr = traces[e]
-        pred = simulate(model, params[e], tr, SimulationSettings()).pressure_bar
-        n = dither_period_samples(tr)
-        m = pressure_metrics(
-            dither_period_mean(tr.get("clutch_pressure_bar"), n), dither_period_mean(pred, n)
-        )
-        return {"rmse_bar": m["rmse_bar"], "fit_pct": m["fit_pct"]}
-
-    # longest first, so that the processes end together
-    order = sorted(range(len(traces)), key=lambda e: -len(traces[e]))
-    rows = fork_map(metrics, len(traces), workers, order)
-    return {tr.name: row for tr, row in zip(traces, rows, strict=True)}
+    rows = {}
+    for tr, (y, yh) in zip(traces, period_mean_pairs(model, params, traces, workers), strict=True):
+        m = pressure_metrics(y, yh)
+        rows[tr.name] = {"rmse_bar": m["rmse_bar"], "fit_pct": m["fit_pct"]}
+    return rows
 
 
 def check_savable(model: CircuitModel) -> None:

@@ -32,10 +32,10 @@ from tqdm.auto import tqdm
 
 from ...data import Dataset, Trace, dither_period_mean, dither_period_samples, pressure_metrics
 from ...errors import ClutchlabError, FitError, FitWarning, warn_at_caller
-from ...forkmap import default_workers, fork_map
-from ...physics import CircuitModel, SimulationSettings, simulate
+from ...forkmap import default_workers
+from ...physics import CircuitModel, SimulationSettings
 from ...physics.effects import EFFECTS
-from ...physics.fit import FitResult, PrefitPoint, at_fit_rate, resolve_free
+from ...physics.fit import FitResult, PrefitPoint, at_fit_rate, period_mean_pairs, resolve_free
 from ...physics.parameters import ParameterSet, quiet_design_checks
 from .alternatives import alternatives_for, beats, broke_down, fit_alternative
 from .deadline import DiscoveryTimeLimit, check_budget, discovery_budget
@@ -73,15 +73,8 @@ def period_mean_metrics(
     if not traces:
         return {"rmse_bar": math.nan, "fit_pct": math.nan}, {}
 
-    def period_means(k: int) -> tuple[np.ndarray, np.ndarray]:
-        tr = traces[k]
-        n = dither_period_samples(tr)
-        y = dither_period_mean(tr.get("clutch_pressure_bar"), n)
-        return y, dither_period_mean(simulate(model, params, tr, sim).pressure_bar, n)
-
-    # longest first, so that the processes end together
-    order = sorted(range(len(traces)), key=lambda k: -len(traces[k]))
-    means = fork_map(period_means, len(traces), workers or default_workers(), order)
+    workers = workers or default_workers()
+    means = period_mean_pairs(model, [params] * len(traces), traces, workers, sim)
     curves = {}
     for tr, (y, yh) in zip(traces, means, strict=True):
         step = max(len(y) // _FIGURE_POINTS, 1)
