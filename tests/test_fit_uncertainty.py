@@ -20,6 +20,7 @@ from clutchlab.physics.fit import (
     FitResult,
     diverged_sensitivities,
     parameter_uncertainty,
+    residual_correlation_time,
 )
 from clutchlab.physics.fit.result import SENSITIVITY_LIMIT
 from clutchlab.validation.report import _fit_status
@@ -132,3 +133,70 @@ def test_reports_call_nothing_identifiable_or_not_when_the_sensitivities_diverge
     params = _parameters(res)
     assert [p["identifiable"] for p in params] == [None, None]
     assert [r[0] for r in _parameter_rows(params)] == ["vfs_K_m", "latch_F0"]
+
+
+def _ar1(rng, n, phi):
+    """A stationary AR(1) series of unit innovations."""
+    e = rng.normal(size=n)
+    x = np.empty(n)
+    x[0] = e[0] / math.sqrt(1.0 - phi * phi)
+    for k in range(1, n):
+        x[k] = phi * x[k - 1] + e[k]
+    return x
+
+
+def test_the_correlation_time_of_known_series():
+    """τ = 1 for independent residuals, (1 + φ) / (1 − φ) for an AR(1), about w for a
+    moving mean over w samples (the fit's period-mean residuals)."""
+    rng = np.random.default_rng(5)
+    assert residual_correlation_time(rng.normal(size=20000)) == pytest.approx(1.0, abs=0.15)
+    assert residual_correlation_time(_ar1(rng, 40000, 0.9)) == pytest.approx(19.0, rel=0.25)
+    w = 20
+    moving = np.convolve(rng.normal(size=40000), np.ones(w) / w, mode="valid")
+    assert residual_correlation_time(moving) == pytest.approx(w, rel=0.25)
+    assert residual_correlation_time(np.zeros(10)) == 1.0  # nothing to correlate
+
+
+def test_lags_do_not_cross_from_one_experiment_into_the_next():
+    """Two experiments with opposite offsets: each is one correlated error; read as one
+    series, the products across the boundary would cancel part of it."""
+    x = np.r_[np.full(500, 0.1), np.full(500, -0.1)]
+    apart = residual_correlation_time(x, [(0, 500), (500, 500)])
+    together = residual_correlation_time(x)
+    assert apart == pytest.approx(500.0, rel=0.01) and together < 0.75 * apart
+
+
+def test_standard_errors_cover_the_spread_of_estimates_under_correlated_residuals():
+    """Linear least squares on smooth sensitivities with AR(1) residuals (φ = 0.95, the
+    fit's case: misfit that drifts): the reported standard errors match the spread of the
+    estimates over noise draws, where independent-residual ones are ~6 × too small."""
+    rng = np.random.default_rng(11)
+    n = 4000
+    t = np.linspace(0.0, 1.0, n)
+    jz = np.column_stack([np.sin(2 * np.pi * t), t, np.cos(3 * np.pi * t) ** 2])
+    specs = {p.name: p for p in CircuitModel().parameters}
+    values = CircuitModel().default_params()
+    estimates, reported = [], []
+    for _ in range(200):
+        y = 0.02 * _ar1(rng, n, 0.95)
+        beta, *_ = np.linalg.lstsq(jz, y, rcond=None)
+        estimates.append(beta)
+        reported.append(parameter_uncertainty(jz, y - jz @ beta, NAMES, specs, values))
+    spread = np.std(estimates, axis=0)
+    for k, name in enumerate(NAMES):
+        spec, v = specs[name], values[name]
+        scale = abs(v if spec.transform == "log" else spec.scale)
+        se = np.median([u.std_errors[name] for u in reported]) / scale
+        assert se == pytest.approx(spread[k], rel=0.3), name
+    tau = np.median([u.correlation_time for u in reported])
+    assert tau == pytest.approx((1 + 0.95) / (1 - 0.95), rel=0.35)
+
+
+def test_the_correlation_time_is_saved_read_back_and_shown(tmp_path):
+    res = synthetic_fit({"vfs_K_m": 14.2})
+    assert "residual_correlation_time" not in res.to_json()  # not reported: not written
+    assert "correlation over" not in res.table()
+    res.residual_correlation_time = 48.9
+    back = FitResult.from_json(res.to_json(tmp_path / "fit.json"))
+    assert back.residual_correlation_time == 48.9
+    assert "allow for the residuals' correlation over 48.9 samples" in back.table()

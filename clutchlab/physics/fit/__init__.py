@@ -9,6 +9,7 @@ from .result import (
     diverged_sensitivities,
     identifiability,
     parameter_uncertainty,
+    residual_correlation_time,
     training_rms,
 )
 from .sensitivity import (
@@ -62,6 +63,7 @@ __all__ = [
     "prefit_settings",
     "prefit_subset",
     "refine_settings",
+    "residual_correlation_time",
     "resolve_free",
     "select_structure",
     "sensitivity_chunk",

@@ -86,20 +86,26 @@ def resolve_free(model: CircuitModel, settings: FitSettings) -> tuple[str, ...]:
     return free
 
 
-def _uncertainty_at(model, traces, shared, settings, fitted, ev=None) -> ParameterUncertainty:
+def _uncertainty_at(
+    model, traces, shared, settings, fitted, ev=None, problem=None
+) -> ParameterUncertainty:
     """Standard errors and identifiability of ``shared`` at ``fitted`` from the
-    single-shooting Jacobian on ``traces``: ``ev``'s when it has one, else one pass."""
+    single-shooting Jacobian on ``traces``: ``ev``'s (an evaluation of ``problem``) when
+    it has one, else one pass."""
     if ev is None or ev.get("J") is None:
         ss_settings = {**asdict(settings), "method": "single_shooting", "per_experiment": ()}
-        ss = FitProblem(model, traces, shared, FitSettings(**ss_settings), fitted)
-        ss.start_workers(traces, settings.workers)
+        problem = FitProblem(model, traces, shared, FitSettings(**ss_settings), fitted)
+        problem.start_workers(traces, settings.workers)
         try:
-            ev = ss.evaluate(np.zeros(ss.n_z), True)
+            ev = problem.evaluate(np.zeros(problem.n_z), True)
         finally:
-            ss.close()
+            problem.close()
     specs = {p.name: p for p in model.parameters}
     if ev.get("J") is not None:
-        return parameter_uncertainty(ev["J"].toarray(), ev["r"], list(shared), specs, fitted)
+        blocks = [(s.row0, len(s.rows)) for s in problem.segments]
+        return parameter_uncertainty(
+            ev["J"].toarray(), ev["r"], list(shared), specs, fitted, blocks
+        )
     return ParameterUncertainty({}, [], [], list(shared), [])
 
 
@@ -114,6 +120,7 @@ def _model_fields(model, fitted, unc: ParameterUncertainty, std_errors: dict) ->
         "singular_values": unc.singular_values,
         "unidentifiable": unc.unidentifiable,
         "weak_directions": unc.weak_directions,
+        "residual_correlation_time": unc.correlation_time,
     }
 
 
@@ -691,7 +698,7 @@ class PhysicsFitter:
             and best["z"] is not None
         )
         ev = problem.evaluate(best["z"], True) if reuse else None
-        unc = _uncertainty_at(model, traces, tuple(problem.shared), settings, fitted, ev)
+        unc = _uncertainty_at(model, traces, tuple(problem.shared), settings, fitted, ev, problem)
         se = dict(unc.std_errors)
         for n in problem.per_exp:
             se[n] = float("nan")

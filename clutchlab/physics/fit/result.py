@@ -23,6 +23,7 @@ __all__ = [
     "diverged_sensitivities",
     "identifiability",
     "parameter_uncertainty",
+    "residual_correlation_time",
     "training_rms",
 ]
 
@@ -83,6 +84,51 @@ def diverged_sensitivities(jz: np.ndarray) -> str:
     )
 
 
+def residual_correlation_time(r: np.ndarray, blocks: list[tuple[int, int]] | None = None) -> float:
+    """Integrated autocorrelation time of the residuals ``r`` (rows, ≥ 1): how many
+    consecutive residuals carry about one residual's worth of independent information.
+
+    The fit's residuals are period means taken at every sample (a moving mean over one
+    dither period) and carry the model's misfit, which drifts over seconds; standard
+    errors that take them for independent ones are far too small (session 65: on the
+    default stand's fit the truth lay 7–163 of them from the fitted values). The
+    autocorrelation is pooled over ``blocks``
+    (one per experiment: lags never cross from one experiment into the next), not
+    centred (an offset that lasts a whole experiment is correlated error), and summed by
+    Geyer's initial positive sequence (pairs of lags while their sum stays positive).
+
+    Parameters
+    ----------
+    r : ndarray
+        Residuals (bar).
+    blocks : list of (int, int), optional
+        ``(first row, number of rows)`` of each contiguous series in ``r``; default: one.
+
+    Returns
+    -------
+    float
+        ``τ = 1 + 2 Σ ρ_l`` in rows; 1 for independent residuals.
+    """
+    r = np.asarray(r, dtype=float)
+    blocks = blocks or [(0, len(r))]
+    acc = np.zeros(max((n for _, n in blocks), default=0))
+    for row0, n in blocks:
+        x = np.nan_to_num(r[row0 : row0 + n])
+        if len(x) < 2:
+            continue
+        nfft = 1 << (2 * len(x) - 1).bit_length()
+        f = np.fft.rfft(x, nfft)
+        acc[: len(x)] += np.fft.irfft(f * np.conj(f), nfft)[: len(x)]
+    if not len(acc) or acc[0] <= 0:
+        return 1.0
+    rho = acc / acc[0]
+    tau, k = -1.0, 0
+    while 2 * k + 1 < len(rho) and (pair := rho[2 * k] + rho[2 * k + 1]) > 0:
+        tau += 2.0 * pair
+        k += 1
+    return max(float(tau), 1.0)
+
+
 def identifiability(
     jz: np.ndarray, names: list[str], rel_se: np.ndarray
 ) -> tuple[list[float], list[str], list[dict]]:
@@ -123,6 +169,9 @@ class ParameterUncertainty:
         Near-null directions with their loadings.
     note : str
         Why nothing is reported (``""`` when it is; :func:`diverged_sensitivities`).
+    correlation_time : float
+        The residuals' integrated autocorrelation time (rows) the standard errors allow
+        for (:func:`residual_correlation_time`; NaN when not reported).
     """
 
     std_errors: dict[str, float]
@@ -131,6 +180,7 @@ class ParameterUncertainty:
     unidentifiable: list[str]
     weak_directions: list[dict]
     note: str = ""
+    correlation_time: float = math.nan
 
 
 def parameter_uncertainty(
@@ -139,12 +189,15 @@ def parameter_uncertainty(
     names: list[str],
     specs: dict,
     values,
+    blocks: list[tuple[int, int]] | None = None,
 ) -> ParameterUncertainty:
     """Gauss–Newton standard errors and identifiability from the output sensitivities.
 
-    The covariance is ``σ² (JᵀJ)⁺`` with ``σ²`` the residual variance (``r·r / dof``), in
-    the solver's scaled coordinates, then mapped to engineering units (a log-scaled
-    parameter's standard error is its value times that of its log). When the
+    The covariance is ``τ σ² (JᵀJ)⁺`` with ``σ²`` the residual variance (``r·r / dof``)
+    and ``τ`` the residuals' integrated autocorrelation time
+    (:func:`residual_correlation_time`: ``n / τ`` residuals' worth of independent
+    information), in the solver's scaled coordinates, then mapped to engineering units (a
+    log-scaled parameter's standard error is its value times that of its log). When the
     sensitivities diverged (:func:`diverged_sensitivities`) nothing is computed from
     them: the standard errors are NaN and the note says why.
 
@@ -160,6 +213,9 @@ def parameter_uncertainty(
         Parameter name -> its specification (``transform``, ``scale``).
     values : mapping
         Fitted values (engineering units).
+    blocks : list of (int, int), optional
+        ``(first row, number of rows)`` of each experiment's residuals (default: one
+        series).
 
     Returns
     -------
@@ -170,7 +226,8 @@ def parameter_uncertainty(
         return ParameterUncertainty(dict.fromkeys(names, math.nan), [], [], [], [], note)
     dof = max(len(r) - jz.shape[1], 1)
     sigma2 = float(np.dot(r, r)) / dof
-    cov = sigma2 * np.linalg.pinv(jz.T @ jz)
+    tau = residual_correlation_time(r, blocks)
+    cov = tau * sigma2 * np.linalg.pinv(jz.T @ jz)
     sd_z = np.sqrt(np.clip(np.diag(cov), 0, None))
     se, rel = {}, []
     for k, n in enumerate(names):
@@ -180,7 +237,7 @@ def parameter_uncertainty(
         rel.append(se[n] / ref)
     d = np.where(sd_z > 0, sd_z, 1.0)
     sv, unid, weak = identifiability(jz, names, np.array(rel))
-    return ParameterUncertainty(se, (cov / np.outer(d, d)).tolist(), sv, unid, weak)
+    return ParameterUncertainty(se, (cov / np.outer(d, d)).tolist(), sv, unid, weak, "", tau)
 
 
 @dataclass
@@ -199,7 +256,8 @@ class FitResult:
         Fitted parameters.
     std_errors : dict
         Standard error of each free parameter (its unit), from the Gauss–Newton
-        Fisher information with the residual variance estimated from the fit.
+        Fisher information with the residual variance estimated from the fit, inflated
+        by the residuals' correlation time (``residual_correlation_time``).
     correlation : list of list
         Correlation matrix of the free parameters (order of ``free``).
     singular_values : list of float
@@ -235,6 +293,10 @@ class FitResult:
         ``unidentifiable`` empty, in words (empty when they are reported; written to JSON
         only when not empty): the output sensitivities at the fitted values diverged
         (:func:`diverged_sensitivities`).
+    residual_correlation_time : float
+        Integrated autocorrelation time (samples) of the training residuals that
+        ``std_errors`` allow for (:func:`residual_correlation_time`); NaN when not reported
+        (and then not written to JSON).
     """
 
     effects: list[str]
@@ -257,6 +319,7 @@ class FitResult:
     settings: dict = field(default_factory=dict)
     note: str = ""
     uncertainty_note: str = ""
+    residual_correlation_time: float = math.nan
 
     def __repr__(self) -> str:
         # the dataclass repr printed every value, the correlation matrix and the cost history
@@ -286,6 +349,11 @@ class FitResult:
             )
         if self.uncertainty_note:
             lines.append(f"({self.uncertainty_note})")
+        elif math.isfinite(self.residual_correlation_time):
+            lines.append(
+                "(standard errors allow for the residuals' correlation over "
+                f"{self.residual_correlation_time:.3g} samples)"
+            )
         return "\n".join(lines)
 
     def to_json(self, path: str | Path | None = None) -> str:
@@ -294,6 +362,8 @@ class FitResult:
         for key in ("note", "uncertainty_note"):
             if not doc[key]:
                 del doc[key]  # files of fits without one stay as they were
+        if not math.isfinite(doc["residual_correlation_time"]):
+            del doc["residual_correlation_time"]
         text = json.dumps(doc, indent=2, ensure_ascii=False, allow_nan=True)
         if path is not None:
             write_file_atomic(path, (text + "\n").encode("utf-8"), overwrite=True)
@@ -360,8 +430,9 @@ _FIELDS: dict[str, tuple[str, object]] = {
     "settings": ("an object", lambda v: isinstance(v, dict)),
     "note": ("a string", lambda v: isinstance(v, str)),
     "uncertainty_note": ("a string", lambda v: isinstance(v, str)),
+    "residual_correlation_time": ("a number of samples", _is_real),
 }
-_OPTIONAL = ("settings", "note", "uncertainty_note")
+_OPTIONAL = ("settings", "note", "uncertainty_note", "residual_correlation_time")
 
 
 def check_fit_document(doc, source: str = "fit result") -> None:
