@@ -10,6 +10,7 @@ are rendered from that same dictionary.
 from __future__ import annotations
 
 import datetime as _dt
+import math
 import platform
 import sys
 import time
@@ -275,6 +276,8 @@ class Evaluation:
             "note": getattr(res, "note", ""),
             # why standard errors are not reported ("" when they are)
             "uncertainty_note": getattr(res, "uncertainty_note", ""),
+            # what they allow for (samples; NaN for a fit made before it was recorded)
+            "residual_correlation_time": getattr(res, "residual_correlation_time", math.nan),
         }
 
     def to_dict(self) -> dict[str, Any]:

@@ -29,6 +29,7 @@ import numpy as np
 
 from .._plotly import MARKER_SCRIPT as _MARKER
 from ..data.output import write_file_atomic, write_folder_atomic
+from ..physics.fit import correlation_note
 from ..physics.units import unit_shown
 from .averaging import averaging_note, scored_signal
 from .figures import FigureSpec, report_figures
@@ -212,6 +213,10 @@ def _fit_status(fit: dict[str, Any]) -> str:
     for key in ("note", "uncertainty_note"):  # the staged start kept; no standard errors
         if fit.get(key):
             text += f" {fit[key][0].upper()}{fit[key][1:]}."
+    if not fit.get("uncertainty_note") and (
+        note := correlation_note(fit.get("residual_correlation_time"))
+    ):
+        text += f" {note[0].upper()}{note[1:]}."
     if fit["converged"]:
         return text
     limits = []

@@ -6,6 +6,7 @@ from .rate import FIT_RATE_MARGIN, SUGGESTED_FIT_RATE_HZ, at_fit_rate, faster_th
 from .result import (
     FitResult,
     ParameterUncertainty,
+    correlation_note,
     diverged_sensitivities,
     identifiability,
     parameter_uncertainty,
@@ -54,6 +55,7 @@ __all__ = [
     "compile_fit_code",
     "compile_sensitivities_for",
     "compile_sensitivities_in_background",
+    "correlation_note",
     "diverged_sensitivities",
     "faster_than_fit",
     "identifiability",

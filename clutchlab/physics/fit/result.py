@@ -20,6 +20,7 @@ __all__ = [
     "FitResult",
     "ParameterUncertainty",
     "check_fit_document",
+    "correlation_note",
     "diverged_sensitivities",
     "identifiability",
     "parameter_uncertainty",
@@ -127,6 +128,20 @@ def residual_correlation_time(r: np.ndarray, blocks: list[tuple[int, int]] | Non
         tau += 2.0 * pair
         k += 1
     return max(float(tau), 1.0)
+
+
+def correlation_note(tau: float) -> str:
+    """What the standard errors allow for, in words (``""`` when ``tau`` is not reported).
+
+    Parameters
+    ----------
+    tau : float
+        The residuals' integrated autocorrelation time (samples;
+        :func:`residual_correlation_time`), NaN when not reported.
+    """
+    if tau is None or not math.isfinite(tau):
+        return ""
+    return f"standard errors allow for the residuals' correlation over {tau:.3g} samples"
 
 
 def identifiability(
@@ -349,11 +364,8 @@ class FitResult:
             )
         if self.uncertainty_note:
             lines.append(f"({self.uncertainty_note})")
-        elif math.isfinite(self.residual_correlation_time):
-            lines.append(
-                "(standard errors allow for the residuals' correlation over "
-                f"{self.residual_correlation_time:.3g} samples)"
-            )
+        elif note := correlation_note(self.residual_correlation_time):
+            lines.append(f"({note})")
         return "\n".join(lines)
 
     def to_json(self, path: str | Path | None = None) -> str:
