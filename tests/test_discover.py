@@ -127,6 +127,7 @@ def test_cli_writes_the_issue_json_and_a_report(cli_run):
     html = (report / "report.html").read_text()
     assert "Iteration 0" in html and "supply_droop" in html
     assert "flexible alternatives" in html  # the evidence table's column (issue 17)
+    assert "standard errors allow for the residuals&#x27; correlation over" in html  # escaped
     for kind in ("residuals", "evidence", "diagnostics"):
         png = report / f"iteration0_{kind}.png"
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

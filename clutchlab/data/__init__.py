@@ -8,6 +8,7 @@ every problem of a log is collected into one :class:`~clutchlab.errors.DataError
 
 from __future__ import annotations
 
+from .autocorrelation import lagged_sums
 from .channel_map import ChannelMap, ChannelSpec, load_channel_map
 from .check import CheckResult, check_path
 from .convert import convert
@@ -84,6 +85,7 @@ __all__ = [
     "dither_period_samples",
     "first_crossing",
     "first_order_lag",
+    "lagged_sums",
     "load_channel_map",
     "load_dataset",
     "model_doc_kind",

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...data.autocorrelation import lagged_sums
 from ...data.output import write_file_atomic
 from ...errors import ClutchlabError, FitError, FitResultError
 from ..effects import EFFECTS, FLEXIBLE_LAWS, make_effect
@@ -93,10 +94,14 @@ def residual_correlation_time(r: np.ndarray, blocks: list[tuple[int, int]] | Non
     dither period) and carry the model's misfit, which drifts over seconds; standard
     errors that take them for independent ones are far too small (session 65: on the
     default stand's fit the truth lay 7–163 of them from the fitted values). The
-    autocorrelation is pooled over ``blocks``
-    (one per experiment: lags never cross from one experiment into the next), not
-    centred (an offset that lasts a whole experiment is correlated error), and summed by
-    Geyer's initial positive sequence (pairs of lags while their sum stays positive).
+    autocorrelation is pooled over ``blocks`` (one per experiment: lags never cross from
+    one experiment into the next), not centred (an offset that lasts a whole experiment
+    is correlated error), and summed by Geyer's initial positive sequence (pairs of lags
+    while their sum stays positive). It differs on purpose from discovery's
+    ``integrated_time`` (centred per experiment, Sokal's window), which sizes that
+    module's statistics: on three of the default stand's fits it reads 22–35 samples
+    where this reads 49–99, the difference being the experiments' own offsets, which a
+    standard error must count.
 
     Parameters
     ----------
@@ -115,11 +120,8 @@ def residual_correlation_time(r: np.ndarray, blocks: list[tuple[int, int]] | Non
     acc = np.zeros(max((n for _, n in blocks), default=0))
     for row0, n in blocks:
         x = np.nan_to_num(r[row0 : row0 + n])
-        if len(x) < 2:
-            continue
-        nfft = 1 << (2 * len(x) - 1).bit_length()
-        f = np.fft.rfft(x, nfft)
-        acc[: len(x)] += np.fft.irfft(f * np.conj(f), nfft)[: len(x)]
+        if len(x) >= 2:
+            acc[: len(x)] += lagged_sums(x)
     if not len(acc) or acc[0] <= 0:
         return 1.0
     rho = acc / acc[0]

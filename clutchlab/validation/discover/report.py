@@ -15,6 +15,7 @@ from matplotlib.patches import Patch
 
 from ..._plotly import MARKER_SCRIPT, figure_div, plotlyjs_script
 from ...data.output import write_folder_atomic
+from ...physics.fit import correlation_note
 from ...physics.units import unit_shown
 from ..report import REPORT_FOLDER
 from .alternatives import alternative_note
@@ -461,6 +462,10 @@ def write_report(
             record["fit_converged_after"],
             baseline=it.after.fit is result.baseline.fit,
         )
+        if not it.after.fit.uncertainty_note and (
+            note := correlation_note(it.after.fit.residual_correlation_time)
+        ):
+            fit_state += f"; {note}"
         figs = {"residuals": plot_residuals(it)}
         if it.candidates:  # none scored (effect limit, no candidate left): no empty axes
             figs["evidence"] = plot_evidence(it, min_share)

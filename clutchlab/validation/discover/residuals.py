@@ -23,6 +23,7 @@ from ...data import (
     nominal_current,
     nominal_didt,
 )
+from ...data.autocorrelation import lagged_sums
 from ...physics import CircuitModel
 from ...physics.fit import FitProblem, FitSettings
 from ...physics.fit.problem import snap_mask
@@ -90,9 +91,7 @@ def integrated_time(x: np.ndarray, c: float = 5.0) -> float:
     n = len(x)
     if n < 4 or not np.any(x != x[0]):
         return 1.0
-    x = x - x.mean()
-    f = np.fft.rfft(x, 2 * n)
-    ac = np.fft.irfft(f * np.conj(f))[:n]
+    ac = lagged_sums(x - x.mean())
     ac = ac / ac[0]
     cum = 1.0 + 2.0 * np.cumsum(ac[1:])
     lags = np.arange(1, n)
