@@ -206,3 +206,11 @@ def test_the_correlation_time_is_saved_read_back_and_shown(tmp_path):
     assert "correlation over" not in _fit_status({**fit, "residual_correlation_time": None})
     gone = {**fit, "residual_correlation_time": 48.9, "uncertainty_note": "not reported"}
     assert "correlation over" not in _fit_status(gone)  # no standard errors: nothing to allow for
+
+
+def test_lagged_sums_are_the_products_at_every_lag_without_wrap_around():
+    from clutchlab.data import lagged_sums
+
+    x = np.random.default_rng(3).normal(size=37)
+    direct = np.correlate(x, x, mode="full")[len(x) - 1 :]
+    np.testing.assert_allclose(lagged_sums(x), direct, atol=1e-10)
