@@ -199,9 +199,9 @@ def test_the_correlation_time_is_saved_read_back_and_shown(tmp_path):
     res.residual_correlation_time = 48.9
     back = FitResult.from_json(res.to_json(tmp_path / "fit.json"))
     assert back.residual_correlation_time == 48.9
-    assert "allow for the residuals' correlation over 48.9 samples" in back.table()
+    assert "allow for the residuals' correlation over 48.9 consecutive residuals" in back.table()
     fit = {"status": back.status, "converged": True, "iterations": 8, "wall_s": 42.6}
-    said = "Standard errors allow for the residuals' correlation over 48.9 samples."
+    said = "Standard errors allow for the residuals' correlation over 48.9 consecutive residuals."
     assert said in _fit_status({**fit, "residual_correlation_time": 48.9})
     assert "correlation over" not in _fit_status({**fit, "residual_correlation_time": None})
     gone = {**fit, "residual_correlation_time": 48.9, "uncertainty_note": "not reported"}

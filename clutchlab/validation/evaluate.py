@@ -276,7 +276,7 @@ class Evaluation:
             "note": getattr(res, "note", ""),
             # why standard errors are not reported ("" when they are)
             "uncertainty_note": getattr(res, "uncertainty_note", ""),
-            # what they allow for (samples; NaN for a fit made before it was recorded)
+            # what they allow for (residuals; NaN for a fit made before it was recorded)
             "residual_correlation_time": getattr(res, "residual_correlation_time", math.nan),
         }
 

@@ -90,8 +90,9 @@ def residual_correlation_time(r: np.ndarray, blocks: list[tuple[int, int]] | Non
     """Integrated autocorrelation time of the residuals ``r`` (rows, ≥ 1): how many
     consecutive residuals carry about one residual's worth of independent information.
 
-    The fit's residuals are period means taken at every sample (a moving mean over one
-    dither period) and carry the model's misfit, which drifts over seconds; standard
+    The fit's residuals are period means (a moving mean over one dither period) taken
+    every ``decimate``-th sample and carry the model's misfit, which drifts over seconds;
+    standard
     errors that take them for independent ones are far too small (session 65: on the
     default stand's fit the truth lay 7–163 of them from the fitted values). The
     autocorrelation is pooled over ``blocks`` (one per experiment: lags never cross from
@@ -99,9 +100,9 @@ def residual_correlation_time(r: np.ndarray, blocks: list[tuple[int, int]] | Non
     is correlated error), and summed by Geyer's initial positive sequence (pairs of lags
     while their sum stays positive). It differs on purpose from discovery's
     ``integrated_time`` (centred per experiment, Sokal's window), which sizes that
-    module's statistics: on three of the default stand's fits it reads 22–35 samples
-    where this reads 49–99, the difference being the experiments' own offsets, which a
-    standard error must count.
+    module's statistics: on the same rows of three of the default stand's fits it reads
+    22–35 where this reads 49–99, the difference being the experiments' own offsets,
+    which a standard error must count.
 
     Parameters
     ----------
@@ -138,12 +139,14 @@ def correlation_note(tau: float) -> str:
     Parameters
     ----------
     tau : float
-        The residuals' integrated autocorrelation time (samples;
+        The residuals' integrated autocorrelation time (consecutive residuals;
         :func:`residual_correlation_time`), NaN when not reported.
     """
     if tau is None or not math.isfinite(tau):
         return ""
-    return f"standard errors allow for the residuals' correlation over {tau:.3g} samples"
+    return (
+        f"standard errors allow for the residuals' correlation over {tau:.3g} consecutive residuals"
+    )
 
 
 def identifiability(
@@ -311,8 +314,9 @@ class FitResult:
         only when not empty): the output sensitivities at the fitted values diverged
         (:func:`diverged_sensitivities`).
     residual_correlation_time : float
-        Integrated autocorrelation time (samples) of the training residuals that
-        ``std_errors`` allow for (:func:`residual_correlation_time`); NaN when not reported
+        Integrated autocorrelation time of the training residuals that ``std_errors``
+        allow for, in consecutive residuals (the fit's rows: every ``decimate``-th sample,
+        10 ms apart by default; :func:`residual_correlation_time`); NaN when not reported
         (and then not written to JSON).
     """
 
@@ -444,7 +448,7 @@ _FIELDS: dict[str, tuple[str, object]] = {
     "settings": ("an object", lambda v: isinstance(v, dict)),
     "note": ("a string", lambda v: isinstance(v, str)),
     "uncertainty_note": ("a string", lambda v: isinstance(v, str)),
-    "residual_correlation_time": ("a number of samples", _is_real),
+    "residual_correlation_time": ("a number of residuals", _is_real),
 }
 _OPTIONAL = ("settings", "note", "uncertainty_note", "residual_correlation_time")
 
