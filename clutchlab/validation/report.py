@@ -213,8 +213,8 @@ def _fit_status(fit: dict[str, Any]) -> str:
     for key in ("note", "uncertainty_note"):  # the staged start kept; no standard errors
         if fit.get(key):
             text += f" {fit[key][0].upper()}{fit[key][1:]}."
-    if not fit.get("uncertainty_note") and (
-        note := correlation_note(fit.get("residual_correlation_time"))
+    if note := correlation_note(
+        fit.get("residual_correlation_time"), fit.get("uncertainty_note", "")
     ):
         text += f" {note[0].upper()}{note[1:]}."
     if fit["converged"]:

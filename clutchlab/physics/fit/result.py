@@ -133,16 +133,19 @@ def residual_correlation_time(r: np.ndarray, blocks: list[tuple[int, int]] | Non
     return max(float(tau), 1.0)
 
 
-def correlation_note(tau: float) -> str:
-    """What the standard errors allow for, in words (``""`` when ``tau`` is not reported).
+def correlation_note(tau: float | None, uncertainty_note: str = "") -> str:
+    """What the standard errors allow for, in words (``""`` when there is nothing to say:
+    ``tau`` not reported, or no standard errors at all, ``uncertainty_note`` saying why).
 
     Parameters
     ----------
-    tau : float
+    tau : float or None
         The residuals' integrated autocorrelation time (consecutive residuals;
-        :func:`residual_correlation_time`), NaN when not reported.
+        :func:`residual_correlation_time`), NaN or None when not reported.
+    uncertainty_note : str
+        The fit's ``uncertainty_note`` (non-empty: its standard errors are not reported).
     """
-    if tau is None or not math.isfinite(tau):
+    if uncertainty_note or tau is None or not math.isfinite(tau):
         return ""
     return (
         f"standard errors allow for the residuals' correlation over {tau:.3g} consecutive residuals"
@@ -370,7 +373,7 @@ class FitResult:
             )
         if self.uncertainty_note:
             lines.append(f"({self.uncertainty_note})")
-        elif note := correlation_note(self.residual_correlation_time):
+        if note := correlation_note(self.residual_correlation_time, self.uncertainty_note):
             lines.append(f"({note})")
         return "\n".join(lines)
 

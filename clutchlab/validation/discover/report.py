@@ -462,9 +462,8 @@ def write_report(
             record["fit_converged_after"],
             baseline=it.after.fit is result.baseline.fit,
         )
-        if not it.after.fit.uncertainty_note and (
-            note := correlation_note(it.after.fit.residual_correlation_time)
-        ):
+        fit = it.after.fit
+        if note := correlation_note(fit.residual_correlation_time, fit.uncertainty_note):
             fit_state += f"; {note}"
         figs = {"residuals": plot_residuals(it)}
         if it.candidates:  # none scored (effect limit, no candidate left): no empty axes
