@@ -67,6 +67,7 @@ from clutchlab.residual_ml import (
 from clutchlab.residual_ml import classifiers as clf_mod
 from clutchlab.residual_ml.compare import compare_classifiers
 from clutchlab.residual_ml.features import LAG_DIDT_FEATURES
+from clutchlab.residual_ml.hybrid import default_residual
 
 #: The three standalone variants of the paper's ablation: (report name, estimator class).
 STANDALONE = (
@@ -249,7 +250,9 @@ def main() -> None:
         with_pilot = (*no_pilot, "physics_pilot_bar")
         scores = {
             f"residual features {'with' if 'physics_pilot_bar' in f else 'without'} pilot": loeo(
-                HybridModel(physics=cached, residual=SVCPartitionedGP(features=f)), traces, folds
+                HybridModel(physics=cached, residual=default_residual().set_params(features=f)),
+                traces,
+                folds,
             )
             for f in (with_pilot, no_pilot)
         }

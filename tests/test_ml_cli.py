@@ -12,6 +12,7 @@ import numpy as np
 from clutchlab.data import save_dataset
 from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
 from clutchlab.residual_ml import load_model
+from clutchlab.residual_ml.hybrid import default_residual
 
 
 def _run(*args, check=True):
@@ -94,6 +95,19 @@ def test_classifiers_and_train_cli(tmp_path):
 
     res = _run("train", str(data), "--variant", "paper_svc_gp", "--out", str(tmp_path / "p"))
     assert "latch decision: local latch-event law" in res.stdout  # the default says so
+
+    # the hybrid's --kernel replaces the default residual model's kernel and nothing else:
+    # its latch classifier sees the physics prediction (before session 66 the residual took
+    # the standalone pipeline's latch law of current, rate and dither: on the default stand
+    # with the RQ kernel the hybrid then fell back to its standalone form, 0.2525 bar on
+    # the medium ramp against 0.0652)
+    _run("train", str(data), "--variant", "hybrid", "--kernel", "rq", "--out", str(tmp_path / "h"))
+    residual = load_model(tmp_path / "h" / "model.json").residual  # as configured
+    want = default_residual()
+    assert residual.kernel == "rq"
+    assert residual.latch_model == want.latch_model == "classifier"
+    assert residual.latched_reference == want.latched_reference == "none"
+    assert list(residual.features) == list(want.features)
 
     bad = _run(
         "train",
