@@ -111,7 +111,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     from .errors import ModelError
     from .residual_ml import SVCPartitionedGP, make_variant, score_traces
     from .residual_ml.features import PHYSICS_FEATURES, causal_features
-    from .residual_ml.hybrid import HYBRID_FEATURES, default_residual
+    from .residual_ml.hybrid import HYBRID_FEATURES
 
     partitioned = {"latched_reference": args.latched_reference} if args.latched_reference else {}
     if partitioned and args.variant not in LATCHED_REFERENCE_VARIANTS:
@@ -132,12 +132,12 @@ def _cmd_train(args: argparse.Namespace) -> int:
                 features=causal_features(own), kernel=args.kernel or None
             )
         elif args.kernel:
-            # the default residual model (its latch classifier sees the physics prediction,
-            # no latched reference) with the kernel replaced; an SVCPartitionedGP with the
-            # standalone pipeline's defaults decides the latch by a law of current, rate and
+            # the default residual model and its standalone form (the paper pipeline) with
+            # the kernel replaced; an SVCPartitionedGP with the standalone pipeline's
+            # defaults as the residual decides the latch by a law of current, rate and
             # dither that never sees the physics (default stand, datasheet physics, --kernel
-            # rq: medium ramp 0.2525 bar, the standalone form chosen, against 0.0652)
-            params["residual"] = default_residual().set_params(kernel=args.kernel)
+            # rq: medium ramp 0.2525 bar, the standalone form chosen; session 66)
+            params["kernel"] = args.kernel
     else:
         if args.physics:
             raise ModelError("--physics is only used by the hybrid variant")

@@ -12,7 +12,6 @@ import numpy as np
 from clutchlab.data import save_dataset
 from clutchlab.physics.stand import DitherSetting, RampProfile, StandConfig, run_stand
 from clutchlab.residual_ml import load_model
-from clutchlab.residual_ml.hybrid import default_residual
 
 
 def _run(*args, check=True):
@@ -96,18 +95,15 @@ def test_classifiers_and_train_cli(tmp_path):
     res = _run("train", str(data), "--variant", "paper_svc_gp", "--out", str(tmp_path / "p"))
     assert "latch decision: local latch-event law" in res.stdout  # the default says so
 
-    # the hybrid's --kernel replaces the default residual model's kernel and nothing else:
-    # its latch classifier sees the physics prediction (before session 66 the residual took
-    # the standalone pipeline's latch law of current, rate and dither: on the default stand
-    # with the RQ kernel the hybrid then fell back to its standalone form, 0.2525 bar on
-    # the medium ramp against 0.0652)
+    # the hybrid's --kernel sets the kernel of its default residual model and of the
+    # standalone form made from it, nothing else (before session 66 the CLI gave the hybrid
+    # an SVCPartitionedGP with the standalone pipeline's defaults as its residual: a latch
+    # law that never sees the physics; on the default stand with the RQ kernel the hybrid
+    # then fell back to its standalone form, 0.2525 bar on the medium ramp against 0.0653)
     _run("train", str(data), "--variant", "hybrid", "--kernel", "rq", "--out", str(tmp_path / "h"))
-    residual = load_model(tmp_path / "h" / "model.json").residual  # as configured
-    want = default_residual()
-    assert residual.kernel == "rq"
-    assert residual.latch_model == want.latch_model == "classifier"
-    assert residual.latched_reference == want.latched_reference == "none"
-    assert list(residual.features) == list(want.features)
+    hybrid = load_model(tmp_path / "h" / "model.json")
+    assert hybrid.kernel == "rq" and hybrid.residual is None
+    assert hybrid.residual_.kernel == "rq"  # the fitted form's GPs
 
     bad = _run(
         "train",

@@ -298,6 +298,27 @@ def test_hybrid_needs_physics_outputs_it_cannot_get(train):
     assert ok.feature_names_ == list(HYBRID_FEATURES)  # the default needs no pilot pressure
 
 
+def test_hybrid_kernel_is_the_default_residual_models_and_its_standalone_forms():
+    """``kernel`` changes the kernel of the default residual model and of the standalone
+    form made from it (the paper pipeline), nothing else; with a given residual model it is
+    refused (that model carries its own)."""
+    plain, rq = HybridModel(), HybridModel(kernel="rq")
+    res, res0 = rq._residual(), plain._residual()
+    assert res.kernel == "rq"
+    assert {k: v for k, v in res.get_params().items() if k != "kernel"} == {
+        k: v for k, v in res0.get_params().items() if k != "kernel"
+    }
+    assert res.latch_model == "classifier" and res.latched_reference == "none"
+    alone, alone0 = rq._standalone(), plain._standalone()
+    assert alone.kernel == "rq"
+    assert {k: v for k, v in alone.get_params().items() if k != "kernel"} == {
+        k: v for k, v in alone0.get_params().items() if k != "kernel"
+    }
+    given = HybridModel(residual=SVCPartitionedGP(features=HYBRID_FEATURES), kernel="rq")
+    with pytest.raises(ModelError, match="given residual model carries its own"):
+        given._residual()
+
+
 # -- persistence and single steps ------------------------------------------------------------
 
 

@@ -144,6 +144,10 @@ class HybridModel(TraceEstimator):
         (``standalone_handicap``) in that comparison.
     form_folds : int
         Folds of the ``auto`` choice (default 3).
+    kernel : {"rq", "rbf"}, optional
+        GP kernel of the default residual model and of the standalone form made from it
+        (the paper pipeline); None (default): each one's own. Only with the default
+        residual model: a given ``residual`` carries its own kernel.
     standalone_handicap : "auto" or float
         Divisor of the standalone form's leave-one-experiment-out RMSE in the ``auto``
         choice: the folds take from the standalone form what a new ramp rate between the
@@ -191,12 +195,14 @@ class HybridModel(TraceEstimator):
         form="auto",
         form_folds=3,
         standalone_handicap=STANDALONE_HANDICAP,
+        kernel=None,
     ) -> None:
         self.physics = physics
         self.residual = residual
         self.form = form
         self.form_folds = form_folds
         self.standalone_handicap = standalone_handicap
+        self.kernel = kernel
 
     def _physics(self):
         phys = self.physics if self.physics is not None else PhysicsPredictor()
@@ -207,7 +213,17 @@ class HybridModel(TraceEstimator):
         return phys
 
     def _residual(self) -> TraceEstimator:
-        return clone(self.residual) if self.residual is not None else default_residual()
+        """The residual model to fit: the given one (cloned), else :func:`default_residual`
+        with ``kernel`` when one is set."""
+        if self.residual is not None:
+            if self.kernel is not None:
+                raise ModelError(
+                    f"kernel={self.kernel!r} sets the default residual model's kernel; a "
+                    "given residual model carries its own (set it there)"
+                )
+            return clone(self.residual)
+        res = default_residual()
+        return res if self.kernel is None else res.set_params(kernel=self.kernel)
 
     def _standalone(self) -> TraceEstimator:
         """The standalone form: the paper pipeline, i.e. the residual model without physics.
