@@ -131,21 +131,16 @@ def _cmd_train(args: argparse.Namespace) -> int:
             params["residual"] = SVCPartitionedGP(
                 features=causal_features(own), kernel=args.kernel or None
             )
-        elif args.kernel:
-            # the default residual model and its standalone form (the paper pipeline) with
-            # the kernel replaced; an SVCPartitionedGP with the standalone pipeline's
-            # defaults as the residual decides the latch by a law of current, rate and
-            # dither that never sees the physics (default stand, datasheet physics, --kernel
-            # rq: medium ramp 0.2525 bar, the standalone form chosen; session 66)
-            params["kernel"] = args.kernel
     else:
         if args.physics:
             raise ModelError("--physics is only used by the hybrid variant")
-        if args.kernel:
-            params["kernel"] = args.kernel
         if args.causal:
             params["features"] = causal_features(make_variant(args.variant)._builder().names)
         params |= partitioned
+    if args.kernel and "residual" not in params:
+        # every variant's own kernel parameter; the hybrid's sets its default residual
+        # model and the standalone form made from it (HybridModel(kernel=...))
+        params["kernel"] = args.kernel
     model = make_variant(args.variant, **params)
     if args.causal and not args.quiet:
         names = model.residual._builder().names if args.variant == "hybrid" else None

@@ -92,8 +92,7 @@ def residual_correlation_time(r: np.ndarray, blocks: list[tuple[int, int]] | Non
 
     The fit's residuals are period means (a moving mean over one dither period) taken
     every ``decimate``-th sample and carry the model's misfit, which drifts over seconds;
-    standard
-    errors that take them for independent ones are far too small (session 65: on the
+    standard errors that take them for independent ones are far too small (session 65: on the
     default stand's fit the truth lay 7–163 of them from the fitted values). The
     autocorrelation is pooled over ``blocks`` (one per experiment: lags never cross from
     one experiment into the next), not centred (an offset that lasts a whole experiment
